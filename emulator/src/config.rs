@@ -1,0 +1,413 @@
+//! Scenario configuration: plain `Deserialize` structs with `Default`s taken from
+//! `shared/reference/lander-and-propulsion.md`, and a `validate()` run before tick 0.
+//!
+//! Every number is a default, never a constant buried in code: a TOML file given with
+//! `--scenario FILE` overrides any subset of fields.
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// A configuration value is out of its meaningful range.
+#[derive(Debug, Error, Clone, PartialEq)]
+#[error("invalid configuration: {field} = {value} ({why})")]
+pub struct ConfigError {
+    /// Dotted path of the field.
+    pub field: &'static str,
+    /// The offending value, printed.
+    pub value: String,
+    /// What is expected.
+    pub why: &'static str,
+}
+
+fn check(ok: bool, field: &'static str, value: f64, why: &'static str) -> Result<(), ConfigError> {
+    if ok && value.is_finite() {
+        Ok(())
+    } else {
+        Err(ConfigError {
+            field,
+            value: value.to_string(),
+            why,
+        })
+    }
+}
+
+/// The Moon as a spherical central body.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MoonConfig {
+    /// Gravitational parameter, m^3/s^2 (sourced).
+    pub mu_m3_s2: f64,
+    /// Mean radius, metres (sourced).
+    pub radius_m: f64,
+}
+
+impl Default for MoonConfig {
+    fn default() -> Self {
+        Self {
+            mu_m3_s2: 4.9028e12,
+            radius_m: 1_737_400.0,
+        }
+    }
+}
+
+/// Main propulsion numbers shared by every model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PropulsionConfig {
+    /// Rated thrust of one main engine, newtons (sourced: 800 N).
+    pub max_thrust_n: f64,
+    /// Lowest throttle as a fraction of rated thrust (assumed 0.4).
+    pub throttle_min_frac: f64,
+    /// Specific impulse, seconds (assumed 310 s).
+    pub isp_s: f64,
+    /// Oxidiser-to-fuel mass ratio (assumed 1.65).
+    pub mixture_ratio: f64,
+    /// Usable main propellant at descent start, kilograms (assumed 1000 kg).
+    pub propellant_kg: f64,
+    /// `ideal` model: thrust time constant, seconds (assumed 50 ms).
+    pub thrust_lag_s: f64,
+    /// `ideal` model: constant helium bottle pressure reported, pascals.
+    pub gas_pressure_pa: f64,
+    /// `ideal` model: constant tank pressure reported, pascals (regulated 17 bar).
+    pub tank_pressure_pa: f64,
+    /// `ideal` model: chamber pressure at rated thrust, pascals (8 bar).
+    pub chamber_pressure_max_pa: f64,
+}
+
+impl Default for PropulsionConfig {
+    fn default() -> Self {
+        Self {
+            max_thrust_n: 800.0,
+            throttle_min_frac: 0.4,
+            isp_s: 310.0,
+            mixture_ratio: 1.65,
+            propellant_kg: 1000.0,
+            thrust_lag_s: 0.05,
+            gas_pressure_pa: 280e5,
+            tank_pressure_pa: 17e5,
+            chamber_pressure_max_pa: 8e5,
+        }
+    }
+}
+
+impl PropulsionConfig {
+    fn validate(&self) -> Result<(), ConfigError> {
+        check(
+            self.max_thrust_n > 0.0,
+            "propulsion.max_thrust_n",
+            self.max_thrust_n,
+            "> 0",
+        )?;
+        check(
+            (0.0..1.0).contains(&self.throttle_min_frac),
+            "propulsion.throttle_min_frac",
+            self.throttle_min_frac,
+            "in [0, 1)",
+        )?;
+        check(self.isp_s > 0.0, "propulsion.isp_s", self.isp_s, "> 0")?;
+        check(
+            self.mixture_ratio > 0.0,
+            "propulsion.mixture_ratio",
+            self.mixture_ratio,
+            "> 0",
+        )?;
+        check(
+            self.propellant_kg >= 0.0,
+            "propulsion.propellant_kg",
+            self.propellant_kg,
+            ">= 0",
+        )?;
+        check(
+            self.thrust_lag_s > 0.0,
+            "propulsion.thrust_lag_s",
+            self.thrust_lag_s,
+            "> 0",
+        )?;
+        Ok(())
+    }
+}
+
+/// The vehicle: mass properties, engine layout, attitude thrusters, legs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LanderConfig {
+    /// Mass without main propellant, kilograms (1750 wet - 1000 propellant).
+    pub dry_mass_kg: f64,
+    /// Principal moments of inertia with full tanks, kg m^2 (assumed: a 2 m box).
+    pub inertia_wet_kg_m2: [f64; 3],
+    /// Principal moments of inertia with empty tanks, kg m^2 (assumed).
+    pub inertia_dry_kg_m2: [f64; 3],
+    /// Main engine positions relative to the centre of mass, body axes, metres; each
+    /// engine thrusts along +Z body through its position.
+    pub engine_positions_body_m: [[f64; 3]; 4],
+    /// Thrust of one attitude thruster, newtons (sourced: 8 x 58 N).
+    pub rcs_thrust_n: f64,
+    /// Moment arm of the thruster couples about body x, y, z, metres (assumed); each
+    /// axis is served by a pair, so the saturation torque is 2 x thrust x arm.
+    pub rcs_moment_arm_m: [f64; 3],
+    /// Attitude thruster specific impulse, seconds (assumed).
+    pub rcs_isp_s: f64,
+    /// Height of the centre of mass above the footpads, metres (assumed).
+    pub leg_height_m: f64,
+}
+
+impl Default for LanderConfig {
+    fn default() -> Self {
+        Self {
+            dry_mass_kg: 750.0,
+            inertia_wet_kg_m2: [1200.0, 1200.0, 1100.0],
+            inertia_dry_kg_m2: [700.0, 700.0, 600.0],
+            engine_positions_body_m: [
+                [0.6, 0.6, -0.8],
+                [-0.6, 0.6, -0.8],
+                [-0.6, -0.6, -0.8],
+                [0.6, -0.6, -0.8],
+            ],
+            rcs_thrust_n: 58.0,
+            rcs_moment_arm_m: [1.0, 1.0, 1.0],
+            rcs_isp_s: 220.0,
+            leg_height_m: 1.2,
+        }
+    }
+}
+
+impl LanderConfig {
+    /// Saturation torque of the attitude thrusters per body axis, N m.
+    pub fn rcs_max_torque_nm(&self) -> [f64; 3] {
+        self.rcs_moment_arm_m
+            .map(|arm| 2.0 * self.rcs_thrust_n * arm)
+    }
+
+    fn validate(&self) -> Result<(), ConfigError> {
+        check(
+            self.dry_mass_kg > 0.0,
+            "lander.dry_mass_kg",
+            self.dry_mass_kg,
+            "> 0",
+        )?;
+        for i in 0..3 {
+            check(
+                self.inertia_wet_kg_m2[i] > 0.0,
+                "lander.inertia_wet_kg_m2",
+                self.inertia_wet_kg_m2[i],
+                "> 0",
+            )?;
+            check(
+                self.inertia_dry_kg_m2[i] > 0.0,
+                "lander.inertia_dry_kg_m2",
+                self.inertia_dry_kg_m2[i],
+                "> 0",
+            )?;
+            check(
+                self.rcs_moment_arm_m[i] > 0.0,
+                "lander.rcs_moment_arm_m",
+                self.rcs_moment_arm_m[i],
+                "> 0",
+            )?;
+        }
+        for p in self.engine_positions_body_m.iter().flatten() {
+            check(true, "lander.engine_positions_body_m", *p, "finite")?;
+        }
+        check(
+            self.rcs_thrust_n >= 0.0,
+            "lander.rcs_thrust_n",
+            self.rcs_thrust_n,
+            ">= 0",
+        )?;
+        check(
+            self.rcs_isp_s > 0.0,
+            "lander.rcs_isp_s",
+            self.rcs_isp_s,
+            "> 0",
+        )?;
+        check(
+            self.leg_height_m >= 0.0,
+            "lander.leg_height_m",
+            self.leg_height_m,
+            ">= 0",
+        )?;
+        Ok(())
+    }
+}
+
+/// Where the powered descent starts (default: Chandrayaan-3-like).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InitialStateConfig {
+    /// Altitude of the footpads above the surface, metres (sourced: ~30 km).
+    pub altitude_m: f64,
+    /// Horizontal speed, m/s (sourced: ~1.68 km/s).
+    pub horizontal_speed_m_s: f64,
+    /// Vertical speed, m/s, positive up.
+    pub vertical_speed_m_s: f64,
+    /// Pitch of the thrust axis above the retrograde horizontal, degrees (0: thrust
+    /// exactly against the horizontal velocity).
+    pub thrust_pitch_deg: f64,
+}
+
+impl Default for InitialStateConfig {
+    fn default() -> Self {
+        Self {
+            altitude_m: 30_000.0,
+            horizontal_speed_m_s: 1680.0,
+            vertical_speed_m_s: 0.0,
+            thrust_pitch_deg: 0.0,
+        }
+    }
+}
+
+impl InitialStateConfig {
+    fn validate(&self) -> Result<(), ConfigError> {
+        check(
+            self.altitude_m > 0.0,
+            "initial.altitude_m",
+            self.altitude_m,
+            "> 0",
+        )?;
+        check(
+            true,
+            "initial.horizontal_speed_m_s",
+            self.horizontal_speed_m_s,
+            "finite",
+        )?;
+        check(
+            true,
+            "initial.vertical_speed_m_s",
+            self.vertical_speed_m_s,
+            "finite",
+        )?;
+        check(
+            self.thrust_pitch_deg.abs() <= 90.0,
+            "initial.thrust_pitch_deg",
+            self.thrust_pitch_deg,
+            "in [-90, 90]",
+        )?;
+        Ok(())
+    }
+}
+
+/// One-sigma navigation noise added to telemetry when enabled (seeded).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct NavNoiseConfig {
+    /// Add noise at all.
+    pub enabled: bool,
+    /// Position noise, metres.
+    pub position_m: f64,
+    /// Velocity noise, m/s.
+    pub velocity_m_s: f64,
+    /// Body rate noise, rad/s.
+    pub rate_rad_s: f64,
+    /// Accelerometer noise, m/s^2.
+    pub accel_m_s2: f64,
+    /// Altimeter noise, metres.
+    pub altitude_m: f64,
+}
+
+impl Default for NavNoiseConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            position_m: 5.0,
+            velocity_m_s: 0.05,
+            rate_rad_s: 1e-4,
+            accel_m_s2: 1e-3,
+            altitude_m: 0.5,
+        }
+    }
+}
+
+/// What counts as a safe landing (sourced design limits, tilt tightened to 10 deg).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TouchdownLimits {
+    /// Largest vertical speed, m/s.
+    pub vertical_speed_mps: f64,
+    /// Largest horizontal speed, m/s.
+    pub horizontal_speed_mps: f64,
+    /// Largest tilt of the body Z axis from the local vertical, degrees.
+    pub tilt_deg: f64,
+}
+
+impl Default for TouchdownLimits {
+    fn default() -> Self {
+        Self {
+            vertical_speed_mps: 2.0,
+            horizontal_speed_mps: 0.5,
+            tilt_deg: 10.0,
+        }
+    }
+}
+
+/// Everything the plant needs.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ScenarioConfig {
+    /// Central body.
+    pub moon: MoonConfig,
+    /// Vehicle.
+    pub lander: LanderConfig,
+    /// Main propulsion.
+    pub propulsion: PropulsionConfig,
+    /// Initial state.
+    pub initial: InitialStateConfig,
+    /// Navigation noise.
+    pub nav_noise: NavNoiseConfig,
+    /// Touchdown limits.
+    pub touchdown: TouchdownLimits,
+}
+
+impl ScenarioConfig {
+    /// Checks every field; run before tick 0.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check(
+            self.moon.mu_m3_s2 > 0.0,
+            "moon.mu_m3_s2",
+            self.moon.mu_m3_s2,
+            "> 0",
+        )?;
+        check(
+            self.moon.radius_m > 0.0,
+            "moon.radius_m",
+            self.moon.radius_m,
+            "> 0",
+        )?;
+        self.lander.validate()?;
+        self.propulsion.validate()?;
+        self.initial.validate()?;
+        Ok(())
+    }
+
+    /// Wet mass at descent start, kilograms.
+    pub fn wet_mass_kg(&self) -> f64 {
+        self.lander.dry_mass_kg + self.propulsion.propellant_kg
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_valid_and_match_reference() {
+        let c = ScenarioConfig::default();
+        c.validate().unwrap();
+        assert!((c.wet_mass_kg() - 1750.0).abs() < 1.0);
+    }
+
+    #[test]
+    fn partial_toml_overrides_and_unknown_fields_fail() {
+        let c: ScenarioConfig = toml::from_str("[initial]\naltitude_m = 1000.0\n").unwrap();
+        assert_eq!(c.initial.altitude_m, 1000.0);
+        assert_eq!(c.lander, LanderConfig::default());
+        assert!(toml::from_str::<ScenarioConfig>("[initial]\naltitude = 1.0\n").is_err());
+    }
+
+    #[test]
+    fn bad_values_are_named() {
+        let mut c = ScenarioConfig::default();
+        c.propulsion.isp_s = f64::NAN;
+        let e = c.validate().unwrap_err();
+        assert_eq!(e.field, "propulsion.isp_s");
+    }
+}

@@ -1,0 +1,90 @@
+//! Propulsion models behind one trait: `ideal` (first-order lag), `hifi` (lumped-parameter
+//! physics of the pressure-fed system) and `surrogate` (the learned sparse polynomial).
+//!
+//! The plant asks a model to advance by one bench step with the command held, and reads
+//! back per-engine thrust and the propellant it ejected. Models own their propellant
+//! accounting: the vehicle mass is the initial mass minus what the model reports ejected.
+
+pub mod ideal;
+
+use crate::config::PropulsionConfig;
+use oils_shared::ENGINE_COUNT;
+
+/// What the propulsion system is told for one step (already sanitised by the link).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EngineCommand {
+    /// Commanded thrust per engine, newtons, finite and within `[0, max_thrust_n]`.
+    pub thrust_cmd_n: [f64; ENGINE_COUNT],
+    /// Engine on/off.
+    pub on: [bool; ENGINE_COUNT],
+}
+
+/// Everything a propulsion model reports after a step.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PropulsionOutput {
+    /// Thrust per engine at the end of the step, newtons.
+    pub thrust_n: [f64; ENGINE_COUNT],
+    /// Time-averaged thrust per engine over the step, newtons: what the rigid body feels
+    /// when it integrates the step with thrust held.
+    pub mean_thrust_n: [f64; ENGINE_COUNT],
+    /// Chamber pressure per engine at the end of the step, pascals.
+    pub chamber_pressure_pa: [f64; ENGINE_COUNT],
+    /// Helium bottle ("gas") pressure, pascals.
+    pub gas_pressure_pa: f64,
+    /// Fuel tank ullage pressure, pascals.
+    pub fuel_tank_pressure_pa: f64,
+    /// Oxidiser tank ullage pressure, pascals.
+    pub ox_tank_pressure_pa: f64,
+    /// Cumulative fuel ejected through the engines since the start, kilograms.
+    pub ejected_fuel_kg: f64,
+    /// Cumulative oxidiser ejected since the start, kilograms.
+    pub ejected_ox_kg: f64,
+    /// Total fuel mass flow at the end of the step, kg/s.
+    pub fuel_flow_kg_s: f64,
+    /// Total oxidiser mass flow at the end of the step, kg/s.
+    pub ox_flow_kg_s: f64,
+}
+
+impl PropulsionOutput {
+    /// Cumulative propellant ejected, kilograms.
+    pub fn ejected_kg(&self) -> f64 {
+        self.ejected_fuel_kg + self.ejected_ox_kg
+    }
+}
+
+/// A propulsion model the plant can step.
+///
+/// Contract: `step` does not allocate, lock, log or read the clock; the same sequence of
+/// commands gives bit-identical outputs.
+pub trait Propulsion: Send {
+    /// Short name used in reports (`ideal`, `hifi`, `surrogate`).
+    fn name(&self) -> &'static str;
+    /// Advances the model by `dt_ns` with `cmd` held; returns the outputs at the end.
+    fn step(&mut self, cmd: &EngineCommand, dt_ns: u64) -> PropulsionOutput;
+    /// The outputs now, without stepping (at construction: the initial state).
+    fn output(&self) -> PropulsionOutput;
+}
+
+/// Which propulsion model a run uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PropulsionKind {
+    /// First-order thrust lag; quick tests.
+    Ideal,
+}
+
+impl PropulsionKind {
+    /// Name as on the command line.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            PropulsionKind::Ideal => "ideal",
+        }
+    }
+}
+
+/// Builds the model chosen in the configuration. Allocation happens here, once.
+pub fn build(kind: PropulsionKind, cfg: &PropulsionConfig) -> Box<dyn Propulsion> {
+    match kind {
+        PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
+    }
+}

@@ -1,0 +1,372 @@
+//! Wire protocol of the oils bench: the only crate a flight-software author needs.
+//!
+//! Two packets cross the link every step, both fixed-size `#[repr(C)]` structs sent
+//! zero-copy through iceoryx2 shared memory:
+//!
+//! * [`Telemetry`]`(k)`: emulator -> onboard computer, the state at `t_k`;
+//! * [`Command`]`(k)`: onboard computer -> emulator, held over `[t_k, t_k+1)`.
+//!
+//! Every field is `f64`, `u64`, `i64` or `u32` and every struct is padded by hand to a
+//! multiple of 8 bytes, so the layout is the same in Rust, C, C++ and Python `ctypes`.
+//! `docs/protocol.md` lists every offset; the test `layout_is_pinned` fails if one moves.
+//!
+//! Frames: `mci` is Moon-centred inertial (the bench neglects the Moon's rotation);
+//! `body` has +Z along the main-engine thrust (up at touchdown), engines on the -Z deck.
+//! Quaternions are `[w, x, y, z]`, scalar first, rotating body vectors into `mci`.
+#![warn(missing_docs)]
+
+use iceoryx2::prelude::ZeroCopySend;
+
+pub mod service;
+
+/// Protocol version; bump on any change to a packet layout or meaning.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// Number of main engines.
+pub const ENGINE_COUNT: usize = 4;
+
+/// Telemetry flag: this is the last telemetry of the run; the stub answers nothing and exits.
+pub const TLM_FLAG_END_OF_RUN: u32 = 1 << 0;
+/// Telemetry flag: navigation values carry seeded sensor noise.
+pub const TLM_FLAG_NAV_NOISE: u32 = 1 << 1;
+
+/// Human-readable schema: one entry per struct, `Struct{field:type@offset,...}=size|`. Its hash,
+/// [`SCHEMA_HASH`], travels in every header so two peers compiled from different
+/// layouts refuse each other with a clear message instead of misreading bytes.
+pub const SCHEMA: &str = concat!(
+    "PacketHeader{protocol_version:u32@0,flags:u32@4,schema_hash:u64@8,run_id:u64@16,step:u64@24,t_ns:i64@32}=40|",
+    "NavState{pos_mci_m:[f64;3]@0,vel_mci_m_s:[f64;3]@24,q_mci_from_body:[f64;4]@48,rate_body_rad_s:[f64;3]@80}=104|",
+    "EngineReading{thrust_n:f64@0,chamber_pressure_pa:f64@8,valve_open:u32@16,flags:u32@20}=24|",
+    "PropulsionReadings{gas_pressure_pa:f64@0,fuel_tank_pressure_pa:f64@8,ox_tank_pressure_pa:f64@16,engines:[EngineReading;4]@24}=120|",
+    "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184}=304|",
+    "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112}=120|",
+);
+
+/// FNV-1a over [`SCHEMA`], evaluated at compile time.
+///
+/// Written by hand because it is six lines and must be a `const fn`; no crate offers
+/// a const 64-bit hash that C and Python authors could reproduce as simply.
+pub const fn schema_hash_of(schema: &str) -> u64 {
+    let bytes = schema.as_bytes();
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut i = 0;
+    while i < bytes.len() {
+        hash ^= bytes[i] as u64;
+        hash = hash.wrapping_mul(0x0000_0100_0000_01b3);
+        i += 1;
+    }
+    hash
+}
+
+/// Hash of this build's [`SCHEMA`].
+pub const SCHEMA_HASH: u64 = schema_hash_of(SCHEMA);
+
+/// Header at the start of every packet.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v1.PacketHeader")]
+pub struct PacketHeader {
+    /// [`PROTOCOL_VERSION`] of the sender.
+    pub protocol_version: u32,
+    /// `TLM_FLAG_*` bits for telemetry; zero for commands.
+    pub flags: u32,
+    /// [`SCHEMA_HASH`] of the sender.
+    pub schema_hash: u64,
+    /// Identifies the run; also part of the service names.
+    pub run_id: u64,
+    /// Step index k; Command(k) answers Telemetry(k).
+    pub step: u64,
+    /// Simulated time of step k in integer nanoseconds since the start of the run.
+    pub t_ns: i64,
+}
+
+impl PacketHeader {
+    /// A header stamped with this build's protocol version and schema hash.
+    pub const fn new(run_id: u64, step: u64, t_ns: i64) -> Self {
+        Self {
+            protocol_version: PROTOCOL_VERSION,
+            flags: 0,
+            schema_hash: SCHEMA_HASH,
+            run_id,
+            step,
+            t_ns,
+        }
+    }
+
+    /// Checks that the peer speaks this build's protocol.
+    pub fn check_peer(&self) -> Result<(), ProtocolMismatch> {
+        if self.protocol_version != PROTOCOL_VERSION || self.schema_hash != SCHEMA_HASH {
+            return Err(ProtocolMismatch {
+                ours_version: PROTOCOL_VERSION,
+                ours_schema_hash: SCHEMA_HASH,
+                peer_version: self.protocol_version,
+                peer_schema_hash: self.schema_hash,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The peer's packet was built from another protocol version or layout.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ProtocolMismatch {
+    /// Our [`PROTOCOL_VERSION`].
+    pub ours_version: u32,
+    /// Our [`SCHEMA_HASH`].
+    pub ours_schema_hash: u64,
+    /// The peer's protocol version.
+    pub peer_version: u32,
+    /// The peer's schema hash.
+    pub peer_schema_hash: u64,
+}
+
+impl core::fmt::Display for ProtocolMismatch {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "protocol mismatch: this side speaks oils protocol v{} (schema {:#018x}), \
+             the peer speaks v{} (schema {:#018x}); rebuild both sides from the same oils-shared",
+            self.ours_version, self.ours_schema_hash, self.peer_version, self.peer_schema_hash
+        )
+    }
+}
+
+impl core::error::Error for ProtocolMismatch {}
+
+/// Navigation state as the onboard computer sees it (possibly with seeded noise).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v1.NavState")]
+pub struct NavState {
+    /// Position of the centre of mass, Moon-centred inertial, metres.
+    pub pos_mci_m: [f64; 3],
+    /// Velocity, Moon-centred inertial, m/s.
+    pub vel_mci_m_s: [f64; 3],
+    /// Attitude quaternion `[w, x, y, z]`, rotates body vectors into `mci`.
+    pub q_mci_from_body: [f64; 4],
+    /// Angular rate of the body relative to `mci`, in body axes, rad/s.
+    pub rate_body_rad_s: [f64; 3],
+}
+
+/// One main engine's readings.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v1.EngineReading")]
+pub struct EngineReading {
+    /// Thrust as sensed (the propulsion model's output), newtons.
+    pub thrust_n: f64,
+    /// Combustion chamber pressure, pascals (0 where the model has no chamber).
+    pub chamber_pressure_pa: f64,
+    /// 1 when the engine's valves are commanded open, else 0.
+    pub valve_open: u32,
+    /// Reserved for engine fault bits; zero today.
+    pub flags: u32,
+}
+
+/// Propulsion system readings.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v1.PropulsionReadings")]
+pub struct PropulsionReadings {
+    /// Helium bottle pressure, pascals.
+    pub gas_pressure_pa: f64,
+    /// Fuel (MMH) tank ullage pressure, pascals.
+    pub fuel_tank_pressure_pa: f64,
+    /// Oxidiser (MON-3) tank ullage pressure, pascals.
+    pub ox_tank_pressure_pa: f64,
+    /// Per-engine readings.
+    pub engines: [EngineReading; ENGINE_COUNT],
+}
+
+/// Emulator -> onboard computer, once per step: the state at `t_k`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v1.Telemetry")]
+pub struct Telemetry {
+    /// Packet header.
+    pub header: PacketHeader,
+    /// Navigation state.
+    pub nav: NavState,
+    /// Measured specific force (non-gravitational acceleration), body axes, m/s^2.
+    pub accel_body_m_s2: [f64; 3],
+    /// Height of the landing-leg footpads above the local surface, metres.
+    pub altitude_m: f64,
+    /// Vehicle mass estimate, kilograms.
+    pub mass_estimate_kg: f64,
+    /// Propulsion readings.
+    pub propulsion: PropulsionReadings,
+}
+
+/// Onboard computer -> emulator, once per step: held over `[t_k, t_k+1)`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v1.Command")]
+pub struct Command {
+    /// Packet header; `step` must echo the telemetry it answers.
+    pub header: PacketHeader,
+    /// Thrust command per main engine, newtons.
+    pub thrust_cmd_n: [f64; ENGINE_COUNT],
+    /// 1 = engine on, 0 = off (any other value is rejected and treated as off).
+    pub engine_on: [u32; ENGINE_COUNT],
+    /// Torque demanded of the attitude thrusters, body axes, N m (saturated by the plant).
+    pub torque_cmd_body_nm: [f64; 3],
+    /// The flight software's own compute time for this step, nanoseconds (wall clock,
+    /// measured by the stub; excluded from the run digest).
+    pub stub_compute_ns: u64,
+}
+
+/// Views a packet as bytes, for digests and log records.
+///
+/// # Safety contract (upheld here)
+/// Only implemented for the `repr(C)` packets above, which have no padding bytes (the
+/// layout test checks that the field sizes add up to the struct size).
+pub trait AsBytes: Copy {
+    /// The packet's bytes in memory order (little-endian on every supported target).
+    fn as_bytes(&self) -> &[u8];
+    /// Rebuilds a packet from exactly `size_of::<Self>()` bytes; `None` on a wrong length.
+    fn from_bytes(bytes: &[u8]) -> Option<Self>;
+}
+
+macro_rules! impl_as_bytes {
+    ($t:ty) => {
+        impl AsBytes for $t {
+            fn as_bytes(&self) -> &[u8] {
+                // SAFETY: repr(C), no padding (pinned by `layout_is_pinned`), every field
+                // is plain old data, so all bytes are initialised.
+                unsafe {
+                    core::slice::from_raw_parts(
+                        (self as *const Self).cast::<u8>(),
+                        core::mem::size_of::<Self>(),
+                    )
+                }
+            }
+            fn from_bytes(bytes: &[u8]) -> Option<Self> {
+                if bytes.len() != core::mem::size_of::<Self>() {
+                    return None;
+                }
+                let mut out = Self::default();
+                // SAFETY: lengths match; every bit pattern is a valid f64/u64/u32/i64.
+                unsafe {
+                    core::ptr::copy_nonoverlapping(
+                        bytes.as_ptr(),
+                        (&mut out as *mut Self).cast::<u8>(),
+                        bytes.len(),
+                    );
+                }
+                Some(out)
+            }
+        }
+    };
+}
+impl_as_bytes!(Telemetry);
+impl_as_bytes!(Command);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::mem::{offset_of, size_of};
+
+    #[test]
+    fn layout_is_pinned() {
+        assert_eq!(size_of::<PacketHeader>(), 40);
+        assert_eq!(offset_of!(PacketHeader, protocol_version), 0);
+        assert_eq!(offset_of!(PacketHeader, flags), 4);
+        assert_eq!(offset_of!(PacketHeader, schema_hash), 8);
+        assert_eq!(offset_of!(PacketHeader, run_id), 16);
+        assert_eq!(offset_of!(PacketHeader, step), 24);
+        assert_eq!(offset_of!(PacketHeader, t_ns), 32);
+
+        assert_eq!(size_of::<NavState>(), 104);
+        assert_eq!(offset_of!(NavState, pos_mci_m), 0);
+        assert_eq!(offset_of!(NavState, vel_mci_m_s), 24);
+        assert_eq!(offset_of!(NavState, q_mci_from_body), 48);
+        assert_eq!(offset_of!(NavState, rate_body_rad_s), 80);
+
+        assert_eq!(size_of::<EngineReading>(), 24);
+        assert_eq!(offset_of!(EngineReading, thrust_n), 0);
+        assert_eq!(offset_of!(EngineReading, chamber_pressure_pa), 8);
+        assert_eq!(offset_of!(EngineReading, valve_open), 16);
+        assert_eq!(offset_of!(EngineReading, flags), 20);
+
+        assert_eq!(size_of::<PropulsionReadings>(), 120);
+        assert_eq!(offset_of!(PropulsionReadings, gas_pressure_pa), 0);
+        assert_eq!(offset_of!(PropulsionReadings, fuel_tank_pressure_pa), 8);
+        assert_eq!(offset_of!(PropulsionReadings, ox_tank_pressure_pa), 16);
+        assert_eq!(offset_of!(PropulsionReadings, engines), 24);
+
+        assert_eq!(size_of::<Telemetry>(), 304);
+        assert_eq!(offset_of!(Telemetry, header), 0);
+        assert_eq!(offset_of!(Telemetry, nav), 40);
+        assert_eq!(offset_of!(Telemetry, accel_body_m_s2), 144);
+        assert_eq!(offset_of!(Telemetry, altitude_m), 168);
+        assert_eq!(offset_of!(Telemetry, mass_estimate_kg), 176);
+        assert_eq!(offset_of!(Telemetry, propulsion), 184);
+
+        assert_eq!(size_of::<Command>(), 120);
+        assert_eq!(offset_of!(Command, header), 0);
+        assert_eq!(offset_of!(Command, thrust_cmd_n), 40);
+        assert_eq!(offset_of!(Command, engine_on), 72);
+        assert_eq!(offset_of!(Command, torque_cmd_body_nm), 88);
+        assert_eq!(offset_of!(Command, stub_compute_ns), 112);
+    }
+
+    #[test]
+    fn no_padding_anywhere() {
+        // Field sizes add up to the struct size: no padding bytes for as_bytes to expose.
+        assert_eq!(4 + 4 + 8 + 8 + 8 + 8, size_of::<PacketHeader>());
+        assert_eq!(8 * (3 + 3 + 4 + 3), size_of::<NavState>());
+        assert_eq!(8 + 8 + 4 + 4, size_of::<EngineReading>());
+        assert_eq!(
+            8 * 3 + 4 * size_of::<EngineReading>(),
+            size_of::<PropulsionReadings>()
+        );
+        assert_eq!(40 + 104 + 24 + 8 + 8 + 120, size_of::<Telemetry>());
+        assert_eq!(40 + 32 + 16 + 24 + 8, size_of::<Command>());
+    }
+
+    #[test]
+    fn schema_string_matches_layout() {
+        // Every "=size;" in SCHEMA must be a real size: a layout change without a
+        // SCHEMA change (and so a new hash) fails here.
+        for (name, size) in [
+            ("PacketHeader", size_of::<PacketHeader>()),
+            ("NavState", size_of::<NavState>()),
+            ("EngineReading", size_of::<EngineReading>()),
+            ("PropulsionReadings", size_of::<PropulsionReadings>()),
+            ("Telemetry", size_of::<Telemetry>()),
+            ("Command", size_of::<Command>()),
+        ] {
+            let entry = SCHEMA
+                .split('|')
+                .find(|e| e.starts_with(&format!("{name}{{")))
+                .unwrap_or_else(|| panic!("{name} missing from SCHEMA"));
+            assert!(entry.ends_with(&format!("}}={size}")), "{entry} vs {size}");
+        }
+    }
+
+    #[test]
+    fn peer_check_names_both_versions() {
+        let mut h = PacketHeader::new(1, 0, 0);
+        assert!(h.check_peer().is_ok());
+        h.protocol_version = 7;
+        h.schema_hash = 0xdead;
+        let err = h.check_peer().unwrap_err().to_string();
+        assert!(err.contains("v1") && err.contains("v7"), "{err}");
+        assert!(err.contains("0x000000000000dead"), "{err}");
+    }
+
+    #[test]
+    fn bytes_round_trip() {
+        let mut t = Telemetry::default();
+        t.header = PacketHeader::new(42, 7, 70_000_000);
+        t.altitude_m = 123.5;
+        let back = Telemetry::from_bytes(t.as_bytes()).unwrap();
+        assert_eq!(back, t);
+        assert!(Telemetry::from_bytes(&[0u8; 3]).is_none());
+        let c = Command {
+            stub_compute_ns: 9,
+            ..Default::default()
+        };
+        assert_eq!(Command::from_bytes(c.as_bytes()).unwrap(), c);
+    }
+}
