@@ -17,6 +17,7 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 
+pub mod profile;
 pub mod service;
 
 /// Protocol version; bump on any change to a packet layout or meaning.
