@@ -5,3 +5,6 @@
 
 pub mod config;
 pub mod propulsion;
+pub mod digest;
+pub mod recorder;
+pub mod timing;

@@ -17,6 +17,8 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 
+pub mod clock;
+pub mod link;
 pub mod profile;
 pub mod service;
 

@@ -1,0 +1,306 @@
+//! The recorder: every step's telemetry and command go to a log file, written by a
+//! thread of its own so the stepping thread never touches the disk.
+//!
+//! File layout (little-endian):
+//! ```text
+//! magic      8 bytes  "OILSLOG1"
+//! header_len u32      length of the JSON header that follows
+//! header     JSON     run configuration (scenario, mode, seed, protocol version...)
+//! records    RECORD_SIZE bytes each, until the end of the file:
+//!            flags u32 | reserved u32 | Telemetry (304 bytes) | Command (120 bytes)
+//! ```
+//! The stepping thread hands each record to a bounded crossbeam channel (a copy, no
+//! allocation). The writer thread drains it, and flushes to the OS whenever the channel
+//! runs dry, so a crash of either process loses at most the records still in flight.
+//! [`Recorder::finish`] (or dropping the recorder, on any error path) closes the channel,
+//! writes the rest, flushes and `fsync`s.
+
+use crossbeam::channel::{bounded, Receiver, Sender};
+use oils_shared::{AsBytes, Command, Telemetry};
+use std::fs::File;
+use std::io::{BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+use std::thread::JoinHandle;
+use thiserror::Error;
+
+/// File magic.
+pub const MAGIC: &[u8; 8] = b"OILSLOG1";
+/// Bytes per record.
+pub const RECORD_SIZE: usize = 8 + core::mem::size_of::<Telemetry>() + core::mem::size_of::<Command>();
+/// Record flag: the command field holds a command received from the stub.
+pub const REC_COMMAND_RECEIVED: u32 = 1 << 0;
+/// Record flag: the command missed its deadline; the miss policy was applied.
+pub const REC_DEADLINE_MISS: u32 = 1 << 1;
+/// Record flag: some command values were rejected and replaced by safe values.
+pub const REC_REJECTED_VALUES: u32 = 1 << 2;
+/// Record flag: last record of the run (the final telemetry, no command).
+pub const REC_END_OF_RUN: u32 = 1 << 3;
+
+/// Records in flight between the stepping thread and the writer.
+const CHANNEL_CAPACITY: usize = 8192;
+
+/// One step as logged.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Record {
+    /// `REC_*` bits.
+    pub flags: u32,
+    /// Telemetry(k).
+    pub telemetry: Telemetry,
+    /// Command(k) as received (zeroed when none arrived).
+    pub command: Command,
+}
+
+impl Record {
+    fn encode(&self, out: &mut [u8; RECORD_SIZE]) {
+        let t = core::mem::size_of::<Telemetry>();
+        out[0..4].copy_from_slice(&self.flags.to_le_bytes());
+        out[4..8].copy_from_slice(&0u32.to_le_bytes());
+        out[8..8 + t].copy_from_slice(self.telemetry.as_bytes());
+        out[8 + t..].copy_from_slice(self.command.as_bytes());
+    }
+
+    fn decode(bytes: &[u8]) -> Option<Self> {
+        if bytes.len() != RECORD_SIZE {
+            return None;
+        }
+        let t = core::mem::size_of::<Telemetry>();
+        Some(Self {
+            flags: u32::from_le_bytes(bytes[0..4].try_into().ok()?),
+            telemetry: Telemetry::from_bytes(&bytes[8..8 + t])?,
+            command: Command::from_bytes(&bytes[8 + t..])?,
+        })
+    }
+}
+
+/// Log file errors.
+#[derive(Debug, Error)]
+pub enum RecorderError {
+    /// The file could not be created, written or read.
+    #[error("log {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The writer thread is gone (it failed earlier; see its error).
+    #[error("log writer stopped: {0}")]
+    WriterGone(String),
+    /// The file is not an oils log.
+    #[error("{path} is not an oils log ({why})")]
+    NotALog {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        why: String,
+    },
+}
+
+/// Hands records to the writer thread.
+pub struct Recorder {
+    tx: Option<Sender<Record>>,
+    writer: Option<JoinHandle<Result<u64, RecorderError>>>,
+    path: PathBuf,
+}
+
+impl Recorder {
+    /// Creates the log file, writes the header and starts the writer thread.
+    pub fn create(path: &Path, header_json: &str) -> Result<Self, RecorderError> {
+        let io = |source| RecorderError::Io { path: path.to_path_buf(), source };
+        let file = File::create(path).map_err(io)?;
+        let mut out = BufWriter::with_capacity(1 << 20, file);
+        out.write_all(MAGIC).map_err(io)?;
+        out.write_all(&(header_json.len() as u32).to_le_bytes()).map_err(io)?;
+        out.write_all(header_json.as_bytes()).map_err(io)?;
+        out.flush().map_err(io)?;
+        let (tx, rx) = bounded(CHANNEL_CAPACITY);
+        let thread_path = path.to_path_buf();
+        let writer = std::thread::Builder::new()
+            .name("oils-recorder".into())
+            .spawn(move || write_records(rx, out, thread_path))
+            .map_err(io)?;
+        Ok(Self { tx: Some(tx), writer: Some(writer), path: path.to_path_buf() })
+    }
+
+    /// The log file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Queues one record (blocks only if the writer is 8192 records behind).
+    pub fn record(&self, rec: &Record) -> Result<(), RecorderError> {
+        match &self.tx {
+            Some(tx) => tx.send(*rec).map_err(|_| RecorderError::WriterGone("channel closed".into())),
+            None => Err(RecorderError::WriterGone("recorder finished".into())),
+        }
+    }
+
+    /// Closes the channel, waits for the writer to write, flush and sync everything.
+    /// Returns the number of records written.
+    pub fn finish(mut self) -> Result<u64, RecorderError> {
+        self.close()
+    }
+
+    fn close(&mut self) -> Result<u64, RecorderError> {
+        drop(self.tx.take());
+        match self.writer.take() {
+            Some(h) => h.join().map_err(|_| RecorderError::WriterGone("writer panicked".into()))?,
+            None => Ok(0),
+        }
+    }
+}
+
+impl Drop for Recorder {
+    /// Error paths drop the recorder: it still writes and syncs what it has.
+    fn drop(&mut self) {
+        let _ = self.close();
+    }
+}
+
+fn write_records(rx: Receiver<Record>, mut out: BufWriter<File>, path: PathBuf) -> Result<u64, RecorderError> {
+    let io = |source| RecorderError::Io { path: path.clone(), source };
+    let mut buf = [0u8; RECORD_SIZE];
+    let mut written = 0u64;
+    // Block for the next record; then drain without blocking; flush when dry.
+    while let Ok(rec) = rx.recv() {
+        rec.encode(&mut buf);
+        out.write_all(&buf).map_err(io)?;
+        written += 1;
+        while let Ok(rec) = rx.try_recv() {
+            rec.encode(&mut buf);
+            out.write_all(&buf).map_err(io)?;
+            written += 1;
+        }
+        out.flush().map_err(io)?;
+    }
+    out.flush().map_err(io)?;
+    out.get_ref().sync_all().map_err(io)?;
+    Ok(written)
+}
+
+/// A log file read back.
+#[derive(Debug, Clone)]
+pub struct Log {
+    /// The JSON header.
+    pub header_json: String,
+    /// The records.
+    pub records: Vec<Record>,
+    /// Bytes after the last whole record (a crash mid-write leaves some).
+    pub trailing_bytes: usize,
+}
+
+/// Reads a whole log file.
+pub fn read_log(path: &Path) -> Result<Log, RecorderError> {
+    let io = |source| RecorderError::Io { path: path.to_path_buf(), source };
+    let not_log = |why: &str| RecorderError::NotALog { path: path.to_path_buf(), why: why.into() };
+    let mut bytes = Vec::new();
+    File::open(path).map_err(io)?.read_to_end(&mut bytes).map_err(io)?;
+    if bytes.len() < 12 || &bytes[..8] != MAGIC {
+        return Err(not_log("missing OILSLOG1 magic"));
+    }
+    let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
+    let body_start = 12usize.checked_add(header_len).filter(|e| *e <= bytes.len()).ok_or_else(|| not_log("truncated header"))?;
+    let header_json = String::from_utf8(bytes[12..body_start].to_vec()).map_err(|_| not_log("header is not UTF-8"))?;
+    let body = &bytes[body_start..];
+    let records = body.chunks_exact(RECORD_SIZE).filter_map(Record::decode).collect();
+    Ok(Log { header_json, records, trailing_bytes: body.len() % RECORD_SIZE })
+}
+
+/// Writes a log's records as CSV: one row per step, named columns with units.
+pub fn export_csv(log: &Log, out: &mut impl Write) -> std::io::Result<()> {
+    write!(
+        out,
+        "step,t_s,flags,pos_x_m,pos_y_m,pos_z_m,vel_x_m_s,vel_y_m_s,vel_z_m_s,q_w,q_x,q_y,q_z,\
+         rate_x_rad_s,rate_y_rad_s,rate_z_rad_s,accel_x_m_s2,accel_y_m_s2,accel_z_m_s2,altitude_m,mass_kg,\
+         gas_pressure_pa,fuel_tank_pressure_pa,ox_tank_pressure_pa"
+    )?;
+    for e in 1..=4 {
+        write!(out, ",thrust{e}_n,chamber_pressure{e}_pa")?;
+    }
+    for e in 1..=4 {
+        write!(out, ",cmd{e}_n,on{e}")?;
+    }
+    writeln!(out, ",torque_x_nm,torque_y_nm,torque_z_nm,stub_compute_ns")?;
+    for r in &log.records {
+        let t = &r.telemetry;
+        let n = &t.nav;
+        write!(out, "{},{},{}", t.header.step, t.header.t_ns as f64 * 1e-9, r.flags)?;
+        for v in n.pos_mci_m.iter().chain(&n.vel_mci_m_s).chain(&n.q_mci_from_body).chain(&n.rate_body_rad_s).chain(&t.accel_body_m_s2) {
+            write!(out, ",{v}")?;
+        }
+        let p = &t.propulsion;
+        write!(out, ",{},{},{},{},{}", t.altitude_m, t.mass_estimate_kg, p.gas_pressure_pa, p.fuel_tank_pressure_pa, p.ox_tank_pressure_pa)?;
+        for e in &p.engines {
+            write!(out, ",{},{}", e.thrust_n, e.chamber_pressure_pa)?;
+        }
+        let c = &r.command;
+        for e in 0..4 {
+            write!(out, ",{},{}", c.thrust_cmd_n[e], c.engine_on[e])?;
+        }
+        let q = &c.torque_cmd_body_nm;
+        writeln!(out, ",{},{},{},{}", q[0], q[1], q[2], c.stub_compute_ns)?;
+    }
+    out.flush()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp(name: &str) -> PathBuf {
+        std::env::temp_dir().join(format!("oils-rec-{}-{name}", std::process::id()))
+    }
+
+    #[test]
+    fn records_round_trip_and_export() {
+        let path = temp("rt.oilslog");
+        let rec = Recorder::create(&path, r#"{"seed":1}"#).unwrap();
+        for k in 0..1000u64 {
+            let mut r = Record { flags: REC_COMMAND_RECEIVED, ..Default::default() };
+            r.telemetry.header.step = k;
+            r.telemetry.altitude_m = k as f64 * 0.5;
+            r.command.thrust_cmd_n[2] = 400.0 + k as f64;
+            rec.record(&r).unwrap();
+        }
+        assert_eq!(rec.finish().unwrap(), 1000);
+        let log = read_log(&path).unwrap();
+        assert_eq!(log.header_json, r#"{"seed":1}"#);
+        assert_eq!(log.records.len(), 1000);
+        assert_eq!(log.trailing_bytes, 0);
+        assert_eq!(log.records[999].telemetry.altitude_m, 499.5);
+        assert_eq!(log.records[999].command.thrust_cmd_n[2], 1399.0);
+        let mut csv = Vec::new();
+        export_csv(&log, &mut csv).unwrap();
+        let text = String::from_utf8(csv).unwrap();
+        assert_eq!(text.lines().count(), 1001);
+        let header = text.lines().next().unwrap();
+        let row = text.lines().nth(1000).unwrap();
+        assert_eq!(header.split(',').count(), row.split(',').count());
+        assert!(row.starts_with("999,"));
+        std::fs::remove_file(&path).ok();
+    }
+
+    #[test]
+    fn dropping_the_recorder_still_writes_everything() {
+        let path = temp("drop.oilslog");
+        {
+            let rec = Recorder::create(&path, "{}").unwrap();
+            for _ in 0..10 {
+                rec.record(&Record::default()).unwrap();
+            }
+        }
+        assert_eq!(read_log(&path).unwrap().records.len(), 10);
+        std::fs::remove_file(&path).ok();
+    }
+
+    #[test]
+    fn rejects_files_that_are_not_logs() {
+        let path = temp("bad.oilslog");
+        std::fs::write(&path, b"hello world, not a log").unwrap();
+        assert!(matches!(read_log(&path), Err(RecorderError::NotALog { .. })));
+        std::fs::write(&path, b"OILSLOG1\xff\xff\xff\x00").unwrap();
+        assert!(matches!(read_log(&path), Err(RecorderError::NotALog { .. })));
+        std::fs::remove_file(&path).ok();
+        assert!(matches!(read_log(&path), Err(RecorderError::Io { .. })));
+    }
+}

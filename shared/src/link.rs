@@ -1,0 +1,470 @@
+//! The link: the one module that touches iceoryx2, shared by both processes (and by any
+//! Rust flight code that wants to sit on the other side).
+//!
+//! A [`Link<Tx, Rx>`] publishes `Tx` packets and receives `Rx` packets over the run's
+//! publish-subscribe services, plus one event service per direction so a receiver can
+//! sleep instead of spin. The emulator creates the four services (and stamps the protocol
+//! version, schema hash and its wait strategy on them as attributes); the stub opens them.
+//!
+//! Hot-path calls ([`Link::publish`], [`Link::try_receive`], [`Link::receive_until`]) do
+//! not allocate: iceoryx2 loans come from shared memory set up at creation.
+
+use crate::clock::monotonic_ns;
+use crate::service::RunServices;
+use crate::{Command, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH};
+use core::fmt::Debug;
+use core::sync::atomic::{AtomicBool, Ordering};
+use core::time::Duration;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::update_connections::UpdateConnections;
+use iceoryx2::prelude::*;
+use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
+use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
+use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
+use std::str::FromStr;
+
+/// How a receiver waits for the next packet.
+///
+/// On a 2-core machine the choice is a trade: busy-polling answers in well under a
+/// microsecond but burns a core; event wake-ups cost tens of microseconds but sleep.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WaitStrategy {
+    /// Spin on the subscriber. Fastest; one core per waiting process.
+    BusyPoll,
+    /// Block on the peer's event notification.
+    Event,
+    /// Spin for `spin_ns`, then block on the event.
+    Hybrid {
+        /// How long to spin before sleeping, nanoseconds.
+        spin_ns: u64,
+    },
+}
+
+impl WaitStrategy {
+    /// Default spin window of the hybrid strategy: long enough to catch a peer that
+    /// answers within one plant or GNC step, short enough not to starve a 2-core machine.
+    pub const DEFAULT_SPIN_NS: u64 = 50_000;
+
+    /// Whether a sender using this strategy must notify its peer after each packet.
+    pub fn notifies(&self) -> bool {
+        !matches!(self, WaitStrategy::BusyPoll)
+    }
+
+    /// Short name, as on the command line and in service attributes.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            WaitStrategy::BusyPoll => "busy",
+            WaitStrategy::Event => "event",
+            WaitStrategy::Hybrid { .. } => "hybrid",
+        }
+    }
+}
+
+impl FromStr for WaitStrategy {
+    type Err = LinkError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "busy" | "busy-poll" => Ok(WaitStrategy::BusyPoll),
+            "event" => Ok(WaitStrategy::Event),
+            "hybrid" => Ok(WaitStrategy::Hybrid { spin_ns: Self::DEFAULT_SPIN_NS }),
+            _ => Err(LinkError::BadWaitStrategy),
+        }
+    }
+}
+
+/// What can go wrong on the link.
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// iceoryx2 refused an operation.
+    #[error("iceoryx2: {what}: {detail}")]
+    Iceoryx {
+        /// The operation.
+        what: &'static str,
+        /// iceoryx2's error, printed.
+        detail: String,
+    },
+    /// The peer speaks another protocol.
+    #[error(transparent)]
+    Protocol(#[from] crate::ProtocolMismatch),
+    /// The services of this run id already exist (another bench uses it).
+    #[error("run id {run_id:016x} is already in use on this machine; pick another --run-id")]
+    RunIdInUse {
+        /// The run id.
+        run_id: u64,
+    },
+    /// The peer did not show up in time.
+    #[error("no peer on run {run_id:016x} after {waited_ms} ms ({what})")]
+    PeerTimeout {
+        /// The run id.
+        run_id: u64,
+        /// How long we waited.
+        waited_ms: u64,
+        /// What was missing.
+        what: &'static str,
+    },
+    /// A termination signal arrived while waiting.
+    #[error("interrupted by a termination signal")]
+    Interrupted,
+    /// Unknown wait strategy name.
+    #[error("unknown wait strategy (expected busy, event or hybrid)")]
+    BadWaitStrategy,
+}
+
+fn ice<E: Debug>(what: &'static str) -> impl FnOnce(E) -> LinkError {
+    move |e| LinkError::Iceoryx { what, detail: format!("{e:?}") }
+}
+
+/// Attribute keys the emulator stamps on the run's telemetry-event service.
+pub mod attribute_keys {
+    /// Protocol version, decimal.
+    pub const PROTOCOL_VERSION: &str = "oils.protocol_version";
+    /// Schema hash, `0x`-prefixed hex.
+    pub const SCHEMA_HASH: &str = "oils.schema_hash";
+    /// The emulator's wait strategy (`busy`, `event`, `hybrid`).
+    pub const WAIT: &str = "oils.wait";
+}
+
+/// Creates an iceoryx2 node for one side of the link.
+///
+/// Signal handling is left to the caller (both binaries install their own SIGINT and
+/// SIGTERM flag before tick 0, so a signal is seen even before any iceoryx2 wait). Dead
+/// nodes of earlier crashed runs are cleaned up on creation (iceoryx2's default config).
+pub fn create_node(name: &str) -> Result<Node<ipc::Service>, LinkError> {
+    iceoryx2::prelude::set_log_level_from_env_or(LogLevel::Error);
+    let node_name = NodeName::new(name).map_err(ice("node name"))?;
+    // An explicit default config: no config-file lookup, so no warning at every start.
+    let mut config = Config::default();
+    config.global.node.cleanup_dead_nodes_on_creation = true;
+    config.global.node.cleanup_dead_nodes_on_destruction = true;
+    NodeBuilder::new()
+        .name(&node_name)
+        .config(&config)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+        .map_err(ice("create node"))
+}
+
+fn service_name(s: &str) -> Result<ServiceName, LinkError> {
+    ServiceName::new(s).map_err(ice("service name"))
+}
+
+/// One side of the link: publishes `Tx`, receives `Rx`.
+pub struct Link<Tx, Rx>
+where
+    Tx: Debug + ZeroCopySend + Copy + 'static,
+    Rx: Debug + ZeroCopySend + Copy + 'static,
+{
+    run_id: u64,
+    wait: WaitStrategy,
+    publisher: Publisher<ipc::Service, Tx, ()>,
+    subscriber: Subscriber<ipc::Service, Rx, ()>,
+    notifier: Notifier<ipc::Service>,
+    listener: Listener<ipc::Service>,
+    tx_service: PubSubFactory<ipc::Service, Tx, ()>,
+    rx_service: PubSubFactory<ipc::Service, Rx, ()>,
+    _tx_event: EventFactory<ipc::Service>,
+    _rx_event: EventFactory<ipc::Service>,
+}
+
+/// The emulator's side.
+pub type EmulatorLink = Link<Telemetry, Command>;
+/// The onboard computer's side.
+pub type StubLink = Link<Command, Telemetry>;
+
+impl EmulatorLink {
+    /// Creates the run's services. Fails with [`LinkError::RunIdInUse`] if they exist.
+    pub fn create(
+        node: &Node<ipc::Service>,
+        run_id: u64,
+        wait: WaitStrategy,
+    ) -> Result<Self, LinkError> {
+        let names = RunServices::new(run_id);
+        let version = PROTOCOL_VERSION.to_string();
+        let hash = format!("{SCHEMA_HASH:#x}");
+        let mut attrs = AttributeSpecifier::new();
+        for (k, v) in [
+            (attribute_keys::PROTOCOL_VERSION, version.as_str()),
+            (attribute_keys::SCHEMA_HASH, hash.as_str()),
+            (attribute_keys::WAIT, wait.as_str()),
+        ] {
+            attrs = attrs.define(&key(k)?, &value(v)?).map_err(ice("service attributes"))?;
+        }
+        let in_use = |e: &dyn Debug| format!("{e:?}").contains("AlreadyExists");
+        let tlm_service = node
+            .service_builder(&service_name(names.telemetry().as_str())?)
+            .publish_subscribe::<Telemetry>()
+            .max_publishers(1)
+            .max_subscribers(4)
+            .subscriber_max_buffer_size(4)
+            .history_size(0)
+            .create()
+            .map_err(|e| if in_use(&e) { LinkError::RunIdInUse { run_id } } else { ice("create telemetry service")(e) })?;
+        let cmd_service = node
+            .service_builder(&service_name(names.command().as_str())?)
+            .publish_subscribe::<Command>()
+            .max_publishers(1)
+            .max_subscribers(2)
+            .subscriber_max_buffer_size(4)
+            .history_size(0)
+            .create()
+            .map_err(ice("create command service"))?;
+        let tlm_event = node
+            .service_builder(&service_name(names.telemetry_event().as_str())?)
+            .event()
+            .create_with_attributes(&attrs)
+            .map_err(ice("create telemetry event"))?;
+        let cmd_event = node
+            .service_builder(&service_name(names.command_event().as_str())?)
+            .event()
+            .create()
+            .map_err(ice("create command event"))?;
+        Self::from_services(run_id, wait, tlm_service, cmd_service, tlm_event, cmd_event)
+    }
+
+    /// Waits until the stub has subscribed to telemetry and publishes commands.
+    pub fn wait_for_peer(&self, timeout_ms: u64, stop: &AtomicBool) -> Result<(), LinkError> {
+        let start = monotonic_ns();
+        loop {
+            let subscribed = self.tx_service.dynamic_config().number_of_subscribers() >= 1;
+            let publishing = self.rx_service.dynamic_config().number_of_publishers() >= 1;
+            if subscribed && publishing {
+                self.publisher.update_connections().map_err(ice("update connections"))?;
+                return Ok(());
+            }
+            if stop.load(Ordering::Relaxed) {
+                return Err(LinkError::Interrupted);
+            }
+            let waited_ms = (monotonic_ns() - start) / 1_000_000;
+            if waited_ms >= timeout_ms {
+                return Err(LinkError::PeerTimeout {
+                    run_id: self.run_id,
+                    waited_ms,
+                    what: "no onboard stub connected",
+                });
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+}
+
+/// What the emulator announced on its services.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PeerAnnouncement {
+    /// The emulator's protocol version.
+    pub protocol_version: u32,
+    /// The emulator's schema hash.
+    pub schema_hash: u64,
+    /// The emulator's wait strategy, if it announced one.
+    pub wait: Option<WaitStrategy>,
+}
+
+impl StubLink {
+    /// Opens the run's services, retrying until the emulator has created them. Checks the
+    /// protocol version and schema hash the emulator announced before touching the typed
+    /// services, so a mismatch is a clear error naming both versions.
+    /// `wait: None` adopts the emulator's announced strategy.
+    pub fn open(
+        node: &Node<ipc::Service>,
+        run_id: u64,
+        wait: Option<WaitStrategy>,
+        timeout_ms: u64,
+        stop: &AtomicBool,
+    ) -> Result<Self, LinkError> {
+        let names = RunServices::new(run_id);
+        let start = monotonic_ns();
+        let tlm_event = loop {
+            match node
+                .service_builder(&service_name(names.telemetry_event().as_str())?)
+                .event()
+                .open()
+            {
+                Ok(s) => break s,
+                Err(e) => {
+                    let msg = format!("{e:?}");
+                    if !msg.contains("DoesNotExist") && !msg.contains("InsufficientPermissions") && !msg.contains("ServiceInCorruptedState") && !msg.contains("HangsInCreation") {
+                        return Err(ice("open telemetry event")(e));
+                    }
+                }
+            }
+            if stop.load(Ordering::Relaxed) {
+                return Err(LinkError::Interrupted);
+            }
+            let waited_ms = (monotonic_ns() - start) / 1_000_000;
+            if waited_ms >= timeout_ms {
+                return Err(LinkError::PeerTimeout { run_id, waited_ms, what: "no emulator created the run's services" });
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        let announced = read_announcement(tlm_event.attributes());
+        if announced.protocol_version != PROTOCOL_VERSION || announced.schema_hash != SCHEMA_HASH {
+            return Err(LinkError::Protocol(crate::ProtocolMismatch {
+                ours_version: PROTOCOL_VERSION,
+                ours_schema_hash: SCHEMA_HASH,
+                peer_version: announced.protocol_version,
+                peer_schema_hash: announced.schema_hash,
+            }));
+        }
+        let wait = wait.or(announced.wait).unwrap_or(WaitStrategy::Hybrid { spin_ns: WaitStrategy::DEFAULT_SPIN_NS });
+        let cmd_service = node
+            .service_builder(&service_name(names.command().as_str())?)
+            .publish_subscribe::<Command>()
+            .open()
+            .map_err(ice("open command service"))?;
+        let tlm_service = node
+            .service_builder(&service_name(names.telemetry().as_str())?)
+            .publish_subscribe::<Telemetry>()
+            .open()
+            .map_err(ice("open telemetry service"))?;
+        let cmd_event = node
+            .service_builder(&service_name(names.command_event().as_str())?)
+            .event()
+            .open()
+            .map_err(ice("open command event"))?;
+        Self::from_services(run_id, wait, cmd_service, tlm_service, cmd_event, tlm_event)
+    }
+}
+
+fn key(s: &str) -> Result<AttributeKey, LinkError> {
+    AttributeKey::new(s.as_bytes()).map_err(ice("attribute key"))
+}
+
+fn value(s: &str) -> Result<AttributeValue, LinkError> {
+    AttributeValue::new(s.as_bytes()).map_err(ice("attribute value"))
+}
+
+fn read_announcement(attrs: &AttributeSet) -> PeerAnnouncement {
+    let get = |k: &str| -> Option<String> {
+        let k = key(k).ok()?;
+        attrs
+            .key_value(&k, 0)
+            .map(|v| String::from_utf8_lossy(v.as_bytes()).into_owned())
+    };
+    PeerAnnouncement {
+        protocol_version: get(attribute_keys::PROTOCOL_VERSION)
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(0),
+        schema_hash: get(attribute_keys::SCHEMA_HASH)
+            .and_then(|v| u64::from_str_radix(v.trim_start_matches("0x"), 16).ok())
+            .unwrap_or(0),
+        wait: get(attribute_keys::WAIT).and_then(|v| v.parse().ok()),
+    }
+}
+
+impl<Tx, Rx> Link<Tx, Rx>
+where
+    Tx: Debug + ZeroCopySend + Copy + 'static,
+    Rx: Debug + ZeroCopySend + Copy + 'static,
+{
+    fn from_services(
+        run_id: u64,
+        wait: WaitStrategy,
+        tx_service: PubSubFactory<ipc::Service, Tx, ()>,
+        rx_service: PubSubFactory<ipc::Service, Rx, ()>,
+        tx_event: EventFactory<ipc::Service>,
+        rx_event: EventFactory<ipc::Service>,
+    ) -> Result<Self, LinkError> {
+        let publisher = tx_service.publisher_builder().create().map_err(ice("create publisher"))?;
+        let subscriber = rx_service.subscriber_builder().create().map_err(ice("create subscriber"))?;
+        let notifier = tx_event.notifier_builder().create().map_err(ice("create notifier"))?;
+        let listener = rx_event.listener_builder().create().map_err(ice("create listener"))?;
+        Ok(Self {
+            run_id,
+            wait,
+            publisher,
+            subscriber,
+            notifier,
+            listener,
+            tx_service,
+            rx_service,
+            _tx_event: tx_event,
+            _rx_event: rx_event,
+        })
+    }
+
+    /// The run id.
+    pub fn run_id(&self) -> u64 {
+        self.run_id
+    }
+
+    /// The wait strategy in use.
+    pub fn wait_strategy(&self) -> WaitStrategy {
+        self.wait
+    }
+
+    /// Whether the peer's receiving port is still attached (a cleanly exited peer
+    /// detaches; a killed one stays until dead-node cleanup).
+    pub fn peer_attached(&self) -> bool {
+        self.tx_service.dynamic_config().number_of_subscribers() >= 1
+    }
+
+    /// Publishes one packet (copied into a loaned shared-memory slot), then notifies the
+    /// peer unless we busy-poll.
+    pub fn publish(&self, packet: &Tx) -> Result<(), LinkError> {
+        let sample = self.publisher.loan_uninit().map_err(ice("loan"))?;
+        let sample = sample.write_payload(*packet);
+        sample.send().map_err(ice("send"))?;
+        if self.wait.notifies() {
+            self.notifier.notify().map_err(ice("notify"))?;
+        }
+        Ok(())
+    }
+
+    /// Takes the next packet, if one is waiting.
+    pub fn try_receive(&self) -> Result<Option<Rx>, LinkError> {
+        match self.subscriber.receive().map_err(ice("receive"))? {
+            Some(sample) => Ok(Some(*sample.payload())),
+            None => Ok(None),
+        }
+    }
+
+    /// Waits for the next packet until the monotonic time `deadline_ns`, with this
+    /// link's wait strategy. `Ok(None)` when the deadline passes; `Err(Interrupted)` when
+    /// `stop` is raised (checked between polls and at least every millisecond).
+    pub fn receive_until(&self, deadline_ns: u64, stop: &AtomicBool) -> Result<Option<Rx>, LinkError> {
+        let spin_until_ns = match self.wait {
+            WaitStrategy::BusyPoll => deadline_ns,
+            WaitStrategy::Event => 0,
+            WaitStrategy::Hybrid { spin_ns } => monotonic_ns().saturating_add(spin_ns).min(deadline_ns),
+        };
+        loop {
+            if let Some(p) = self.try_receive()? {
+                return Ok(Some(p));
+            }
+            let now = monotonic_ns();
+            if now >= deadline_ns {
+                return Ok(None);
+            }
+            if stop.load(Ordering::Relaxed) {
+                return Err(LinkError::Interrupted);
+            }
+            if now < spin_until_ns {
+                core::hint::spin_loop();
+                continue;
+            }
+            // Sleep on the peer's event, in slices of at most 1 ms so a peer that does not
+            // notify (a busy-polling emulator, or foreign code) is still seen promptly.
+            let slice_ns = (deadline_ns - now).min(1_000_000);
+            self.listener
+                .timed_wait(|_| {}, Duration::from_nanos(slice_ns))
+                .map_err(ice("event wait"))?;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wait_strategy_names_round_trip() {
+        for w in ["busy", "event", "hybrid"] {
+            assert_eq!(w.parse::<WaitStrategy>().unwrap().as_str(), w);
+        }
+        assert!("spin".parse::<WaitStrategy>().is_err());
+        assert!(!WaitStrategy::BusyPoll.notifies());
+        assert!(WaitStrategy::Event.notifies());
+    }
+}
