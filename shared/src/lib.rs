@@ -21,6 +21,7 @@ pub mod clock;
 pub mod link;
 pub mod profile;
 pub mod service;
+pub mod signals;
 
 /// Protocol version; bump on any change to a packet layout or meaning.
 pub const PROTOCOL_VERSION: u32 = 1;

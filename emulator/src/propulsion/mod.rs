@@ -82,6 +82,16 @@ impl PropulsionKind {
     }
 }
 
+impl std::str::FromStr for PropulsionKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "ideal" => Ok(PropulsionKind::Ideal),
+            other => Err(format!("unknown propulsion model `{other}` (expected ideal)")),
+        }
+    }
+}
+
 /// Builds the model chosen in the configuration. Allocation happens here, once.
 pub fn build(kind: PropulsionKind, cfg: &PropulsionConfig) -> Box<dyn Propulsion> {
     match kind {

@@ -1,0 +1,154 @@
+//! The run report: the JSON written with `--report PATH` and the compact table printed
+//! at the end of every run.
+
+use crate::scheduler::{Mode, RunSummary};
+use crate::timing::Percentiles;
+use serde::Serialize;
+use std::fmt::Write as _;
+
+/// Everything a run reports. Field names are the interface checks rely on.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunReport {
+    /// Run id, hex.
+    pub run_id: String,
+    /// Pacing mode.
+    pub mode: Mode,
+    /// Realtime speed factor.
+    pub speed: f64,
+    /// Step, milliseconds.
+    pub dt_ms: f64,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// Propulsion model.
+    pub propulsion: String,
+    /// Flight software the stub ran (as asked; a hand-started stub may differ).
+    pub fsw: String,
+    /// Wait strategy of the emulator.
+    pub wait: String,
+    /// Protocol version.
+    pub protocol_version: u32,
+    /// Log file, if any.
+    pub log: Option<String>,
+    /// The run's figures.
+    #[serde(flatten)]
+    pub summary: RunSummary,
+}
+
+impl RunReport {
+    /// Pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"))
+    }
+
+    /// The compact table printed at the end of a run.
+    pub fn table(&self) -> String {
+        let s = &self.summary;
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "oils run {}  mode {:?}  dt {} ms  propulsion {}  fsw {}  wait {}  seed {}",
+            self.run_id, self.mode, self.dt_ms, self.propulsion, self.fsw, self.wait, self.seed
+        );
+        let outcome = format!("{:?}", s.outcome).to_uppercase();
+        match &s.touchdown {
+            Some(td) => {
+                let _ = writeln!(
+                    out,
+                    "outcome     {outcome} at t = {:.1} s: vertical {:.2} m/s, horizontal {:.2} m/s, tilt {:.2} deg, propellant used {:.1} kg",
+                    td.t_s, td.vertical_speed_mps, td.horizontal_speed_mps, td.tilt_deg, td.propellant_used_kg
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    out,
+                    "outcome     {outcome} at t = {:.1} s, propellant used {:.1} kg",
+                    s.sim_time_s, s.propellant_used_kg
+                );
+            }
+        }
+        if let Some(e) = &s.error {
+            let _ = writeln!(out, "error       {e}");
+        }
+        let t = &s.timing;
+        let _ = writeln!(
+            out,
+            "steps       {}  wall {:.3} s  realtime factor {:.1}x",
+            s.steps, t.wall_s, t.realtime_factor
+        );
+        let _ = writeln!(out, "timing (us)        p50       p99     p99.9       max     count");
+        let row = |out: &mut String, name: &str, p: &Percentiles| {
+            if p.count == 0 {
+                let _ = writeln!(out, "  {name:<13} {:>9} {:>9} {:>9} {:>9} {:>9}", "-", "-", "-", "-", 0);
+            } else {
+                let us = |v: u64| v as f64 / 1000.0;
+                let _ = writeln!(
+                    out,
+                    "  {name:<13} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9}",
+                    us(p.p50), us(p.p99), us(p.p999), us(p.max), p.count
+                );
+            }
+        };
+        row(&mut out, "wake error", &t.wake_error_ns);
+        row(&mut out, "round trip", &t.round_trip_ns);
+        row(&mut out, "stub compute", &t.stub_compute_ns);
+        row(&mut out, "transport", &t.transport_ns);
+        let _ = writeln!(
+            out,
+            "deadline misses {}  late commands {}  rejected commands {} ({} values)",
+            t.deadline_misses, t.late_commands, s.rejected_commands, s.rejected_values
+        );
+        for v in &s.threshold_violations {
+            let _ = writeln!(out, "THRESHOLD   {v}");
+        }
+        let _ = writeln!(out, "digest      {}", s.digest);
+        if let Some(log) = &self.log {
+            let _ = writeln!(out, "log         {log} ({} records)", s.log_records);
+        }
+        out
+    }
+}
+
+/// The run did not pass.
+#[derive(Debug, thiserror::Error)]
+pub enum RunFailed {
+    /// The report could not be written.
+    #[error("writing report {path}: {source}")]
+    ReportFile {
+        /// The file.
+        path: String,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The run ended badly or broke a threshold.
+    #[error("run failed: {0}")]
+    Verdict(String),
+}
+
+/// Prints the table, writes the JSON report if asked, and turns a bad run (aborted,
+/// crashed, or a broken timing threshold) into an error, so the process exits non-zero.
+pub fn finish_run(report: &RunReport, json_path: Option<&std::path::Path>) -> Result<(), RunFailed> {
+    print!("{}", report.table());
+    if let Some(path) = json_path {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir)
+                .map_err(|source| RunFailed::ReportFile { path: path.display().to_string(), source })?;
+        }
+        std::fs::write(path, report.to_json() + "\n")
+            .map_err(|source| RunFailed::ReportFile { path: path.display().to_string(), source })?;
+    }
+    let s = &report.summary;
+    let mut why = Vec::new();
+    match s.outcome {
+        crate::scheduler::Outcome::Aborted => why.push(format!("aborted: {}", s.error.clone().unwrap_or_default())),
+        crate::scheduler::Outcome::Crashed => why.push("touched down outside the limits".to_string()),
+        _ => {}
+    }
+    for v in &s.threshold_violations {
+        why.push(format!("threshold broken: {v}"));
+    }
+    if why.is_empty() {
+        Ok(())
+    } else {
+        Err(RunFailed::Verdict(why.join("; ")))
+    }
+}

@@ -1,0 +1,85 @@
+//! The stub's command line (`oils-onboard-stub`, and `oils stub` when the bench spawns
+//! it): which run to join and which flight software to fly.
+
+use crate::fsw::FlightSoftware;
+use crate::gnc::ReferenceGnc;
+use crate::playback::ProfilePlayback;
+use crate::runner::{serve, StubError, StubSummary};
+use oils_shared::link::{create_node, LinkError, StubLink, WaitStrategy};
+use oils_shared::profile::{ProfileError, ThrustProfile};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+/// Flight software choice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum FswKind {
+    /// The reference descent GNC.
+    Gnc,
+    /// Open-loop playback of a thrust-command profile CSV.
+    Playback,
+}
+
+/// Arguments of the onboard stub.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StubArgs {
+    /// Run id to join (hex), as printed by the emulator.
+    #[arg(long)]
+    pub run_id: String,
+    /// Flight software to run.
+    #[arg(long, value_enum, default_value = "gnc")]
+    pub fsw: FswKind,
+    /// Thrust-command profile CSV for `--fsw playback`.
+    #[arg(long)]
+    pub profile: Option<PathBuf>,
+    /// busy, event or hybrid; default: what the emulator announces.
+    #[arg(long)]
+    pub wait: Option<String>,
+    /// Give up after this long without telemetry, milliseconds.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+    /// How long to wait for the emulator's services to appear, milliseconds.
+    #[arg(long, default_value_t = 10000)]
+    pub startup_timeout_ms: u64,
+}
+
+/// Why the stub could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum StubCliError {
+    /// Bad argument.
+    #[error("{0}")]
+    Argument(String),
+    /// Profile unreadable.
+    #[error(transparent)]
+    Profile(#[from] ProfileError),
+    /// Link failure.
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    /// The loop failed.
+    #[error(transparent)]
+    Serve(#[from] StubError),
+}
+
+/// Builds the flight software asked for (allocation happens here, before tick 0).
+pub fn build_fsw(kind: FswKind, profile: Option<&PathBuf>) -> Result<Box<dyn FlightSoftware>, StubCliError> {
+    match kind {
+        FswKind::Gnc => Ok(Box::new(ReferenceGnc::default())),
+        FswKind::Playback => {
+            let path = profile.ok_or_else(|| StubCliError::Argument("--fsw playback needs --profile CSV".into()))?;
+            Ok(Box::new(ProfilePlayback::new(ThrustProfile::load(path)?)))
+        }
+    }
+}
+
+/// Joins the run and serves it to the end.
+pub fn run_stub(args: &StubArgs, stop: &AtomicBool) -> Result<StubSummary, StubCliError> {
+    let run_id = u64::from_str_radix(args.run_id.trim_start_matches("0x"), 16)
+        .map_err(|_| StubCliError::Argument(format!("--run-id {}: not a hex number", args.run_id)))?;
+    let wait: Option<WaitStrategy> = match &args.wait {
+        Some(w) => Some(w.parse().map_err(|_| StubCliError::Argument(format!("--wait {w}: expected busy, event or hybrid")))?),
+        None => None,
+    };
+    let mut fsw = build_fsw(args.fsw, args.profile.as_ref())?;
+    let node = create_node("oils-onboard-stub")?;
+    let link = StubLink::open(&node, run_id, wait, args.startup_timeout_ms, stop)?;
+    Ok(serve(&link, fsw.as_mut(), args.timeout_ms, stop)?)
+}

@@ -1,0 +1,166 @@
+//! End-to-end: the `oils` binary spawns a real onboard-stub process and the two fly the
+//! default descent over real iceoryx2 shared memory.
+
+mod common;
+use common::*;
+
+#[test]
+fn default_descent_lands_within_limits_and_reports() {
+    let dir = scratch("default");
+    let rep = dir.join("report.json");
+    let log = dir.join("run.oilslog");
+    let out = run_oils(&["run", "--report", rep.to_str().unwrap(), "--log", log.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out));
+    let r = report(&rep);
+    assert_eq!(r["outcome"], "landed", "{}", text(&out));
+    assert_eq!(r["mode"], "lockstep");
+    let td = &r["touchdown"];
+    assert!(td["vertical_speed_mps"].as_f64().unwrap() <= 2.0, "{td}");
+    assert!(td["horizontal_speed_mps"].as_f64().unwrap() <= 0.5, "{td}");
+    assert!(td["tilt_deg"].as_f64().unwrap() <= 10.0, "{td}");
+    let used = td["propellant_used_kg"].as_f64().unwrap();
+    assert!(used > 500.0 && used < 1000.0, "propellant used {used}");
+    assert!(td["t_s"].as_f64().unwrap() > 300.0);
+    let steps = r["steps"].as_u64().unwrap();
+    assert!(steps > 30_000, "{steps}");
+    let digest = r["digest"].as_str().unwrap();
+    assert_eq!(digest.len(), 64);
+    assert!(digest.chars().all(|c| c.is_ascii_hexdigit()));
+    for key in ["wake_error_ns", "round_trip_ns", "stub_compute_ns", "transport_ns"] {
+        for p in ["p50", "p99", "p999", "max"] {
+            assert!(r["timing"][key][p].is_u64(), "timing.{key}.{p} missing");
+        }
+    }
+    assert_eq!(r["timing"]["round_trip_ns"]["count"].as_u64().unwrap(), steps);
+    assert_eq!(r["timing"]["deadline_misses"], 0);
+    assert!(r["timing"]["wall_s"].as_f64().unwrap() > 0.0);
+    assert!(r["timing"]["realtime_factor"].as_f64().unwrap() > 1.0);
+    assert_eq!(r["rejected_commands"], 0);
+
+    // The log holds every step plus the final telemetry, and exports to CSV.
+    let csv = dir.join("run.csv");
+    let out = run_oils(&["export", log.to_str().unwrap(), "--csv", csv.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out));
+    let text_csv = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text_csv.lines();
+    let header = lines.next().unwrap();
+    assert!(header.starts_with("step,t_s,flags,pos_x_m"), "{header}");
+    assert_eq!(lines.count() as u64, steps + 1);
+}
+
+#[test]
+fn same_configuration_same_digest_other_seed_other_digest() {
+    let dir = scratch("determinism");
+    let digest_of = |name: &str, extra: &[&str]| -> String {
+        let rep = dir.join(format!("{name}.json"));
+        let mut args = vec!["run", "--no-log", "--duration", "120", "--report", rep.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let out = run_oils(&args);
+        assert!(out.status.success(), "{}", text(&out));
+        report(&rep)["digest"].as_str().unwrap().to_string()
+    };
+    let a = digest_of("a", &["--seed", "7"]);
+    let b = digest_of("b", &["--seed", "7"]);
+    assert_eq!(a, b, "two identical lockstep runs must give the same digest");
+    let c = digest_of("c", &["--seed", "8"]);
+    assert_ne!(a, c, "another seed must give another digest");
+    let d = digest_of("d", &["--seed", "7", "--dt-ms", "20"]);
+    assert_ne!(a, d, "another step must give another digest");
+}
+
+#[test]
+fn two_runs_at_once_do_not_collide() {
+    let dir = scratch("parallel");
+    let spawn = |name: &str| {
+        let rep = dir.join(format!("{name}.json"));
+        let child = oils()
+            .args(["run", "--no-log", "--duration", "200", "--seed", "3", "--report", rep.to_str().unwrap()])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .expect("spawn");
+        (child, rep)
+    };
+    let (mut c1, r1) = spawn("one");
+    let (mut c2, r2) = spawn("two");
+    assert!(c1.wait().unwrap().success());
+    assert!(c2.wait().unwrap().success());
+    let (r1, r2) = (report(&r1), report(&r2));
+    assert_ne!(r1["run_id"], r2["run_id"]);
+    assert_eq!(r1["digest"], r2["digest"], "same inputs, same digest, even side by side");
+}
+
+#[test]
+fn playback_flies_a_profile_open_loop() {
+    let dir = scratch("playback");
+    let profile = dir.join("profile.csv");
+    std::fs::write(&profile, "t,cmd1,cmd2,cmd3,cmd4,on1,on2,on3,on4\n0,800,800,800,800,1,1,1,1\n2,400,400,400,400,1,1,1,1\n").unwrap();
+    let rep = dir.join("report.json");
+    let out = run_oils(&[
+        "run", "--fsw", "playback", "--profile", profile.to_str().unwrap(), "--duration", "5", "--no-log",
+        "--report", rep.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let r = report(&rep);
+    assert_eq!(r["outcome"], "completed");
+    assert_eq!(r["steps"], 500);
+}
+
+#[test]
+fn realtime_mode_paces_and_reports_wake_error() {
+    let dir = scratch("realtime");
+    let rep = dir.join("report.json");
+    let out = run_oils(&["run", "--mode", "realtime", "--speed", "4", "--duration", "2", "--no-log", "--report", rep.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out));
+    let r = report(&rep);
+    assert_eq!(r["mode"], "realtime");
+    assert_eq!(r["steps"], 200);
+    assert_eq!(r["timing"]["wake_error_ns"]["count"], 200);
+    // 2 s simulated at 4x takes about half a second of wall time, never much less.
+    let wall = r["timing"]["wall_s"].as_f64().unwrap();
+    assert!(wall >= 0.49, "realtime pacing ran too fast: {wall} s");
+}
+
+#[test]
+fn a_broken_threshold_fails_the_run_and_names_it() {
+    let dir = scratch("threshold");
+    let rep = dir.join("report.json");
+    // 1 ns of round trip is impossible: the run must fail and say which bound broke.
+    let out = run_oils(&["run", "--duration", "1", "--no-log", "--max-round-trip-p99-us", "0.001", "--report", rep.to_str().unwrap()]);
+    assert!(!out.status.success(), "{}", text(&out));
+    let all = text(&out);
+    assert!(all.contains("round_trip p99"), "{all}");
+    assert!(!report(&rep)["threshold_violations"].as_array().unwrap().is_empty());
+}
+
+#[test]
+fn bad_command_line_input_is_a_clear_error() {
+    let cases: &[(&[&str], &str)] = &[
+        (&["run", "--dt-ms", "0"], "dt-ms"),
+        (&["run", "--dt-ms", "101"], "dt-ms"),
+        (&["run", "--scenario", "/nonexistent/scenario.toml"], "scenario"),
+        (&["run", "--fsw", "playback"], "--profile"),
+        (&["run", "--propulsion", "warp"], "warp"),
+        (&["run", "--miss-policy", "abort:0"], "miss-policy"),
+        (&["run", "--speed", "-1"], "speed"),
+        (&["run", "--wait", "sometimes"], "--wait"),
+        (&["export", "/nonexistent.oilslog", "--csv", "/tmp/x.csv"], "nonexistent"),
+    ];
+    for (args, needle) in cases {
+        let out = run_oils(args);
+        assert!(!out.status.success(), "{args:?} should fail");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "{args:?}: stderr lacks `{needle}`:\n{err}");
+        assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
+    }
+}
+
+#[test]
+fn malformed_profile_names_the_line() {
+    let dir = scratch("badprofile");
+    let profile = dir.join("bad.csv");
+    std::fs::write(&profile, "t,cmd1,cmd2,cmd3,cmd4,on1,on2,on3,on4\n0,800,800,800,800,1,1,1,1\n1,abc,0,0,0,1,1,1,1\n").unwrap();
+    let out = run_oils(&["run", "--fsw", "playback", "--profile", profile.to_str().unwrap(), "--no-log", "--startup-timeout-ms", "3000"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("line 3"), "{err}");
+}

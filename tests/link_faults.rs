@@ -1,0 +1,179 @@
+//! End-to-end faults at the link: a stub killed with SIGKILL, the emulator stopped with
+//! SIGTERM, a foreign stub sending garbage, a stub speaking another protocol. Real
+//! processes, real iceoryx2.
+
+mod common;
+use common::*;
+use oils_shared::link::{create_node, StubLink};
+use oils_shared::{Command, PacketHeader, TLM_FLAG_END_OF_RUN};
+use std::process::Stdio;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+fn wait_with_deadline(child: &mut std::process::Child, secs: u64) -> std::process::ExitStatus {
+    let until = Instant::now() + Duration::from_secs(secs);
+    loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            return s;
+        }
+        if Instant::now() > until {
+            let _ = child.kill();
+            panic!("process still running after {secs} s");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Reads a log through `oils export`; returns the CSV rows (without header).
+fn exported_rows(log: &std::path::Path) -> Vec<String> {
+    let csv = log.with_extension("csv");
+    let out = run_oils(&["export", log.to_str().unwrap(), "--csv", csv.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out));
+    std::fs::read_to_string(&csv).unwrap().lines().skip(1).map(String::from).collect()
+}
+
+#[test]
+fn killed_stub_is_noticed_log_is_intact_and_the_next_run_starts_clean() {
+    let dir = scratch("kill9");
+    let id = run_id(1);
+    let (log, rep) = (dir.join("run.oilslog"), dir.join("report.json"));
+    let mut emulator = oils()
+        .args([
+            "run", "--no-stub", "--run-id", &id, "--mode", "realtime", "--duration", "60", "--link-timeout-ms", "500",
+            "--log", log.to_str().unwrap(), "--report", rep.to_str().unwrap(),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stub = oils().args(["stub", "--run-id", &id]).spawn().unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    stub.kill().unwrap(); // SIGKILL: no cleanup of any kind
+    stub.wait().unwrap();
+    let killed_at = Instant::now();
+    let status = wait_with_deadline(&mut emulator, 15);
+    assert!(killed_at.elapsed() < Duration::from_secs(5), "noticed too late: {:?}", killed_at.elapsed());
+    let mut err = String::new();
+    std::io::Read::read_to_string(emulator.stderr.as_mut().unwrap(), &mut err).unwrap();
+    assert!(!status.success());
+    assert!(err.contains("silent"), "{err}");
+    let r = report(&rep);
+    assert_eq!(r["outcome"], "aborted");
+    // Log intact up to the kill: contiguous steps, ending with the end-of-run record.
+    let rows = exported_rows(&log);
+    assert!(rows.len() > 50, "only {} rows", rows.len());
+    for (k, row) in rows.iter().enumerate() {
+        assert!(row.starts_with(&format!("{k},")), "row {k} is `{}`", &row[..20.min(row.len())]);
+    }
+    assert_eq!(rows.len() as u64, r["steps"].as_u64().unwrap() + 1);
+
+    // Same run id again, right away: no hand cleaning of /dev/shm needed.
+    let rep2 = dir.join("again.json");
+    let out = run_oils(&["run", "--run-id", &id, "--duration", "5", "--no-log", "--report", rep2.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert_eq!(report(&rep2)["outcome"], "completed");
+}
+
+#[test]
+fn sigterm_ends_the_run_cleanly_with_the_log_flushed() {
+    let dir = scratch("sigterm");
+    let (log, rep) = (dir.join("run.oilslog"), dir.join("report.json"));
+    let mut emulator = oils()
+        .args(["run", "--mode", "realtime", "--duration", "60", "--log", log.to_str().unwrap(), "--report", rep.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    // SAFETY: plain kill(2) on our own child.
+    unsafe { libc::kill(emulator.id() as i32, libc::SIGTERM) };
+    let status = wait_with_deadline(&mut emulator, 10);
+    assert!(!status.success(), "an interrupted run is not a success");
+    let r = report(&rep);
+    assert_eq!(r["outcome"], "aborted");
+    assert!(r["error"].as_str().unwrap().contains("signal"));
+    let rows = exported_rows(&log);
+    assert!(rows.len() > 50);
+    assert_eq!(rows.len() as u64, r["steps"].as_u64().unwrap() + 1);
+    // The last record is the end-of-run telemetry (flag bit 3).
+    let flags: u32 = rows.last().unwrap().split(',').nth(2).unwrap().parse().unwrap();
+    assert_eq!(flags & 8, 8);
+}
+
+/// A foreign flight program written against `oils-shared` only: it answers every
+/// telemetry with `make(tlm)` until the end of the run.
+fn foreign_stub(id: &str, make: impl Fn(&oils_shared::Telemetry) -> Command) {
+    let stop = AtomicBool::new(false);
+    let node = create_node("foreign-stub").unwrap();
+    let run_id = u64::from_str_radix(id, 16).unwrap();
+    let link = StubLink::open(&node, run_id, None, 10_000, &stop).unwrap();
+    loop {
+        let deadline = oils_shared::clock::monotonic_ns() + 5_000_000_000;
+        let Some(tlm) = link.receive_until(deadline, &stop).unwrap() else { return };
+        if tlm.header.flags & TLM_FLAG_END_OF_RUN != 0 {
+            return;
+        }
+        let mut cmd = make(&tlm);
+        if cmd.header.protocol_version == 0 {
+            cmd.header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
+        }
+        if link.publish(&cmd).is_err() {
+            return;
+        }
+    }
+}
+
+#[test]
+fn garbage_commands_never_reach_the_plant_and_are_counted() {
+    let dir = scratch("garbage");
+    let id = run_id(2);
+    let rep = dir.join("report.json");
+    let mut emulator = oils()
+        .args(["run", "--no-stub", "--run-id", &id, "--duration", "3", "--no-log", "--report", rep.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    foreign_stub(&id, |tlm| {
+        let k = tlm.header.step;
+        Command {
+            thrust_cmd_n: [f64::NAN, f64::INFINITY, -1.0, if k % 2 == 0 { 1e12 } else { 500.0 }],
+            engine_on: [1, 1, 1, if k % 3 == 0 { 42 } else { 1 }],
+            torque_cmd_body_nm: [f64::NAN, 0.0, 0.0],
+            ..Default::default()
+        }
+    });
+    let status = wait_with_deadline(&mut emulator, 20);
+    assert!(status.success());
+    let r = report(&rep);
+    assert_eq!(r["outcome"], "completed");
+    assert_eq!(r["steps"], 300);
+    assert_eq!(r["rejected_commands"], 300, "every command had a bad value");
+    // 4 per command (NaN, inf, negative thrust, NaN torque) + 1e12 on even steps + 42 on every third.
+    assert_eq!(r["rejected_values"], 300 * 4 + 150 + 100);
+}
+
+#[test]
+fn a_peer_speaking_another_protocol_is_refused_by_name() {
+    let dir = scratch("mismatch");
+    let id = run_id(3);
+    let rep = dir.join("report.json");
+    let mut emulator = oils()
+        .args(["run", "--no-stub", "--run-id", &id, "--duration", "3", "--no-log", "--report", rep.to_str().unwrap()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    foreign_stub(&id, |tlm| {
+        let mut header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
+        header.protocol_version = 99;
+        header.schema_hash = 0xbad;
+        Command { header, ..Default::default() }
+    });
+    let status = wait_with_deadline(&mut emulator, 20);
+    assert!(!status.success());
+    let r = report(&rep);
+    assert_eq!(r["outcome"], "aborted");
+    let e = r["error"].as_str().unwrap();
+    assert!(e.contains("v1") && e.contains("v99"), "{e}");
+}
