@@ -1,0 +1,423 @@
+//! The plant: the lander as a 6-DOF rigid body of varying mass around a spherical,
+//! non-rotating Moon, driven by a propulsion model and saturated attitude thrusters,
+//! until its footpads touch the surface.
+//!
+//! Frames: `mci` is Moon-centred inertial; the Moon's rotation (the surface moves 4.6 m/s at
+//! the equator) is neglected, so the surface is fixed in `mci` and touchdown speeds are
+//! relative to it. Body +Z is the main-engine thrust axis. See `docs/plant.md`.
+//!
+//! One bench step: the propulsion model is stepped first with the command held; the
+//! rigid body is then integrated over the step (RK4) with the model's mean thrust held
+//! and the mass falling linearly by what was ejected. If the footpads reach the surface
+//! inside the step, the contact instant is found by re-integrating shorter sub-steps.
+
+pub mod initial;
+pub mod integrator;
+pub mod nav_noise;
+pub mod rigid_body;
+
+use crate::config::{ConfigError, ScenarioConfig, TouchdownLimits};
+use crate::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
+use integrator::RK4;
+use nalgebra::Vector3;
+use nav_noise::NavNoise;
+use oils_shared::{
+    EngineReading, NavState, PacketHeader, PropulsionReadings, Telemetry, ENGINE_COUNT,
+    TLM_FLAG_NAV_NOISE,
+};
+use rigid_body::{Dynamics, HeldLoads, MassModel, StateVector};
+
+pub use rigid_body::RigidBodyState;
+
+/// Standard gravity for specific impulse, m/s^2.
+const G0_M_S2: f64 = 9.80665;
+
+/// Contact search: stop when the footpad height is within this of zero, metres.
+const CONTACT_TOLERANCE_M: f64 = 1e-9;
+/// Contact search: at most this many sub-step re-integrations.
+const CONTACT_MAX_ITERATIONS: usize = 60;
+
+/// What the plant is told for one step (already sanitised by the link: finite, in range).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ActuatorCommand {
+    /// Main engine commands.
+    pub engines: EngineCommand,
+    /// Torque demanded of the attitude thrusters, body axes, N m (saturated here).
+    pub torque_cmd_body_nm: [f64; 3],
+}
+
+/// The state of the vehicle at the end of a step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PlantStatus {
+    /// Still in the air.
+    Flying,
+    /// The footpads reached the surface during this step (or earlier).
+    Touchdown(TouchdownState),
+}
+
+/// The vehicle at the instant of contact.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct TouchdownState {
+    /// Contact time since the start of the run, seconds.
+    pub t_s: f64,
+    /// Speed towards the surface at contact, m/s (>= 0).
+    pub vertical_speed_mps: f64,
+    /// Speed along the surface at contact, m/s.
+    pub horizontal_speed_mps: f64,
+    /// Angle between body +Z and the local vertical, degrees.
+    pub tilt_deg: f64,
+    /// Main and attitude-thruster propellant used up to contact, kilograms.
+    pub propellant_used_kg: f64,
+    /// Every quantity within the configured touchdown limits.
+    pub landed: bool,
+}
+
+/// Fixed numbers the plant derives from the configuration at construction.
+#[derive(Debug, Clone, Copy)]
+struct Setup {
+    dynamics: Dynamics,
+    moon_radius_m: f64,
+    leg_height_m: f64,
+    wet_mass_kg: f64,
+    engine_pos_body_m: [Vector3<f64>; ENGINE_COUNT],
+    rcs_max_torque_nm: Vector3<f64>,
+    rcs_moment_arm_m: Vector3<f64>,
+    rcs_exhaust_m_s: f64,
+    limits: Limits,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Limits {
+    vertical_speed_mps: f64,
+    horizontal_speed_mps: f64,
+    tilt_deg: f64,
+}
+
+impl From<&TouchdownLimits> for Limits {
+    fn from(l: &TouchdownLimits) -> Self {
+        Self {
+            vertical_speed_mps: l.vertical_speed_mps,
+            horizontal_speed_mps: l.horizontal_speed_mps,
+            tilt_deg: l.tilt_deg,
+        }
+    }
+}
+
+/// The lander plant.
+pub struct Plant {
+    setup: Setup,
+    propulsion: Box<dyn Propulsion>,
+    /// Last output of the propulsion model.
+    prop_out: PropulsionOutput,
+    /// Last engine command (for the valve readings).
+    last_engines: EngineCommand,
+    state: RigidBodyState,
+    /// Specific force at the end of the last step, body axes, m/s^2.
+    specific_force_body_m_s2: Vector3<f64>,
+    time_ns: i64,
+    rcs_used_kg: f64,
+    touchdown: Option<TouchdownState>,
+    noise: Option<NavNoise>,
+}
+
+impl Plant {
+    /// A plant at the configured initial state. Validates `cfg`; `seed` seeds the
+    /// navigation noise stream.
+    pub fn new(
+        cfg: &ScenarioConfig,
+        propulsion: Box<dyn Propulsion>,
+        seed: u64,
+    ) -> Result<Plant, ConfigError> {
+        cfg.validate()?;
+        let lander = &cfg.lander;
+        let setup = Setup {
+            dynamics: Dynamics {
+                mu_m3_s2: cfg.moon.mu_m3_s2,
+                mass: MassModel::new(lander, cfg.propulsion.propellant_kg),
+            },
+            moon_radius_m: cfg.moon.radius_m,
+            leg_height_m: lander.leg_height_m,
+            wet_mass_kg: cfg.wet_mass_kg(),
+            engine_pos_body_m: lander.engine_positions_body_m.map(Vector3::from),
+            rcs_max_torque_nm: Vector3::from(lander.rcs_max_torque_nm()),
+            rcs_moment_arm_m: Vector3::from(lander.rcs_moment_arm_m),
+            rcs_exhaust_m_s: lander.rcs_isp_s * G0_M_S2,
+            limits: Limits::from(&cfg.touchdown),
+        };
+        let prop_out = propulsion.output();
+        let mut state = initial::initial_state(cfg);
+        state.mass_kg = (setup.wet_mass_kg - prop_out.ejected_kg()).max(lander.dry_mass_kg);
+        let noise = cfg
+            .nav_noise
+            .enabled
+            .then(|| NavNoise::new(&cfg.nav_noise, seed));
+        Ok(Plant {
+            setup,
+            propulsion,
+            prop_out,
+            last_engines: EngineCommand::default(),
+            state,
+            specific_force_body_m_s2: Vector3::zeros(),
+            time_ns: 0,
+            rcs_used_kg: 0.0,
+            touchdown: None,
+            noise,
+        })
+    }
+
+    /// Telemetry of the current state. Fills everything but `header`, which is kept as
+    /// given apart from OR-ing in [`TLM_FLAG_NAV_NOISE`] when noise is on.
+    pub fn telemetry(&mut self, header: PacketHeader) -> Telemetry {
+        let s = &self.state;
+        let q = s.q_mci_from_body.quaternion();
+        let mut engines = [EngineReading::default(); ENGINE_COUNT];
+        for (i, e) in engines.iter_mut().enumerate() {
+            e.thrust_n = self.prop_out.thrust_n[i];
+            e.chamber_pressure_pa = self.prop_out.chamber_pressure_pa[i];
+            e.valve_open = u32::from(self.last_engines.on[i]);
+        }
+        let mut tlm = Telemetry {
+            header,
+            nav: NavState {
+                pos_mci_m: s.pos_mci_m.into(),
+                vel_mci_m_s: s.vel_mci_m_s.into(),
+                q_mci_from_body: [q.w, q.i, q.j, q.k],
+                rate_body_rad_s: s.rate_body_rad_s.into(),
+            },
+            accel_body_m_s2: self.specific_force_body_m_s2.into(),
+            altitude_m: self.altitude_m(),
+            mass_estimate_kg: s.mass_kg,
+            propulsion: PropulsionReadings {
+                gas_pressure_pa: self.prop_out.gas_pressure_pa,
+                fuel_tank_pressure_pa: self.prop_out.fuel_tank_pressure_pa,
+                ox_tank_pressure_pa: self.prop_out.ox_tank_pressure_pa,
+                engines,
+            },
+        };
+        if let Some(noise) = self.noise.as_mut() {
+            noise.apply(&mut tlm);
+            tlm.header.flags |= TLM_FLAG_NAV_NOISE;
+        }
+        tlm
+    }
+
+    /// Advances one bench step of `dt_ns` with `cmd` held. After touchdown the state is
+    /// frozen at the contact instant and every further call returns the same touchdown.
+    /// No allocation, I/O or clock.
+    pub fn step(&mut self, cmd: &ActuatorCommand, dt_ns: u64) -> PlantStatus {
+        if let Some(td) = self.touchdown {
+            return PlantStatus::Touchdown(td);
+        }
+        let dt_s = dt_ns as f64 * 1e-9;
+        let setup = self.setup;
+        let dry_mass_kg = setup.dynamics.mass.dry_mass_kg;
+
+        // 1. Propulsion first: its mean thrust over the step is what the body feels.
+        let ejected_before_kg = self.prop_out.ejected_kg();
+        self.prop_out = self.propulsion.step(&cmd.engines, dt_ns);
+        self.last_engines = cmd.engines;
+        let main_ejected_kg = (self.prop_out.ejected_kg() - ejected_before_kg).max(0.0);
+
+        // 2. Attitude thrusters: saturated torque; propellant at |torque| / arm / c.
+        let mut rcs_torque_nm =
+            Vector3::from(cmd.torque_cmd_body_nm).zip_map(&setup.rcs_max_torque_nm, |t, max| {
+                if t.is_finite() {
+                    t.clamp(-max, max)
+                } else {
+                    0.0
+                }
+            });
+        let rcs_flow_kg_s = rcs_torque_nm
+            .abs()
+            .component_div(&setup.rcs_moment_arm_m)
+            .sum()
+            / setup.rcs_exhaust_m_s;
+        let propellant_left_kg = (self.state.mass_kg - main_ejected_kg - dry_mass_kg).max(0.0);
+        let mut rcs_kg = rcs_flow_kg_s * dt_s;
+        if rcs_kg > propellant_left_kg {
+            // Tanks run dry inside the step: deliver the torque the remainder can buy.
+            rcs_torque_nm *= if rcs_kg > 0.0 {
+                propellant_left_kg / rcs_kg
+            } else {
+                0.0
+            };
+            rcs_kg = propellant_left_kg;
+        }
+
+        // 3. Loads held over the step.
+        let mut thrust_n = 0.0;
+        let mut torque_nm = rcs_torque_nm;
+        for (pos, &f_n) in setup
+            .engine_pos_body_m
+            .iter()
+            .zip(self.prop_out.mean_thrust_n.iter())
+        {
+            let force = Vector3::new(0.0, 0.0, f_n);
+            thrust_n += f_n;
+            torque_nm += pos.cross(&force);
+        }
+        let mass_start_kg = self.state.mass_kg;
+        // Cumulative accounting keeps the mass exactly "wet - ejected - rcs used", never
+        // below dry (the main model does not know what the thrusters took).
+        let rcs_used_after_kg = self.rcs_used_kg + rcs_kg;
+        let mass_end_kg = (setup.wet_mass_kg - self.prop_out.ejected_kg() - rcs_used_after_kg)
+            .max(dry_mass_kg)
+            .min(mass_start_kg);
+        let loads = HeldLoads {
+            force_body_n: Vector3::new(0.0, 0.0, thrust_n),
+            torque_body_nm: torque_nm,
+            mass_start_kg,
+            mass_flow_kg_s: if dt_s > 0.0 {
+                (mass_start_kg - mass_end_kg) / dt_s
+            } else {
+                0.0
+            },
+        };
+
+        // 4. Rigid body over the step.
+        let x0 = self.state.to_vector();
+        let x1 = self.integrate(&loads, &x0, dt_s);
+        let end = RigidBodyState::from_vector(&x1, mass_end_kg);
+        self.time_ns = self.time_ns.saturating_add(dt_ns as i64);
+        self.specific_force_body_m_s2 = Vector3::new(
+            0.0,
+            0.0,
+            self.prop_out.thrust_n.iter().sum::<f64>() / mass_end_kg,
+        );
+
+        if self.footpad_height_m(&end.pos_mci_m) > 0.0 {
+            self.state = end;
+            self.rcs_used_kg = rcs_used_after_kg;
+            return PlantStatus::Flying;
+        }
+
+        // 5. Contact inside the step: find the instant, freeze the state there.
+        let frac = self.contact_fraction(&loads, &x0, dt_s);
+        let x_c = self.integrate(&loads, &x0, frac * dt_s);
+        let mass_c_kg = mass_start_kg - (mass_start_kg - mass_end_kg) * frac;
+        let contact = RigidBodyState::from_vector(&x_c, mass_c_kg);
+        self.rcs_used_kg += rcs_kg * frac;
+        let step_start_s = (self.time_ns - dt_ns as i64) as f64 * 1e-9;
+        let td = self.touchdown_state(&contact, step_start_s + frac * dt_s);
+        self.state = contact;
+        self.touchdown = Some(td);
+        PlantStatus::Touchdown(td)
+    }
+
+    /// One RK4 step of `h_s` seconds from `x0` at the start of the bench step.
+    fn integrate(&self, loads: &HeldLoads, x0: &StateVector, h_s: f64) -> StateVector {
+        let dyn_ = &self.setup.dynamics;
+        RK4.step(0.0, h_s, x0, |t, x| dyn_.derivative(loads, t, x))
+    }
+
+    /// Fraction of the step at which the footpads touch: regula falsi (Illinois) on the
+    /// footpad height of a re-integrated sub-step; height > 0 at 0, <= 0 at 1.
+    fn contact_fraction(&self, loads: &HeldLoads, x0: &StateVector, dt_s: f64) -> f64 {
+        let height = |frac: f64| {
+            let x = self.integrate(loads, x0, frac * dt_s);
+            self.footpad_height_m(&x.fixed_rows::<3>(0).into_owned())
+        };
+        let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
+        let (mut h_lo, mut h_hi) = (height(lo), height(hi));
+        if h_lo <= 0.0 {
+            return 0.0;
+        }
+        let mut side = 0i8;
+        let mut frac = hi;
+        for _ in 0..CONTACT_MAX_ITERATIONS {
+            frac = (lo * h_hi - hi * h_lo) / (h_hi - h_lo);
+            if !(lo..=hi).contains(&frac) {
+                frac = 0.5 * (lo + hi);
+            }
+            let h = height(frac);
+            if h.abs() < CONTACT_TOLERANCE_M || hi - lo < 1e-12 {
+                break;
+            }
+            if h > 0.0 {
+                lo = frac;
+                h_lo = h;
+                if side == 1 {
+                    h_hi *= 0.5;
+                }
+                side = 1;
+            } else {
+                hi = frac;
+                h_hi = h;
+                if side == -1 {
+                    h_lo *= 0.5;
+                }
+                side = -1;
+            }
+        }
+        frac
+    }
+
+    fn touchdown_state(&self, s: &RigidBodyState, t_s: f64) -> TouchdownState {
+        let up = s.pos_mci_m.normalize();
+        let v_up = s.vel_mci_m_s.dot(&up);
+        let horizontal = (s.vel_mci_m_s - up * v_up).norm();
+        let tilt_deg = s
+            .thrust_axis_mci()
+            .dot(&up)
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
+        let vertical = v_up.abs();
+        let lim = &self.setup.limits;
+        TouchdownState {
+            t_s,
+            vertical_speed_mps: vertical,
+            horizontal_speed_mps: horizontal,
+            tilt_deg,
+            propellant_used_kg: self.setup.wet_mass_kg - s.mass_kg,
+            landed: vertical <= lim.vertical_speed_mps
+                && horizontal <= lim.horizontal_speed_mps
+                && tilt_deg <= lim.tilt_deg,
+        }
+    }
+
+    fn footpad_height_m(&self, pos_mci_m: &Vector3<f64>) -> f64 {
+        pos_mci_m.norm() - self.setup.moon_radius_m - self.setup.leg_height_m
+    }
+
+    /// True height of the footpads above the surface, metres.
+    pub fn altitude_m(&self) -> f64 {
+        self.footpad_height_m(&self.state.pos_mci_m)
+    }
+
+    /// Simulated time at the end of the last step, nanoseconds. After touchdown the
+    /// state is the contact state (see [`TouchdownState::t_s`]) and time stops.
+    pub fn time_ns(&self) -> i64 {
+        self.time_ns
+    }
+
+    /// The true rigid-body state.
+    pub fn state(&self) -> &RigidBodyState {
+        &self.state
+    }
+
+    /// Propellant used so far (main engines and attitude thrusters), kilograms.
+    pub fn propellant_used_kg(&self) -> f64 {
+        self.setup.wet_mass_kg - self.state.mass_kg
+    }
+
+    /// Attitude-thruster propellant used so far, kilograms.
+    pub fn rcs_propellant_used_kg(&self) -> f64 {
+        self.rcs_used_kg
+    }
+
+    /// The propulsion model's last output.
+    pub fn propulsion_output(&self) -> &PropulsionOutput {
+        &self.prop_out
+    }
+
+    /// Name of the propulsion model.
+    pub fn propulsion_name(&self) -> &'static str {
+        self.propulsion.name()
+    }
+
+    /// The touchdown, once it happened.
+    pub fn touchdown(&self) -> Option<TouchdownState> {
+        self.touchdown
+    }
+}
