@@ -11,7 +11,11 @@ use std::process::{Child, Command as Process, Stdio};
 use std::time::{Duration, Instant};
 
 #[derive(Parser)]
-#[command(name = "oils", version, about = "Onboard-in-loop simulation bench for a lunar lander")]
+#[command(
+    name = "oils",
+    version,
+    about = "Onboard-in-loop simulation bench for a lunar lander"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Cmd,
@@ -48,12 +52,17 @@ struct ExportArgs {
 
 fn main() -> anyhow::Result<()> {
     // `cargo run --release` with no arguments: the default scenario, lockstep, spawned stub.
-    let cli = if std::env::args_os().len() <= 1 { Cli::parse_from(["oils", "run"]) } else { Cli::parse() };
+    let cli = if std::env::args_os().len() <= 1 {
+        Cli::parse_from(["oils", "run"])
+    } else {
+        Cli::parse()
+    };
     match cli.command {
         Cmd::Run(cmd) => run(*cmd),
         Cmd::Export(a) => export(&a),
         Cmd::Stub(a) => {
-            let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
+            let stop =
+                oils_shared::signals::termination_flag().context("installing signal handlers")?;
             run_stub(&a, &stop).with_context(|| format!("onboard stub on run {}", a.run_id))?;
             Ok(())
         }
@@ -70,7 +79,10 @@ fn run(cmd: RunCmd) -> anyhow::Result<()> {
             eprintln!("    cargo run --release -p oils-onboard-stub -- --run-id {run_id:016x}");
             return Ok(());
         }
-        child = Some(spawn_stub(&args, run_id, wait.as_str()).map_err(|e| SessionError::Argument(format!("{e:#}")))?);
+        child = Some(
+            spawn_stub(&args, run_id, wait.as_str())
+                .map_err(|e| SessionError::Argument(format!("{e:#}")))?,
+        );
         Ok(())
     });
     let stub_status = child.map(reap_stub);
@@ -126,14 +138,23 @@ fn reap_stub(mut child: Child) -> Result<(), String> {
 
 fn export(a: &ExportArgs) -> anyhow::Result<()> {
     let log = oils_emulator::recorder::read_log(&a.log)?;
-    let file = std::fs::File::create(&a.csv).with_context(|| format!("creating {}", a.csv.display()))?;
+    let file =
+        std::fs::File::create(&a.csv).with_context(|| format!("creating {}", a.csv.display()))?;
     let mut out = std::io::BufWriter::new(file);
-    oils_emulator::recorder::export_csv(&log, &mut out).with_context(|| format!("writing {}", a.csv.display()))?;
+    oils_emulator::recorder::export_csv(&log, &mut out)
+        .with_context(|| format!("writing {}", a.csv.display()))?;
     eprintln!(
         "oils export: {} records to {}{}",
         log.records.len(),
         a.csv.display(),
-        if log.trailing_bytes > 0 { format!(" ({} trailing bytes of a torn record ignored)", log.trailing_bytes) } else { String::new() }
+        if log.trailing_bytes > 0 {
+            format!(
+                " ({} trailing bytes of a torn record ignored)",
+                log.trailing_bytes
+            )
+        } else {
+            String::new()
+        }
     );
     Ok(())
 }

@@ -9,7 +9,13 @@ fn default_descent_lands_within_limits_and_reports() {
     let dir = scratch("default");
     let rep = dir.join("report.json");
     let log = dir.join("run.oilslog");
-    let out = run_oils(&["run", "--report", rep.to_str().unwrap(), "--log", log.to_str().unwrap()]);
+    let out = run_oils(&[
+        "run",
+        "--report",
+        rep.to_str().unwrap(),
+        "--log",
+        log.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", text(&out));
     let r = report(&rep);
     assert_eq!(r["outcome"], "landed", "{}", text(&out));
@@ -26,12 +32,20 @@ fn default_descent_lands_within_limits_and_reports() {
     let digest = r["digest"].as_str().unwrap();
     assert_eq!(digest.len(), 64);
     assert!(digest.chars().all(|c| c.is_ascii_hexdigit()));
-    for key in ["wake_error_ns", "round_trip_ns", "stub_compute_ns", "transport_ns"] {
+    for key in [
+        "wake_error_ns",
+        "round_trip_ns",
+        "stub_compute_ns",
+        "transport_ns",
+    ] {
         for p in ["p50", "p99", "p999", "max"] {
             assert!(r["timing"][key][p].is_u64(), "timing.{key}.{p} missing");
         }
     }
-    assert_eq!(r["timing"]["round_trip_ns"]["count"].as_u64().unwrap(), steps);
+    assert_eq!(
+        r["timing"]["round_trip_ns"]["count"].as_u64().unwrap(),
+        steps
+    );
     assert_eq!(r["timing"]["deadline_misses"], 0);
     assert!(r["timing"]["wall_s"].as_f64().unwrap() > 0.0);
     assert!(r["timing"]["realtime_factor"].as_f64().unwrap() > 1.0);
@@ -39,7 +53,12 @@ fn default_descent_lands_within_limits_and_reports() {
 
     // The log holds every step plus the final telemetry, and exports to CSV.
     let csv = dir.join("run.csv");
-    let out = run_oils(&["export", log.to_str().unwrap(), "--csv", csv.to_str().unwrap()]);
+    let out = run_oils(&[
+        "export",
+        log.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", text(&out));
     let text_csv = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text_csv.lines();
@@ -53,7 +72,14 @@ fn same_configuration_same_digest_other_seed_other_digest() {
     let dir = scratch("determinism");
     let digest_of = |name: &str, extra: &[&str]| -> String {
         let rep = dir.join(format!("{name}.json"));
-        let mut args = vec!["run", "--no-log", "--duration", "120", "--report", rep.to_str().unwrap()];
+        let mut args = vec![
+            "run",
+            "--no-log",
+            "--duration",
+            "120",
+            "--report",
+            rep.to_str().unwrap(),
+        ];
         args.extend_from_slice(extra);
         let out = run_oils(&args);
         assert!(out.status.success(), "{}", text(&out));
@@ -61,7 +87,10 @@ fn same_configuration_same_digest_other_seed_other_digest() {
     };
     let a = digest_of("a", &["--seed", "7"]);
     let b = digest_of("b", &["--seed", "7"]);
-    assert_eq!(a, b, "two identical lockstep runs must give the same digest");
+    assert_eq!(
+        a, b,
+        "two identical lockstep runs must give the same digest"
+    );
     let c = digest_of("c", &["--seed", "8"]);
     assert_ne!(a, c, "another seed must give another digest");
     let d = digest_of("d", &["--seed", "7", "--dt-ms", "20"]);
@@ -74,7 +103,16 @@ fn two_runs_at_once_do_not_collide() {
     let spawn = |name: &str| {
         let rep = dir.join(format!("{name}.json"));
         let child = oils()
-            .args(["run", "--no-log", "--duration", "200", "--seed", "3", "--report", rep.to_str().unwrap()])
+            .args([
+                "run",
+                "--no-log",
+                "--duration",
+                "200",
+                "--seed",
+                "3",
+                "--report",
+                rep.to_str().unwrap(),
+            ])
             .stdout(std::process::Stdio::null())
             .spawn()
             .expect("spawn");
@@ -86,7 +124,10 @@ fn two_runs_at_once_do_not_collide() {
     assert!(c2.wait().unwrap().success());
     let (r1, r2) = (report(&r1), report(&r2));
     assert_ne!(r1["run_id"], r2["run_id"]);
-    assert_eq!(r1["digest"], r2["digest"], "same inputs, same digest, even side by side");
+    assert_eq!(
+        r1["digest"], r2["digest"],
+        "same inputs, same digest, even side by side"
+    );
 }
 
 #[test]
@@ -96,8 +137,16 @@ fn playback_flies_a_profile_open_loop() {
     std::fs::write(&profile, "t,cmd1,cmd2,cmd3,cmd4,on1,on2,on3,on4\n0,800,800,800,800,1,1,1,1\n2,400,400,400,400,1,1,1,1\n").unwrap();
     let rep = dir.join("report.json");
     let out = run_oils(&[
-        "run", "--fsw", "playback", "--profile", profile.to_str().unwrap(), "--duration", "5", "--no-log",
-        "--report", rep.to_str().unwrap(),
+        "run",
+        "--fsw",
+        "playback",
+        "--profile",
+        profile.to_str().unwrap(),
+        "--duration",
+        "5",
+        "--no-log",
+        "--report",
+        rep.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", text(&out));
     let r = report(&rep);
@@ -109,12 +158,24 @@ fn playback_flies_a_profile_open_loop() {
 fn realtime_mode_paces_and_reports_wake_error() {
     let dir = scratch("realtime");
     let rep = dir.join("report.json");
-    let out = run_oils(&["run", "--mode", "realtime", "--speed", "4", "--duration", "2", "--no-log", "--report", rep.to_str().unwrap()]);
+    let out = run_oils(&[
+        "run",
+        "--mode",
+        "realtime",
+        "--speed",
+        "4",
+        "--duration",
+        "2",
+        "--no-log",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", text(&out));
     let r = report(&rep);
     assert_eq!(r["mode"], "realtime");
     assert_eq!(r["steps"], 200);
-    assert_eq!(r["timing"]["wake_error_ns"]["count"], 200);
+    // Every paced step start counts, including the end-of-run telemetry's.
+    assert_eq!(r["timing"]["wake_error_ns"]["count"], 201);
     // 2 s simulated at 4x takes about half a second of wall time, never much less.
     let wall = r["timing"]["wall_s"].as_f64().unwrap();
     assert!(wall >= 0.49, "realtime pacing ran too fast: {wall} s");
@@ -125,11 +186,23 @@ fn a_broken_threshold_fails_the_run_and_names_it() {
     let dir = scratch("threshold");
     let rep = dir.join("report.json");
     // 1 ns of round trip is impossible: the run must fail and say which bound broke.
-    let out = run_oils(&["run", "--duration", "1", "--no-log", "--max-round-trip-p99-us", "0.001", "--report", rep.to_str().unwrap()]);
+    let out = run_oils(&[
+        "run",
+        "--duration",
+        "1",
+        "--no-log",
+        "--max-round-trip-p99-us",
+        "0.001",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
     assert!(!out.status.success(), "{}", text(&out));
     let all = text(&out);
     assert!(all.contains("round_trip p99"), "{all}");
-    assert!(!report(&rep)["threshold_violations"].as_array().unwrap().is_empty());
+    assert!(!report(&rep)["threshold_violations"]
+        .as_array()
+        .unwrap()
+        .is_empty());
 }
 
 #[test]
@@ -137,19 +210,28 @@ fn bad_command_line_input_is_a_clear_error() {
     let cases: &[(&[&str], &str)] = &[
         (&["run", "--dt-ms", "0"], "dt-ms"),
         (&["run", "--dt-ms", "101"], "dt-ms"),
-        (&["run", "--scenario", "/nonexistent/scenario.toml"], "scenario"),
+        (
+            &["run", "--scenario", "/nonexistent/scenario.toml"],
+            "scenario",
+        ),
         (&["run", "--fsw", "playback"], "--profile"),
         (&["run", "--propulsion", "warp"], "warp"),
         (&["run", "--miss-policy", "abort:0"], "miss-policy"),
-        (&["run", "--speed", "-1"], "speed"),
+        (&["run", "--speed=-1"], "speed"),
         (&["run", "--wait", "sometimes"], "--wait"),
-        (&["export", "/nonexistent.oilslog", "--csv", "/tmp/x.csv"], "nonexistent"),
+        (
+            &["export", "/nonexistent.oilslog", "--csv", "/tmp/x.csv"],
+            "nonexistent",
+        ),
     ];
     for (args, needle) in cases {
         let out = run_oils(args);
         assert!(!out.status.success(), "{args:?} should fail");
         let err = String::from_utf8_lossy(&out.stderr);
-        assert!(err.contains(needle), "{args:?}: stderr lacks `{needle}`:\n{err}");
+        assert!(
+            err.contains(needle),
+            "{args:?}: stderr lacks `{needle}`:\n{err}"
+        );
         assert!(!err.contains("panicked"), "{args:?} panicked:\n{err}");
     }
 }
@@ -158,8 +240,21 @@ fn bad_command_line_input_is_a_clear_error() {
 fn malformed_profile_names_the_line() {
     let dir = scratch("badprofile");
     let profile = dir.join("bad.csv");
-    std::fs::write(&profile, "t,cmd1,cmd2,cmd3,cmd4,on1,on2,on3,on4\n0,800,800,800,800,1,1,1,1\n1,abc,0,0,0,1,1,1,1\n").unwrap();
-    let out = run_oils(&["run", "--fsw", "playback", "--profile", profile.to_str().unwrap(), "--no-log", "--startup-timeout-ms", "3000"]);
+    std::fs::write(
+        &profile,
+        "t,cmd1,cmd2,cmd3,cmd4,on1,on2,on3,on4\n0,800,800,800,800,1,1,1,1\n1,abc,0,0,0,1,1,1,1\n",
+    )
+    .unwrap();
+    let out = run_oils(&[
+        "run",
+        "--fsw",
+        "playback",
+        "--profile",
+        profile.to_str().unwrap(),
+        "--no-log",
+        "--startup-timeout-ms",
+        "3000",
+    ]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("line 3"), "{err}");

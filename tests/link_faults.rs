@@ -27,9 +27,19 @@ fn wait_with_deadline(child: &mut std::process::Child, secs: u64) -> std::proces
 /// Reads a log through `oils export`; returns the CSV rows (without header).
 fn exported_rows(log: &std::path::Path) -> Vec<String> {
     let csv = log.with_extension("csv");
-    let out = run_oils(&["export", log.to_str().unwrap(), "--csv", csv.to_str().unwrap()]);
+    let out = run_oils(&[
+        "export",
+        log.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", text(&out));
-    std::fs::read_to_string(&csv).unwrap().lines().skip(1).map(String::from).collect()
+    std::fs::read_to_string(&csv)
+        .unwrap()
+        .lines()
+        .skip(1)
+        .map(String::from)
+        .collect()
 }
 
 #[test]
@@ -39,8 +49,20 @@ fn killed_stub_is_noticed_log_is_intact_and_the_next_run_starts_clean() {
     let (log, rep) = (dir.join("run.oilslog"), dir.join("report.json"));
     let mut emulator = oils()
         .args([
-            "run", "--no-stub", "--run-id", &id, "--mode", "realtime", "--duration", "60", "--link-timeout-ms", "500",
-            "--log", log.to_str().unwrap(), "--report", rep.to_str().unwrap(),
+            "run",
+            "--no-stub",
+            "--run-id",
+            &id,
+            "--mode",
+            "realtime",
+            "--duration",
+            "60",
+            "--link-timeout-ms",
+            "500",
+            "--log",
+            log.to_str().unwrap(),
+            "--report",
+            rep.to_str().unwrap(),
         ])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -52,7 +74,11 @@ fn killed_stub_is_noticed_log_is_intact_and_the_next_run_starts_clean() {
     stub.wait().unwrap();
     let killed_at = Instant::now();
     let status = wait_with_deadline(&mut emulator, 15);
-    assert!(killed_at.elapsed() < Duration::from_secs(5), "noticed too late: {:?}", killed_at.elapsed());
+    assert!(
+        killed_at.elapsed() < Duration::from_secs(5),
+        "noticed too late: {:?}",
+        killed_at.elapsed()
+    );
     let mut err = String::new();
     std::io::Read::read_to_string(emulator.stderr.as_mut().unwrap(), &mut err).unwrap();
     assert!(!status.success());
@@ -63,13 +89,26 @@ fn killed_stub_is_noticed_log_is_intact_and_the_next_run_starts_clean() {
     let rows = exported_rows(&log);
     assert!(rows.len() > 50, "only {} rows", rows.len());
     for (k, row) in rows.iter().enumerate() {
-        assert!(row.starts_with(&format!("{k},")), "row {k} is `{}`", &row[..20.min(row.len())]);
+        assert!(
+            row.starts_with(&format!("{k},")),
+            "row {k} is `{}`",
+            &row[..20.min(row.len())]
+        );
     }
     assert_eq!(rows.len() as u64, r["steps"].as_u64().unwrap() + 1);
 
     // Same run id again, right away: no hand cleaning of /dev/shm needed.
     let rep2 = dir.join("again.json");
-    let out = run_oils(&["run", "--run-id", &id, "--duration", "5", "--no-log", "--report", rep2.to_str().unwrap()]);
+    let out = run_oils(&[
+        "run",
+        "--run-id",
+        &id,
+        "--duration",
+        "5",
+        "--no-log",
+        "--report",
+        rep2.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", text(&out));
     assert_eq!(report(&rep2)["outcome"], "completed");
 }
@@ -79,7 +118,17 @@ fn sigterm_ends_the_run_cleanly_with_the_log_flushed() {
     let dir = scratch("sigterm");
     let (log, rep) = (dir.join("run.oilslog"), dir.join("report.json"));
     let mut emulator = oils()
-        .args(["run", "--mode", "realtime", "--duration", "60", "--log", log.to_str().unwrap(), "--report", rep.to_str().unwrap()])
+        .args([
+            "run",
+            "--mode",
+            "realtime",
+            "--duration",
+            "60",
+            "--log",
+            log.to_str().unwrap(),
+            "--report",
+            rep.to_str().unwrap(),
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -96,7 +145,14 @@ fn sigterm_ends_the_run_cleanly_with_the_log_flushed() {
     assert!(rows.len() > 50);
     assert_eq!(rows.len() as u64, r["steps"].as_u64().unwrap() + 1);
     // The last record is the end-of-run telemetry (flag bit 3).
-    let flags: u32 = rows.last().unwrap().split(',').nth(2).unwrap().parse().unwrap();
+    let flags: u32 = rows
+        .last()
+        .unwrap()
+        .split(',')
+        .nth(2)
+        .unwrap()
+        .parse()
+        .unwrap();
     assert_eq!(flags & 8, 8);
 }
 
@@ -109,7 +165,9 @@ fn foreign_stub(id: &str, make: impl Fn(&oils_shared::Telemetry) -> Command) {
     let link = StubLink::open(&node, run_id, None, 10_000, &stop).unwrap();
     loop {
         let deadline = oils_shared::clock::monotonic_ns() + 5_000_000_000;
-        let Some(tlm) = link.receive_until(deadline, &stop).unwrap() else { return };
+        let Some(tlm) = link.receive_until(deadline, &stop).unwrap() else {
+            return;
+        };
         if tlm.header.flags & TLM_FLAG_END_OF_RUN != 0 {
             return;
         }
@@ -129,7 +187,17 @@ fn garbage_commands_never_reach_the_plant_and_are_counted() {
     let id = run_id(2);
     let rep = dir.join("report.json");
     let mut emulator = oils()
-        .args(["run", "--no-stub", "--run-id", &id, "--duration", "3", "--no-log", "--report", rep.to_str().unwrap()])
+        .args([
+            "run",
+            "--no-stub",
+            "--run-id",
+            &id,
+            "--duration",
+            "3",
+            "--no-log",
+            "--report",
+            rep.to_str().unwrap(),
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -137,7 +205,12 @@ fn garbage_commands_never_reach_the_plant_and_are_counted() {
     foreign_stub(&id, |tlm| {
         let k = tlm.header.step;
         Command {
-            thrust_cmd_n: [f64::NAN, f64::INFINITY, -1.0, if k % 2 == 0 { 1e12 } else { 500.0 }],
+            thrust_cmd_n: [
+                f64::NAN,
+                f64::INFINITY,
+                -1.0,
+                if k % 2 == 0 { 1e12 } else { 500.0 },
+            ],
             engine_on: [1, 1, 1, if k % 3 == 0 { 42 } else { 1 }],
             torque_cmd_body_nm: [f64::NAN, 0.0, 0.0],
             ..Default::default()
@@ -159,7 +232,17 @@ fn a_peer_speaking_another_protocol_is_refused_by_name() {
     let id = run_id(3);
     let rep = dir.join("report.json");
     let mut emulator = oils()
-        .args(["run", "--no-stub", "--run-id", &id, "--duration", "3", "--no-log", "--report", rep.to_str().unwrap()])
+        .args([
+            "run",
+            "--no-stub",
+            "--run-id",
+            &id,
+            "--duration",
+            "3",
+            "--no-log",
+            "--report",
+            rep.to_str().unwrap(),
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -168,7 +251,10 @@ fn a_peer_speaking_another_protocol_is_refused_by_name() {
         let mut header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
         header.protocol_version = 99;
         header.schema_hash = 0xbad;
-        Command { header, ..Default::default() }
+        Command {
+            header,
+            ..Default::default()
+        }
     });
     let status = wait_with_deadline(&mut emulator, 20);
     assert!(!status.success());

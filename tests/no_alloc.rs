@@ -43,7 +43,12 @@ static GLOBAL: Counting = Counting;
 /// the plant, link and stub excluded; the scheduler's own setup included).
 fn allocations_during_run(run_id: u64, duration_s: f64, wait: WaitStrategy) -> (u64, u64, Outcome) {
     let scenario = ScenarioConfig::default();
-    let mut plant = Plant::new(&scenario, build(PropulsionKind::Ideal, &scenario.propulsion), 1).unwrap();
+    let mut plant = Plant::new(
+        &scenario,
+        build(PropulsionKind::Ideal, &scenario.propulsion),
+        1,
+    )
+    .unwrap();
     let stop = AtomicBool::new(false);
     let node = create_node("no-alloc-emulator").unwrap();
     let link = EmulatorLink::create(&node, run_id, wait).unwrap();
@@ -82,11 +87,23 @@ fn allocations_during_run(run_id: u64, duration_s: f64, wait: WaitStrategy) -> (
 #[test]
 fn step_paths_do_not_allocate() {
     let base = (std::process::id() as u64) << 24;
-    for (i, wait) in [WaitStrategy::BusyPoll, WaitStrategy::Hybrid { spin_ns: 20_000 }].into_iter().enumerate() {
-        let (short_allocs, short_steps, _) = allocations_during_run(base + 2 * i as u64, 50.0, wait);
-        let (long_allocs, long_steps, outcome) = allocations_during_run(base + 2 * i as u64 + 1, 2000.0, wait);
+    for (i, wait) in [
+        WaitStrategy::BusyPoll,
+        WaitStrategy::Hybrid { spin_ns: 20_000 },
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let (short_allocs, short_steps, _) =
+            allocations_during_run(base + 2 * i as u64, 50.0, wait);
+        let (long_allocs, long_steps, outcome) =
+            allocations_during_run(base + 2 * i as u64 + 1, 2000.0, wait);
         assert_eq!(short_steps, 5_000);
-        assert_eq!(outcome, Outcome::Landed, "the long run covers every GNC phase down to touchdown");
+        assert_eq!(
+            outcome,
+            Outcome::Landed,
+            "the long run covers every GNC phase down to touchdown"
+        );
         assert!(long_steps > 20 * short_steps);
         assert_eq!(
             long_allocs, short_allocs,

@@ -21,7 +21,10 @@ impl Default for RunDigest {
 impl RunDigest {
     /// Empty digest.
     pub fn new() -> Self {
-        Self { hasher: blake3::Hasher::new(), packets: 0 }
+        Self {
+            hasher: blake3::Hasher::new(),
+            packets: 0,
+        }
     }
 
     /// Adds a telemetry packet.

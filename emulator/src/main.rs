@@ -7,7 +7,11 @@ use clap::Parser;
 use oils_emulator::session::{run_session, RunArgs};
 
 #[derive(Parser)]
-#[command(name = "oils-emulator", version, about = "Emulator process of the oils bench")]
+#[command(
+    name = "oils-emulator",
+    version,
+    about = "Emulator process of the oils bench"
+)]
 struct Cli {
     #[command(flatten)]
     args: RunArgs,
@@ -17,10 +21,15 @@ fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
     let report = run_session(&cli.args, &stop, &mut |run_id, _wait| {
-        eprintln!("oils-emulator: run {run_id:016x} is waiting for an onboard stub; start one with:");
+        eprintln!(
+            "oils-emulator: run {run_id:016x} is waiting for an onboard stub; start one with:"
+        );
         eprintln!("    cargo run --release -p oils-onboard-stub -- --run-id {run_id:016x}");
         Ok(())
     })
     .context("emulator run")?;
-    Ok(oils_emulator::report::finish_run(&report, cli.args.report.as_deref())?)
+    Ok(oils_emulator::report::finish_run(
+        &report,
+        cli.args.report.as_deref(),
+    )?)
 }

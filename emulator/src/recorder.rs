@@ -26,7 +26,8 @@ use thiserror::Error;
 /// File magic.
 pub const MAGIC: &[u8; 8] = b"OILSLOG1";
 /// Bytes per record.
-pub const RECORD_SIZE: usize = 8 + core::mem::size_of::<Telemetry>() + core::mem::size_of::<Command>();
+pub const RECORD_SIZE: usize =
+    8 + core::mem::size_of::<Telemetry>() + core::mem::size_of::<Command>();
 /// Record flag: the command field holds a command received from the stub.
 pub const REC_COMMAND_RECEIVED: u32 = 1 << 0;
 /// Record flag: the command missed its deadline; the miss policy was applied.
@@ -106,11 +107,15 @@ pub struct Recorder {
 impl Recorder {
     /// Creates the log file, writes the header and starts the writer thread.
     pub fn create(path: &Path, header_json: &str) -> Result<Self, RecorderError> {
-        let io = |source| RecorderError::Io { path: path.to_path_buf(), source };
+        let io = |source| RecorderError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
         let file = File::create(path).map_err(io)?;
         let mut out = BufWriter::with_capacity(1 << 20, file);
         out.write_all(MAGIC).map_err(io)?;
-        out.write_all(&(header_json.len() as u32).to_le_bytes()).map_err(io)?;
+        out.write_all(&(header_json.len() as u32).to_le_bytes())
+            .map_err(io)?;
         out.write_all(header_json.as_bytes()).map_err(io)?;
         out.flush().map_err(io)?;
         let (tx, rx) = bounded(CHANNEL_CAPACITY);
@@ -119,7 +124,11 @@ impl Recorder {
             .name("oils-recorder".into())
             .spawn(move || write_records(rx, out, thread_path))
             .map_err(io)?;
-        Ok(Self { tx: Some(tx), writer: Some(writer), path: path.to_path_buf() })
+        Ok(Self {
+            tx: Some(tx),
+            writer: Some(writer),
+            path: path.to_path_buf(),
+        })
     }
 
     /// The log file's path.
@@ -130,7 +139,9 @@ impl Recorder {
     /// Queues one record (blocks only if the writer is 8192 records behind).
     pub fn record(&self, rec: &Record) -> Result<(), RecorderError> {
         match &self.tx {
-            Some(tx) => tx.send(*rec).map_err(|_| RecorderError::WriterGone("channel closed".into())),
+            Some(tx) => tx
+                .send(*rec)
+                .map_err(|_| RecorderError::WriterGone("channel closed".into())),
             None => Err(RecorderError::WriterGone("recorder finished".into())),
         }
     }
@@ -144,7 +155,9 @@ impl Recorder {
     fn close(&mut self) -> Result<u64, RecorderError> {
         drop(self.tx.take());
         match self.writer.take() {
-            Some(h) => h.join().map_err(|_| RecorderError::WriterGone("writer panicked".into()))?,
+            Some(h) => h
+                .join()
+                .map_err(|_| RecorderError::WriterGone("writer panicked".into()))?,
             None => Ok(0),
         }
     }
@@ -157,8 +170,15 @@ impl Drop for Recorder {
     }
 }
 
-fn write_records(rx: Receiver<Record>, mut out: BufWriter<File>, path: PathBuf) -> Result<u64, RecorderError> {
-    let io = |source| RecorderError::Io { path: path.clone(), source };
+fn write_records(
+    rx: Receiver<Record>,
+    mut out: BufWriter<File>,
+    path: PathBuf,
+) -> Result<u64, RecorderError> {
+    let io = |source| RecorderError::Io {
+        path: path.clone(),
+        source,
+    };
     let mut buf = [0u8; RECORD_SIZE];
     let mut written = 0u64;
     // Block for the next record; then drain without blocking; flush when dry.
@@ -191,19 +211,39 @@ pub struct Log {
 
 /// Reads a whole log file.
 pub fn read_log(path: &Path) -> Result<Log, RecorderError> {
-    let io = |source| RecorderError::Io { path: path.to_path_buf(), source };
-    let not_log = |why: &str| RecorderError::NotALog { path: path.to_path_buf(), why: why.into() };
+    let io = |source| RecorderError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let not_log = |why: &str| RecorderError::NotALog {
+        path: path.to_path_buf(),
+        why: why.into(),
+    };
     let mut bytes = Vec::new();
-    File::open(path).map_err(io)?.read_to_end(&mut bytes).map_err(io)?;
+    File::open(path)
+        .map_err(io)?
+        .read_to_end(&mut bytes)
+        .map_err(io)?;
     if bytes.len() < 12 || &bytes[..8] != MAGIC {
         return Err(not_log("missing OILSLOG1 magic"));
     }
     let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
-    let body_start = 12usize.checked_add(header_len).filter(|e| *e <= bytes.len()).ok_or_else(|| not_log("truncated header"))?;
-    let header_json = String::from_utf8(bytes[12..body_start].to_vec()).map_err(|_| not_log("header is not UTF-8"))?;
+    let body_start = 12usize
+        .checked_add(header_len)
+        .filter(|e| *e <= bytes.len())
+        .ok_or_else(|| not_log("truncated header"))?;
+    let header_json = String::from_utf8(bytes[12..body_start].to_vec())
+        .map_err(|_| not_log("header is not UTF-8"))?;
     let body = &bytes[body_start..];
-    let records = body.chunks_exact(RECORD_SIZE).filter_map(Record::decode).collect();
-    Ok(Log { header_json, records, trailing_bytes: body.len() % RECORD_SIZE })
+    let records = body
+        .chunks_exact(RECORD_SIZE)
+        .filter_map(Record::decode)
+        .collect();
+    Ok(Log {
+        header_json,
+        records,
+        trailing_bytes: body.len() % RECORD_SIZE,
+    })
 }
 
 /// Writes a log's records as CSV: one row per step, named columns with units.
@@ -224,12 +264,33 @@ pub fn export_csv(log: &Log, out: &mut impl Write) -> std::io::Result<()> {
     for r in &log.records {
         let t = &r.telemetry;
         let n = &t.nav;
-        write!(out, "{},{},{}", t.header.step, t.header.t_ns as f64 * 1e-9, r.flags)?;
-        for v in n.pos_mci_m.iter().chain(&n.vel_mci_m_s).chain(&n.q_mci_from_body).chain(&n.rate_body_rad_s).chain(&t.accel_body_m_s2) {
+        write!(
+            out,
+            "{},{},{}",
+            t.header.step,
+            t.header.t_ns as f64 * 1e-9,
+            r.flags
+        )?;
+        for v in n
+            .pos_mci_m
+            .iter()
+            .chain(&n.vel_mci_m_s)
+            .chain(&n.q_mci_from_body)
+            .chain(&n.rate_body_rad_s)
+            .chain(&t.accel_body_m_s2)
+        {
             write!(out, ",{v}")?;
         }
         let p = &t.propulsion;
-        write!(out, ",{},{},{},{},{}", t.altitude_m, t.mass_estimate_kg, p.gas_pressure_pa, p.fuel_tank_pressure_pa, p.ox_tank_pressure_pa)?;
+        write!(
+            out,
+            ",{},{},{},{},{}",
+            t.altitude_m,
+            t.mass_estimate_kg,
+            p.gas_pressure_pa,
+            p.fuel_tank_pressure_pa,
+            p.ox_tank_pressure_pa
+        )?;
         for e in &p.engines {
             write!(out, ",{},{}", e.thrust_n, e.chamber_pressure_pa)?;
         }
@@ -256,7 +317,10 @@ mod tests {
         let path = temp("rt.oilslog");
         let rec = Recorder::create(&path, r#"{"seed":1}"#).unwrap();
         for k in 0..1000u64 {
-            let mut r = Record { flags: REC_COMMAND_RECEIVED, ..Default::default() };
+            let mut r = Record {
+                flags: REC_COMMAND_RECEIVED,
+                ..Default::default()
+            };
             r.telemetry.header.step = k;
             r.telemetry.altitude_m = k as f64 * 0.5;
             r.command.thrust_cmd_n[2] = 400.0 + k as f64;
@@ -297,9 +361,15 @@ mod tests {
     fn rejects_files_that_are_not_logs() {
         let path = temp("bad.oilslog");
         std::fs::write(&path, b"hello world, not a log").unwrap();
-        assert!(matches!(read_log(&path), Err(RecorderError::NotALog { .. })));
+        assert!(matches!(
+            read_log(&path),
+            Err(RecorderError::NotALog { .. })
+        ));
         std::fs::write(&path, b"OILSLOG1\xff\xff\xff\x00").unwrap();
-        assert!(matches!(read_log(&path), Err(RecorderError::NotALog { .. })));
+        assert!(matches!(
+            read_log(&path),
+            Err(RecorderError::NotALog { .. })
+        ));
         std::fs::remove_file(&path).ok();
         assert!(matches!(read_log(&path), Err(RecorderError::Io { .. })));
     }

@@ -75,16 +75,27 @@ impl RunReport {
             "steps       {}  wall {:.3} s  realtime factor {:.1}x",
             s.steps, t.wall_s, t.realtime_factor
         );
-        let _ = writeln!(out, "timing (us)        p50       p99     p99.9       max     count");
+        let _ = writeln!(
+            out,
+            "timing (us)        p50       p99     p99.9       max     count"
+        );
         let row = |out: &mut String, name: &str, p: &Percentiles| {
             if p.count == 0 {
-                let _ = writeln!(out, "  {name:<13} {:>9} {:>9} {:>9} {:>9} {:>9}", "-", "-", "-", "-", 0);
+                let _ = writeln!(
+                    out,
+                    "  {name:<13} {:>9} {:>9} {:>9} {:>9} {:>9}",
+                    "-", "-", "-", "-", 0
+                );
             } else {
                 let us = |v: u64| v as f64 / 1000.0;
                 let _ = writeln!(
                     out,
                     "  {name:<13} {:>9.2} {:>9.2} {:>9.2} {:>9.2} {:>9}",
-                    us(p.p50), us(p.p99), us(p.p999), us(p.max), p.count
+                    us(p.p50),
+                    us(p.p99),
+                    us(p.p999),
+                    us(p.max),
+                    p.count
                 );
             }
         };
@@ -126,21 +137,32 @@ pub enum RunFailed {
 
 /// Prints the table, writes the JSON report if asked, and turns a bad run (aborted,
 /// crashed, or a broken timing threshold) into an error, so the process exits non-zero.
-pub fn finish_run(report: &RunReport, json_path: Option<&std::path::Path>) -> Result<(), RunFailed> {
+pub fn finish_run(
+    report: &RunReport,
+    json_path: Option<&std::path::Path>,
+) -> Result<(), RunFailed> {
     print!("{}", report.table());
     if let Some(path) = json_path {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir)
-                .map_err(|source| RunFailed::ReportFile { path: path.display().to_string(), source })?;
+            std::fs::create_dir_all(dir).map_err(|source| RunFailed::ReportFile {
+                path: path.display().to_string(),
+                source,
+            })?;
         }
-        std::fs::write(path, report.to_json() + "\n")
-            .map_err(|source| RunFailed::ReportFile { path: path.display().to_string(), source })?;
+        std::fs::write(path, report.to_json() + "\n").map_err(|source| RunFailed::ReportFile {
+            path: path.display().to_string(),
+            source,
+        })?;
     }
     let s = &report.summary;
     let mut why = Vec::new();
     match s.outcome {
-        crate::scheduler::Outcome::Aborted => why.push(format!("aborted: {}", s.error.clone().unwrap_or_default())),
-        crate::scheduler::Outcome::Crashed => why.push("touched down outside the limits".to_string()),
+        crate::scheduler::Outcome::Aborted => {
+            why.push(format!("aborted: {}", s.error.clone().unwrap_or_default()))
+        }
+        crate::scheduler::Outcome::Crashed => {
+            why.push("touched down outside the limits".to_string())
+        }
         _ => {}
     }
     for v in &s.threshold_violations {

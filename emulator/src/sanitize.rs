@@ -49,7 +49,13 @@ pub fn sanitize(cmd: &Command, max_thrust_n: f64) -> (ActuatorCommand, u32) {
             rejected += 1;
         }
     }
-    (ActuatorCommand { engines, torque_cmd_body_nm }, rejected)
+    (
+        ActuatorCommand {
+            engines,
+            torque_cmd_body_nm,
+        },
+        rejected,
+    )
 }
 
 #[cfg(test)]

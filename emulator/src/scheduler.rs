@@ -14,7 +14,9 @@
 use crate::config::ScenarioConfig;
 use crate::digest::RunDigest;
 use crate::plant::{ActuatorCommand, Plant, PlantStatus, TouchdownState};
-use crate::recorder::{Record, Recorder, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN, REC_REJECTED_VALUES};
+use crate::recorder::{
+    Record, Recorder, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN, REC_REJECTED_VALUES,
+};
 use crate::sanitize::sanitize;
 use crate::timing::{TimingMonitor, TimingThresholds};
 use oils_shared::clock::{monotonic_ns, sleep_until_ns};
@@ -143,7 +145,10 @@ impl SchedulerConfig {
             return bad(format!("speed {} must be in (0, 1e6]", self.speed));
         }
         if !(self.deadline_frac > 0.0 && self.deadline_frac <= 1.0) {
-            return bad(format!("deadline fraction {} must be in (0, 1]", self.deadline_frac));
+            return bad(format!(
+                "deadline fraction {} must be in (0, 1]",
+                self.deadline_frac
+            ));
         }
         if self.max_duration_ns <= 0 {
             return bad("duration must be positive".into());
@@ -212,14 +217,20 @@ pub fn run(
             abort = Some(Abort::Interrupted);
         }
         let mut tlm = plant.telemetry(PacketHeader::new(cfg.run_id, k, t_ns));
-        let finished = abort.is_some() || matches!(status, PlantStatus::Touchdown(_)) || t_ns >= cfg.max_duration_ns;
+        let finished = abort.is_some()
+            || matches!(status, PlantStatus::Touchdown(_))
+            || t_ns >= cfg.max_duration_ns;
         if finished {
             tlm.header.flags |= TLM_FLAG_END_OF_RUN;
             // Best effort: the stub may be gone already.
             let _ = link.publish(&tlm);
             digest.add_telemetry(&tlm);
             if let Some(r) = recorder {
-                r.record(&Record { flags: REC_END_OF_RUN, telemetry: tlm, command: Command::default() })?;
+                r.record(&Record {
+                    flags: REC_END_OF_RUN,
+                    telemetry: tlm,
+                    command: Command::default(),
+                })?;
             }
             break;
         }
@@ -278,7 +289,10 @@ pub fn run(
                 logged_cmd = cmd;
             }
             None if !realtime => {
-                abort = Some(Abort::StubSilent { step: k, waited_ms: (received_ns - published_ns) / 1_000_000 });
+                abort = Some(Abort::StubSilent {
+                    step: k,
+                    waited_ms: (received_ns - published_ns) / 1_000_000,
+                });
                 continue;
             }
             None => {
@@ -286,7 +300,10 @@ pub fn run(
                 flags |= REC_DEADLINE_MISS;
                 let silent_ms = (received_ns - last_command_ns) / 1_000_000;
                 if silent_ms >= cfg.link_timeout_ms {
-                    abort = Some(Abort::StubSilent { step: k, waited_ms: silent_ms });
+                    abort = Some(Abort::StubSilent {
+                        step: k,
+                        waited_ms: silent_ms,
+                    });
                     continue;
                 }
                 match cfg.miss_policy {
@@ -302,7 +319,11 @@ pub fn run(
             }
         }
         if let Some(r) = recorder {
-            r.record(&Record { flags, telemetry: tlm, command: logged_cmd })?;
+            r.record(&Record {
+                flags,
+                telemetry: tlm,
+                command: logged_cmd,
+            })?;
         }
         status = plant.step(&applied, cfg.dt_ns);
         steps += 1;
@@ -314,7 +335,14 @@ pub fn run(
     let timing = timing.summary(wall_s, sim_time_s);
     let (outcome, touchdown) = match (&abort, status) {
         (Some(_), _) => (Outcome::Aborted, None),
-        (None, PlantStatus::Touchdown(td)) => (if td.landed { Outcome::Landed } else { Outcome::Crashed }, Some(td)),
+        (None, PlantStatus::Touchdown(td)) => (
+            if td.landed {
+                Outcome::Landed
+            } else {
+                Outcome::Crashed
+            },
+            Some(td),
+        ),
         (None, PlantStatus::Flying) => (Outcome::Completed, None),
     };
     Ok(RunSummary {

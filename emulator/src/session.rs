@@ -175,16 +175,25 @@ impl RunArgs {
     /// (spin briefly, then sleep on the event: leaves the core free between steps).
     pub fn wait_strategy(&self) -> Result<WaitStrategy, SessionError> {
         match &self.wait {
-            Some(w) => w.parse().map_err(|_| SessionError::Argument(format!("--wait {w}: expected busy, event or hybrid"))),
+            Some(w) => w.parse().map_err(|_| {
+                SessionError::Argument(format!("--wait {w}: expected busy, event or hybrid"))
+            }),
             None => Ok(match self.mode {
                 ModeArg::Lockstep => WaitStrategy::BusyPoll,
-                ModeArg::Realtime => WaitStrategy::Hybrid { spin_ns: WaitStrategy::DEFAULT_SPIN_NS },
+                ModeArg::Realtime => WaitStrategy::Hybrid {
+                    spin_ns: WaitStrategy::DEFAULT_SPIN_NS,
+                },
             }),
         }
     }
 
     fn miss_policy(&self) -> Result<MissPolicy, SessionError> {
-        let bad = || SessionError::Argument(format!("--miss-policy {}: expected hold, zero or abort:N", self.miss_policy));
+        let bad = || {
+            SessionError::Argument(format!(
+                "--miss-policy {}: expected hold, zero or abort:N",
+                self.miss_policy
+            ))
+        };
         match self.miss_policy.as_str() {
             "hold" => Ok(MissPolicy::Hold),
             "zero" => Ok(MissPolicy::Zero),
@@ -218,7 +227,10 @@ impl RunArgs {
     /// Scheduler settings.
     pub fn scheduler_config(&self, run_id: u64) -> Result<SchedulerConfig, SessionError> {
         if !(self.duration.is_finite() && self.duration > 0.0 && self.duration <= 1e6) {
-            return Err(SessionError::Argument(format!("--duration {}: expected (0, 1e6] seconds", self.duration)));
+            return Err(SessionError::Argument(format!(
+                "--duration {}: expected (0, 1e6] seconds",
+                self.duration
+            )));
         }
         let us = |v: Option<f64>| v.map(|x| (x.max(0.0) * 1000.0) as u64);
         let cfg = SchedulerConfig {
@@ -253,7 +265,9 @@ impl RunArgs {
         self.wait_strategy()?;
         self.propulsion_kind()?;
         if self.fsw == FswArg::Playback && self.profile.is_none() {
-            return Err(SessionError::Argument("--fsw playback needs --profile CSV".into()));
+            return Err(SessionError::Argument(
+                "--fsw playback needs --profile CSV".into(),
+            ));
         }
         if let Some(path) = &self.profile {
             // Fail here, before any process or service exists, not in the spawned stub.
@@ -266,9 +280,14 @@ impl RunArgs {
 
 /// Reads a scenario TOML file.
 pub fn load_scenario(path: &Path) -> Result<ScenarioConfig, SessionError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| SessionError::ScenarioFile { path: path.to_path_buf(), why: e.to_string() })?;
-    toml::from_str(&text).map_err(|e| SessionError::ScenarioFile { path: path.to_path_buf(), why: e.to_string() })
+    let text = std::fs::read_to_string(path).map_err(|e| SessionError::ScenarioFile {
+        path: path.to_path_buf(),
+        why: e.to_string(),
+    })?;
+    toml::from_str(&text).map_err(|e| SessionError::ScenarioFile {
+        path: path.to_path_buf(),
+        why: e.to_string(),
+    })
 }
 
 /// Runs one session. `spawn_stub(run_id, wait)` is called once the services exist (the
@@ -292,13 +311,19 @@ pub fn run_session(
     let log_path = if args.no_log {
         None
     } else {
-        Some(args.log.clone().unwrap_or_else(|| PathBuf::from(format!("oils-out/{run_id:016x}.oilslog"))))
+        Some(
+            args.log
+                .clone()
+                .unwrap_or_else(|| PathBuf::from(format!("oils-out/{run_id:016x}.oilslog"))),
+        )
     };
     let recorder = match &log_path {
         Some(p) => {
             if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir)
-                    .map_err(|source| RecorderError::Io { path: dir.to_path_buf(), source })?;
+                std::fs::create_dir_all(dir).map_err(|source| RecorderError::Io {
+                    path: dir.to_path_buf(),
+                    source,
+                })?;
             }
             let header = serde_json::json!({
                 "protocol_version": PROTOCOL_VERSION,
@@ -315,7 +340,14 @@ pub fn run_session(
     };
     spawn_stub(run_id, wait)?;
     link.wait_for_peer(sched.startup_timeout_ms, stop)?;
-    let mut summary = scheduler::run(&sched, &scenario, &mut plant, &link, recorder.as_ref(), stop)?;
+    let mut summary = scheduler::run(
+        &sched,
+        &scenario,
+        &mut plant,
+        &link,
+        recorder.as_ref(),
+        stop,
+    )?;
     if let Some(r) = recorder {
         summary.log_records = r.finish()?;
     }

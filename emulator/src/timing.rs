@@ -94,7 +94,8 @@ impl TimingMonitor {
     pub fn record_exchange(&mut self, round_trip_ns: u64, stub_compute_ns: u64) {
         self.round_trip.saturating_record(round_trip_ns);
         self.stub_compute.saturating_record(stub_compute_ns);
-        self.transport.saturating_record(round_trip_ns.saturating_sub(stub_compute_ns));
+        self.transport
+            .saturating_record(round_trip_ns.saturating_sub(stub_compute_ns));
     }
 
     /// Counts a step whose command missed its deadline.
@@ -163,9 +164,21 @@ impl TimingThresholds {
                 }
             }
         };
-        check("wake_error p99 ns", self.wake_error_p99_ns, s.wake_error_ns.p99);
-        check("round_trip p99 ns", self.round_trip_p99_ns, s.round_trip_ns.p99);
-        check("transport p99 ns", self.transport_p99_ns, s.transport_ns.p99);
+        check(
+            "wake_error p99 ns",
+            self.wake_error_p99_ns,
+            s.wake_error_ns.p99,
+        );
+        check(
+            "round_trip p99 ns",
+            self.round_trip_p99_ns,
+            s.round_trip_ns.p99,
+        );
+        check(
+            "transport p99 ns",
+            self.transport_p99_ns,
+            s.transport_ns.p99,
+        );
         check("deadline_misses", self.deadline_misses, s.deadline_misses);
         out
     }
@@ -182,9 +195,17 @@ mod tests {
             m.record_exchange(10_000 + i, 4_000);
         }
         let s = m.summary(1.0, 2.0);
-        assert!((s.transport_ns.p50 as i64 - 6_050).abs() <= 10, "{:?}", s.transport_ns);
+        assert!(
+            (s.transport_ns.p50 as i64 - 6_050).abs() <= 10,
+            "{:?}",
+            s.transport_ns
+        );
         // Values come back at the histogram's precision: 3 significant digits.
-        assert!((s.stub_compute_ns.max as i64 - 4_000).abs() <= 4, "{:?}", s.stub_compute_ns);
+        assert!(
+            (s.stub_compute_ns.max as i64 - 4_000).abs() <= 4,
+            "{:?}",
+            s.stub_compute_ns
+        );
         assert_eq!(s.round_trip_ns.count, 100);
         assert_eq!(s.realtime_factor, 2.0);
         assert_eq!(s.wake_error_ns, Percentiles::default());
@@ -196,7 +217,11 @@ mod tests {
         m.record_wake_error(50_000);
         m.record_deadline_miss();
         let s = m.summary(1.0, 1.0);
-        let t = TimingThresholds { wake_error_p99_ns: Some(20_000), deadline_misses: Some(0), ..Default::default() };
+        let t = TimingThresholds {
+            wake_error_p99_ns: Some(20_000),
+            deadline_misses: Some(0),
+            ..Default::default()
+        };
         let v = t.violations(&s);
         assert_eq!(v.len(), 2, "{v:?}");
         assert!(v[0].contains("wake_error"));

@@ -60,11 +60,16 @@ pub enum StubCliError {
 }
 
 /// Builds the flight software asked for (allocation happens here, before tick 0).
-pub fn build_fsw(kind: FswKind, profile: Option<&PathBuf>) -> Result<Box<dyn FlightSoftware>, StubCliError> {
+pub fn build_fsw(
+    kind: FswKind,
+    profile: Option<&PathBuf>,
+) -> Result<Box<dyn FlightSoftware>, StubCliError> {
     match kind {
         FswKind::Gnc => Ok(Box::new(ReferenceGnc::default())),
         FswKind::Playback => {
-            let path = profile.ok_or_else(|| StubCliError::Argument("--fsw playback needs --profile CSV".into()))?;
+            let path = profile.ok_or_else(|| {
+                StubCliError::Argument("--fsw playback needs --profile CSV".into())
+            })?;
             Ok(Box::new(ProfilePlayback::new(ThrustProfile::load(path)?)))
         }
     }
@@ -72,10 +77,13 @@ pub fn build_fsw(kind: FswKind, profile: Option<&PathBuf>) -> Result<Box<dyn Fli
 
 /// Joins the run and serves it to the end.
 pub fn run_stub(args: &StubArgs, stop: &AtomicBool) -> Result<StubSummary, StubCliError> {
-    let run_id = u64::from_str_radix(args.run_id.trim_start_matches("0x"), 16)
-        .map_err(|_| StubCliError::Argument(format!("--run-id {}: not a hex number", args.run_id)))?;
+    let run_id = u64::from_str_radix(args.run_id.trim_start_matches("0x"), 16).map_err(|_| {
+        StubCliError::Argument(format!("--run-id {}: not a hex number", args.run_id))
+    })?;
     let wait: Option<WaitStrategy> = match &args.wait {
-        Some(w) => Some(w.parse().map_err(|_| StubCliError::Argument(format!("--wait {w}: expected busy, event or hybrid")))?),
+        Some(w) => Some(w.parse().map_err(|_| {
+            StubCliError::Argument(format!("--wait {w}: expected busy, event or hybrid"))
+        })?),
         None => None,
     };
     let mut fsw = build_fsw(args.fsw, args.profile.as_ref())?;

@@ -6,7 +6,11 @@ use clap::Parser;
 use oils_onboard_stub::cli::{run_stub, StubArgs};
 
 #[derive(Parser)]
-#[command(name = "oils-onboard-stub", version, about = "Onboard-computer stub of the oils bench")]
+#[command(
+    name = "oils-onboard-stub",
+    version,
+    about = "Onboard-computer stub of the oils bench"
+)]
 struct Cli {
     #[command(flatten)]
     args: StubArgs,
@@ -15,7 +19,11 @@ struct Cli {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
-    let s = run_stub(&cli.args, &stop).with_context(|| format!("onboard stub on run {}", cli.args.run_id))?;
-    eprintln!("oils-onboard-stub: served {} commands, last step {}", s.commands, s.last_step);
+    let s = run_stub(&cli.args, &stop)
+        .with_context(|| format!("onboard stub on run {}", cli.args.run_id))?;
+    eprintln!(
+        "oils-onboard-stub: served {} commands, last step {}",
+        s.commands, s.last_step
+    );
     Ok(())
 }

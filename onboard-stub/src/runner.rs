@@ -45,7 +45,10 @@ pub fn serve(
     timeout_ms: u64,
     stop: &AtomicBool,
 ) -> Result<StubSummary, StubError> {
-    let mut summary = StubSummary { commands: 0, last_step: 0 };
+    let mut summary = StubSummary {
+        commands: 0,
+        last_step: 0,
+    };
     loop {
         let waited_from = monotonic_ns();
         let tlm = match link.receive_until(waited_from + timeout_ms * 1_000_000, stop)? {

@@ -69,7 +69,9 @@ impl FromStr for WaitStrategy {
         match s {
             "busy" | "busy-poll" => Ok(WaitStrategy::BusyPoll),
             "event" => Ok(WaitStrategy::Event),
-            "hybrid" => Ok(WaitStrategy::Hybrid { spin_ns: Self::DEFAULT_SPIN_NS }),
+            "hybrid" => Ok(WaitStrategy::Hybrid {
+                spin_ns: Self::DEFAULT_SPIN_NS,
+            }),
             _ => Err(LinkError::BadWaitStrategy),
         }
     }
@@ -114,7 +116,10 @@ pub enum LinkError {
 }
 
 fn ice<E: Debug>(what: &'static str) -> impl FnOnce(E) -> LinkError {
-    move |e| LinkError::Iceoryx { what, detail: format!("{e:?}") }
+    move |e| LinkError::Iceoryx {
+        what,
+        detail: format!("{e:?}"),
+    }
 }
 
 /// Attribute keys the emulator stamps on the run's telemetry-event service.
@@ -190,7 +195,9 @@ impl EmulatorLink {
             (attribute_keys::SCHEMA_HASH, hash.as_str()),
             (attribute_keys::WAIT, wait.as_str()),
         ] {
-            attrs = attrs.define(&key(k)?, &value(v)?).map_err(ice("service attributes"))?;
+            attrs = attrs
+                .define(&key(k)?, &value(v)?)
+                .map_err(ice("service attributes"))?;
         }
         let in_use = |e: &dyn Debug| format!("{e:?}").contains("AlreadyExists");
         let tlm_service = node
@@ -201,7 +208,13 @@ impl EmulatorLink {
             .subscriber_max_buffer_size(4)
             .history_size(0)
             .create()
-            .map_err(|e| if in_use(&e) { LinkError::RunIdInUse { run_id } } else { ice("create telemetry service")(e) })?;
+            .map_err(|e| {
+                if in_use(&e) {
+                    LinkError::RunIdInUse { run_id }
+                } else {
+                    ice("create telemetry service")(e)
+                }
+            })?;
         let cmd_service = node
             .service_builder(&service_name(names.command().as_str())?)
             .publish_subscribe::<Command>()
@@ -231,7 +244,9 @@ impl EmulatorLink {
             let subscribed = self.tx_service.dynamic_config().number_of_subscribers() >= 1;
             let publishing = self.rx_service.dynamic_config().number_of_publishers() >= 1;
             if subscribed && publishing {
-                self.publisher.update_connections().map_err(ice("update connections"))?;
+                self.publisher
+                    .update_connections()
+                    .map_err(ice("update connections"))?;
                 return Ok(());
             }
             if stop.load(Ordering::Relaxed) {
@@ -284,7 +299,11 @@ impl StubLink {
                 Ok(s) => break s,
                 Err(e) => {
                     let msg = format!("{e:?}");
-                    if !msg.contains("DoesNotExist") && !msg.contains("InsufficientPermissions") && !msg.contains("ServiceInCorruptedState") && !msg.contains("HangsInCreation") {
+                    if !msg.contains("DoesNotExist")
+                        && !msg.contains("InsufficientPermissions")
+                        && !msg.contains("ServiceInCorruptedState")
+                        && !msg.contains("HangsInCreation")
+                    {
                         return Err(ice("open telemetry event")(e));
                     }
                 }
@@ -294,7 +313,11 @@ impl StubLink {
             }
             let waited_ms = (monotonic_ns() - start) / 1_000_000;
             if waited_ms >= timeout_ms {
-                return Err(LinkError::PeerTimeout { run_id, waited_ms, what: "no emulator created the run's services" });
+                return Err(LinkError::PeerTimeout {
+                    run_id,
+                    waited_ms,
+                    what: "no emulator created the run's services",
+                });
             }
             std::thread::sleep(Duration::from_millis(5));
         };
@@ -307,7 +330,9 @@ impl StubLink {
                 peer_schema_hash: announced.schema_hash,
             }));
         }
-        let wait = wait.or(announced.wait).unwrap_or(WaitStrategy::Hybrid { spin_ns: WaitStrategy::DEFAULT_SPIN_NS });
+        let wait = wait.or(announced.wait).unwrap_or(WaitStrategy::Hybrid {
+            spin_ns: WaitStrategy::DEFAULT_SPIN_NS,
+        });
         let cmd_service = node
             .service_builder(&service_name(names.command().as_str())?)
             .publish_subscribe::<Command>()
@@ -366,10 +391,22 @@ where
         tx_event: EventFactory<ipc::Service>,
         rx_event: EventFactory<ipc::Service>,
     ) -> Result<Self, LinkError> {
-        let publisher = tx_service.publisher_builder().create().map_err(ice("create publisher"))?;
-        let subscriber = rx_service.subscriber_builder().create().map_err(ice("create subscriber"))?;
-        let notifier = tx_event.notifier_builder().create().map_err(ice("create notifier"))?;
-        let listener = rx_event.listener_builder().create().map_err(ice("create listener"))?;
+        let publisher = tx_service
+            .publisher_builder()
+            .create()
+            .map_err(ice("create publisher"))?;
+        let subscriber = rx_service
+            .subscriber_builder()
+            .create()
+            .map_err(ice("create subscriber"))?;
+        let notifier = tx_event
+            .notifier_builder()
+            .create()
+            .map_err(ice("create notifier"))?;
+        let listener = rx_event
+            .listener_builder()
+            .create()
+            .map_err(ice("create listener"))?;
         Ok(Self {
             run_id,
             wait,
@@ -423,11 +460,17 @@ where
     /// Waits for the next packet until the monotonic time `deadline_ns`, with this
     /// link's wait strategy. `Ok(None)` when the deadline passes; `Err(Interrupted)` when
     /// `stop` is raised (checked between polls and at least every millisecond).
-    pub fn receive_until(&self, deadline_ns: u64, stop: &AtomicBool) -> Result<Option<Rx>, LinkError> {
+    pub fn receive_until(
+        &self,
+        deadline_ns: u64,
+        stop: &AtomicBool,
+    ) -> Result<Option<Rx>, LinkError> {
         let spin_until_ns = match self.wait {
             WaitStrategy::BusyPoll => deadline_ns,
             WaitStrategy::Event => 0,
-            WaitStrategy::Hybrid { spin_ns } => monotonic_ns().saturating_add(spin_ns).min(deadline_ns),
+            WaitStrategy::Hybrid { spin_ns } => {
+                monotonic_ns().saturating_add(spin_ns).min(deadline_ns)
+            }
         };
         loop {
             if let Some(p) = self.try_receive()? {

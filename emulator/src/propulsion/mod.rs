@@ -87,7 +87,9 @@ impl std::str::FromStr for PropulsionKind {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "ideal" => Ok(PropulsionKind::Ideal),
-            other => Err(format!("unknown propulsion model `{other}` (expected ideal)")),
+            other => Err(format!(
+                "unknown propulsion model `{other}` (expected ideal)"
+            )),
         }
     }
 }
