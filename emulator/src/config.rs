@@ -411,3 +411,15 @@ mod tests {
         assert_eq!(e.field, "propulsion.isp_s");
     }
 }
+
+#[cfg(test)]
+mod file_tests {
+    use super::*;
+
+    #[test]
+    fn committed_scenario_file_equals_the_defaults() {
+        let text = include_str!("../config/scenario.toml");
+        let from_file: ScenarioConfig = toml::from_str(text).expect("config/scenario.toml parses");
+        assert_eq!(from_file, ScenarioConfig::default());
+    }
+}

@@ -71,7 +71,7 @@ pub struct RunArgs {
     /// Seeded navigation noise on the telemetry.
     #[arg(long, value_enum, default_value = "on")]
     pub nav_noise: OnOff,
-    /// Scenario TOML overriding any default (see docs/scenario.md).
+    /// Scenario TOML overriding any default (template: emulator/config/scenario.toml).
     #[arg(long)]
     pub scenario: Option<PathBuf>,
     /// Write the JSON report here.
