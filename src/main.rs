@@ -50,7 +50,16 @@ struct ExportArgs {
     csv: PathBuf,
 }
 
-fn main() -> anyhow::Result<()> {
+/// Errors print as one chain of causes (no backtrace, whatever RUST_BACKTRACE says)
+/// and exit with status 1.
+fn main() {
+    if let Err(e) = real_main() {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn real_main() -> anyhow::Result<()> {
     // `cargo run --release` with no arguments: the default scenario, lockstep, spawned stub.
     let cli = if std::env::args_os().len() <= 1 {
         Cli::parse_from(["oils", "run"])

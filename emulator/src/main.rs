@@ -17,7 +17,16 @@ struct Cli {
     args: RunArgs,
 }
 
-fn main() -> anyhow::Result<()> {
+/// Errors print as one chain of causes (no backtrace, whatever RUST_BACKTRACE says)
+/// and exit with status 1.
+fn main() {
+    if let Err(e) = real_main() {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn real_main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
     let report = run_session(&cli.args, &stop, &mut |run_id, _wait| {

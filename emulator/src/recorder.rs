@@ -77,7 +77,7 @@ impl Record {
 #[derive(Debug, Error)]
 pub enum RecorderError {
     /// The file could not be created, written or read.
-    #[error("log {path}: {source}")]
+    #[error("log {path}")]
     Io {
         /// The file.
         path: PathBuf,

@@ -123,7 +123,7 @@ impl RunReport {
 #[derive(Debug, thiserror::Error)]
 pub enum RunFailed {
     /// The report could not be written.
-    #[error("writing report {path}: {source}")]
+    #[error("writing report {path}")]
     ReportFile {
         /// The file.
         path: String,
