@@ -13,7 +13,7 @@ use oils_emulator::propulsion::{build, PropulsionKind};
 use oils_emulator::recorder::Recorder;
 use oils_emulator::scheduler::{run, MissPolicy, Mode, Outcome, SchedulerConfig};
 use oils_emulator::timing::TimingThresholds;
-use oils_onboard_stub::gnc::ReferenceGnc;
+use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
 use oils_onboard_stub::runner::serve;
 use oils_shared::link::{create_node, EmulatorLink, StubLink, WaitStrategy};
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -58,7 +58,7 @@ fn allocations_during_run(run_id: u64, duration_s: f64, wait: WaitStrategy) -> (
         let stop = AtomicBool::new(false);
         let node = create_node("no-alloc-stub").unwrap();
         let link = StubLink::open(&node, run_id, None, 10_000, &stop).unwrap();
-        let mut gnc = ReferenceGnc::default();
+        let mut gnc = ReferenceGnc::new(GncConfig::default()).unwrap();
         serve(&link, &mut gnc, 10_000, &stop).unwrap()
     });
     link.wait_for_peer(10_000, &stop).unwrap();

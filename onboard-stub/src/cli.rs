@@ -2,7 +2,7 @@
 //! it): which run to join and which flight software to fly.
 
 use crate::fsw::FlightSoftware;
-use crate::gnc::ReferenceGnc;
+use crate::gnc::{GncConfig, GncConfigError, ReferenceGnc};
 use crate::playback::ProfilePlayback;
 use crate::runner::{serve, StubError, StubSummary};
 use oils_shared::link::{create_node, LinkError, StubLink, WaitStrategy};
@@ -51,6 +51,9 @@ pub enum StubCliError {
     /// Profile unreadable.
     #[error(transparent)]
     Profile(#[from] ProfileError),
+    /// GNC configuration invalid.
+    #[error(transparent)]
+    Gnc(#[from] GncConfigError),
     /// Link failure.
     #[error(transparent)]
     Link(#[from] LinkError),
@@ -65,7 +68,7 @@ pub fn build_fsw(
     profile: Option<&PathBuf>,
 ) -> Result<Box<dyn FlightSoftware>, StubCliError> {
     match kind {
-        FswKind::Gnc => Ok(Box::new(ReferenceGnc::default())),
+        FswKind::Gnc => Ok(Box::new(ReferenceGnc::new(GncConfig::default())?)),
         FswKind::Playback => {
             let path = profile.ok_or_else(|| {
                 StubCliError::Argument("--fsw playback needs --profile CSV".into())

@@ -1,6 +1,7 @@
-//! The onboard-computer stub of the oils bench: flight software behind the
-//! [`fsw::FlightSoftware`] trait (the reference GNC, profile playback, or yours), and the
-//! loop that serves it over the iceoryx2 link.
+//! The onboard-computer side of the oils bench: the [`fsw::FlightSoftware`] trait, the
+//! reference descent GNC ([`gnc::ReferenceGnc`]), open-loop profile playback
+//! ([`playback::ProfilePlayback`]), and the loop that serves them over the iceoryx2 link
+//! ([`runner`], [`cli`]).
 #![warn(missing_docs)]
 
 pub mod cli;

@@ -1,17 +1,464 @@
-//! TEMPORARY placeholder until the reference GNC branch merges.
+//! The reference descent GNC: navigation filter, guidance, attitude control, thrust
+//! allocation and the thrust loop as plain structs; [`ReferenceGnc`] only wires them.
+//!
+//! The onboard software never reads the emulator's configuration: it flies on its own
+//! [`GncConfig`], whose defaults match `shared/reference/lander-and-propulsion.md`.
+//! See `docs/gnc.md` for the phases, laws, gains and the landing-site choice.
+
+pub mod allocation;
+pub mod attitude;
+pub mod guidance;
+pub mod navigation;
+pub mod thrust_loop;
 
 use crate::fsw::FlightSoftware;
-use oils_shared::{Command, Telemetry};
+use allocation::{EngineSet, ThrustAllocator};
+use attitude::AttitudeController;
+use guidance::{Guidance, Phase};
+use nalgebra::Vector3;
+use navigation::NavFilter;
+use oils_shared::{Command, Telemetry, ENGINE_COUNT};
+use thrust_loop::ThrustLoop;
 
-/// Placeholder.
-#[derive(Default)]
-pub struct ReferenceGnc;
+/// Everything the onboard software assumes about the vehicle, the Moon and its own
+/// gains. Plain numbers with defaults; `validate` before use.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GncConfig {
+    /// Moon gravitational parameter, m^3/s^2.
+    pub moon_mu_m3_s2: f64,
+    /// Main engine positions relative to the centre of mass, body axes, metres.
+    pub engine_positions_body_m: [[f64; 3]; ENGINE_COUNT],
+    /// Rated thrust per engine, newtons.
+    pub max_thrust_n: f64,
+    /// Throttle floor as a fraction of rated thrust.
+    pub throttle_min_frac: f64,
+    /// Attitude-thruster torque limit per axis, N m.
+    pub rcs_max_torque_nm: [f64; 3],
+    /// Dry mass, kilograms (for the inertia estimate).
+    pub dry_mass_kg: f64,
+    /// Propellant at descent start, kilograms (for the inertia estimate).
+    pub propellant_kg: f64,
+    /// Principal inertia with full tanks, kg m^2.
+    pub inertia_wet_kg_m2: [f64; 3],
+    /// Principal inertia with empty tanks, kg m^2.
+    pub inertia_dry_kg_m2: [f64; 3],
+
+    /// Navigation filter gain on position (per step).
+    pub nav_gain_position: f64,
+    /// Navigation filter gain on velocity (per step).
+    pub nav_gain_velocity: f64,
+    /// Navigation filter gain on the altimeter (per step).
+    pub nav_gain_altitude: f64,
+
+    /// Rough braking throttle (leaves headroom for differential-throttle torque).
+    pub rough_throttle_frac: f64,
+    /// Rough braking ends at this horizontal speed, m/s (sourced: ~358 m/s).
+    pub rough_end_speed_m_s: f64,
+    /// Altitude the rough-braking profile reaches at its end, metres (sourced: 7.42 km).
+    pub rough_end_altitude_m: f64,
+    /// Rough braking also ends below this altitude (safety), metres.
+    pub rough_floor_altitude_m: f64,
+    /// Vertical-speed gain of the rough-braking altitude channel, 1/s.
+    pub rough_gain_vertical_speed_1_s: f64,
+    /// Altitude gain of the rough-braking altitude channel, 1/s^2.
+    pub rough_gain_altitude_1_s2: f64,
+    /// Largest upward share of the thrust acceleration in rough braking.
+    pub rough_max_up_frac: f64,
+    /// Largest downward share of the thrust acceleration in rough braking.
+    pub rough_max_down_frac: f64,
+    /// Attitude hold duration, seconds (sourced: ~10 s).
+    pub attitude_hold_s: f64,
+
+    /// Fine braking brings the vehicle to rest this high above the site, metres.
+    pub fine_target_altitude_m: f64,
+    /// Vertical speed at the fine-braking target, m/s (negative: descending).
+    pub fine_target_vertical_speed_m_s: f64,
+    /// Fine braking may not plan more than this share of the maximum acceleration.
+    pub fine_accel_fraction: f64,
+    /// Fine braking must plan at least this multiple of the throttle-floor acceleration.
+    pub fine_min_accel_margin: f64,
+    /// Shortest fine-braking time-to-go considered, seconds.
+    pub fine_min_tgo_s: f64,
+    /// Longest fine-braking time-to-go considered, seconds.
+    pub fine_max_tgo_s: f64,
+    /// Hold the last E-guidance command below this time-to-go, seconds.
+    pub fine_hold_tgo_s: f64,
+    /// Start fine braking (rather than terminal descent) only this far above its target, m.
+    pub fine_min_drop_m: f64,
+
+    /// Terminal descent deceleration of the vertical-speed profile, m/s^2.
+    pub terminal_decel_m_s2: f64,
+    /// Fastest terminal descent, m/s.
+    pub terminal_max_speed_m_s: f64,
+    /// Vertical-speed loop gain, 1/s.
+    pub terminal_gain_vertical_speed_1_s: f64,
+    /// Vertical-speed loop integral gain, 1/s^2.
+    pub terminal_gain_vertical_integral_1_s2: f64,
+    /// Vertical-speed integral limit, m/s^2.
+    pub terminal_integral_limit_m_s2: f64,
+    /// Horizontal velocity nulling gain, 1/s.
+    pub terminal_gain_horizontal_speed_1_s: f64,
+    /// Horizontal pull towards the site, 1/s^2 (terminal descent and hover only).
+    pub terminal_gain_position_1_s2: f64,
+    /// Site offset the pull acts on at most, metres.
+    pub terminal_max_position_error_m: f64,
+    /// Largest thrust tilt from the vertical in terminal descent, degrees.
+    pub terminal_max_tilt_deg: f64,
+    /// Hover altitude, metres.
+    pub hover_altitude_m: f64,
+    /// Hover starts within this of the hover altitude, metres.
+    pub hover_capture_m: f64,
+    /// Hover duration, seconds (0: no hover).
+    pub hover_s: f64,
+    /// Hover altitude gain, 1/s.
+    pub hover_gain_altitude_1_s: f64,
+    /// Largest vertical speed while hovering, m/s.
+    pub hover_max_speed_m_s: f64,
+    /// Final descent deceleration of the vertical-speed profile, m/s^2.
+    pub final_decel_m_s2: f64,
+    /// Below this altitude the final descent flies at touchdown speed, metres.
+    pub final_altitude_m: f64,
+    /// Fastest final descent, m/s.
+    pub final_max_speed_m_s: f64,
+    /// Descent speed at contact, m/s.
+    pub touchdown_speed_m_s: f64,
+    /// Below this altitude the tilt limit tightens, metres.
+    pub final_upright_altitude_m: f64,
+    /// Tilt limit near the ground, degrees.
+    pub final_max_tilt_deg: f64,
+
+    /// Fly the diagonal pair from hover on, if it can hold the vehicle with this margin.
+    pub two_engine_enabled: bool,
+    /// The diagonal pair (engine indices).
+    pub two_engine_pair: [usize; 2],
+    /// Thrust margin the pair needs over the weight at the surface (0.12: 12 %).
+    pub two_engine_margin: f64,
+    /// Back to four engines after the pair saturates for this long, seconds.
+    pub two_engine_saturation_s: f64,
+
+    /// Attitude loop natural frequency, rad/s.
+    pub attitude_natural_freq_rad_s: f64,
+    /// Attitude loop damping ratio.
+    pub attitude_damping: f64,
+    /// Largest commanded slew rate, rad/s.
+    pub attitude_max_rate_rad_s: f64,
+
+    /// Engine lag the thrust loop assumes, seconds.
+    pub thrust_lag_model_s: f64,
+    /// Thrust efficiency filter time constant, seconds.
+    pub thrust_efficiency_filter_s: f64,
+    /// Lowest thrust efficiency believed.
+    pub thrust_efficiency_min: f64,
+    /// Highest thrust efficiency believed.
+    pub thrust_efficiency_max: f64,
+}
+
+impl Default for GncConfig {
+    fn default() -> Self {
+        Self {
+            moon_mu_m3_s2: 4.9028e12,
+            engine_positions_body_m: [
+                [0.6, 0.6, -0.8],
+                [-0.6, 0.6, -0.8],
+                [-0.6, -0.6, -0.8],
+                [0.6, -0.6, -0.8],
+            ],
+            max_thrust_n: 800.0,
+            throttle_min_frac: 0.4,
+            rcs_max_torque_nm: [116.0; 3],
+            dry_mass_kg: 750.0,
+            propellant_kg: 1000.0,
+            inertia_wet_kg_m2: [1200.0, 1200.0, 1100.0],
+            inertia_dry_kg_m2: [700.0, 700.0, 600.0],
+
+            nav_gain_position: 0.01,
+            nav_gain_velocity: 0.02,
+            nav_gain_altitude: 0.05,
+
+            rough_throttle_frac: 0.98,
+            rough_end_speed_m_s: 358.0,
+            rough_end_altitude_m: 7_400.0,
+            rough_floor_altitude_m: 5_000.0,
+            rough_gain_vertical_speed_1_s: 0.05,
+            rough_gain_altitude_1_s2: 0.0005,
+            rough_max_up_frac: 0.9,
+            rough_max_down_frac: 0.0,
+            attitude_hold_s: 10.0,
+
+            fine_target_altitude_m: 800.0,
+            fine_target_vertical_speed_m_s: -15.0,
+            fine_accel_fraction: 0.95,
+            fine_min_accel_margin: 1.1,
+            fine_min_tgo_s: 20.0,
+            fine_max_tgo_s: 900.0,
+            fine_hold_tgo_s: 2.0,
+            fine_min_drop_m: 300.0,
+
+            terminal_decel_m_s2: 0.4,
+            terminal_max_speed_m_s: 20.0,
+            terminal_gain_vertical_speed_1_s: 0.8,
+            terminal_gain_vertical_integral_1_s2: 0.1,
+            terminal_integral_limit_m_s2: 0.3,
+            terminal_gain_horizontal_speed_1_s: 0.3,
+            terminal_gain_position_1_s2: 0.01,
+            terminal_max_position_error_m: 30.0,
+            terminal_max_tilt_deg: 15.0,
+            hover_altitude_m: 100.0,
+            hover_capture_m: 0.5,
+            hover_s: 10.0,
+            hover_gain_altitude_1_s: 0.3,
+            hover_max_speed_m_s: 2.0,
+            final_decel_m_s2: 0.08,
+            final_altitude_m: 5.0,
+            final_max_speed_m_s: 5.0,
+            touchdown_speed_m_s: 1.0,
+            final_upright_altitude_m: 10.0,
+            final_max_tilt_deg: 4.0,
+
+            two_engine_enabled: true,
+            two_engine_pair: [0, 2],
+            two_engine_margin: 0.12,
+            two_engine_saturation_s: 1.0,
+
+            attitude_natural_freq_rad_s: 1.0,
+            attitude_damping: 0.8,
+            attitude_max_rate_rad_s: 0.1,
+
+            thrust_lag_model_s: 0.1,
+            thrust_efficiency_filter_s: 3.0,
+            thrust_efficiency_min: 0.8,
+            thrust_efficiency_max: 1.2,
+        }
+    }
+}
+
+/// A GNC configuration value is unusable.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("invalid GNC configuration: {field} ({why})")]
+pub struct GncConfigError {
+    /// The field.
+    pub field: &'static str,
+    /// What is expected.
+    pub why: &'static str,
+}
+
+impl GncConfig {
+    /// Checks the numbers the laws divide by or take roots of.
+    pub fn validate(&self) -> Result<(), GncConfigError> {
+        let err = |field, why| Err(GncConfigError { field, why });
+        let positive = [
+            (self.moon_mu_m3_s2, "moon_mu_m3_s2"),
+            (self.max_thrust_n, "max_thrust_n"),
+            (self.dry_mass_kg, "dry_mass_kg"),
+            (self.rough_end_speed_m_s, "rough_end_speed_m_s"),
+            (self.fine_min_tgo_s, "fine_min_tgo_s"),
+            (self.terminal_decel_m_s2, "terminal_decel_m_s2"),
+            (self.final_decel_m_s2, "final_decel_m_s2"),
+            (self.touchdown_speed_m_s, "touchdown_speed_m_s"),
+            (
+                self.attitude_natural_freq_rad_s,
+                "attitude_natural_freq_rad_s",
+            ),
+            (self.attitude_damping, "attitude_damping"),
+            (self.attitude_max_rate_rad_s, "attitude_max_rate_rad_s"),
+            (self.thrust_lag_model_s, "thrust_lag_model_s"),
+            (
+                self.thrust_efficiency_filter_s,
+                "thrust_efficiency_filter_s",
+            ),
+        ];
+        for (v, name) in positive {
+            if !(v.is_finite() && v > 0.0) {
+                return err(name, "finite and > 0");
+            }
+        }
+        if !(0.0..1.0).contains(&self.throttle_min_frac) {
+            return err("throttle_min_frac", "in [0, 1)");
+        }
+        for (v, name) in [
+            (self.nav_gain_position, "nav_gain_position"),
+            (self.nav_gain_velocity, "nav_gain_velocity"),
+            (self.nav_gain_altitude, "nav_gain_altitude"),
+            (self.rough_throttle_frac, "rough_throttle_frac"),
+            (self.fine_accel_fraction, "fine_accel_fraction"),
+        ] {
+            if !(v > 0.0 && v <= 1.0) {
+                return err(name, "in (0, 1]");
+            }
+        }
+        if self.fine_max_tgo_s < self.fine_min_tgo_s {
+            return err("fine_max_tgo_s", ">= fine_min_tgo_s");
+        }
+        if self.two_engine_pair.iter().any(|&i| i >= ENGINE_COUNT)
+            || self.two_engine_pair[0] == self.two_engine_pair[1]
+        {
+            return err("two_engine_pair", "two different engine indices < 4");
+        }
+        Ok(())
+    }
+
+    /// Principal inertia at a vehicle mass (linear in the propellant fraction).
+    pub fn inertia_kg_m2(&self, mass_kg: f64) -> Vector3<f64> {
+        let frac = if self.propellant_kg > 0.0 {
+            ((mass_kg - self.dry_mass_kg) / self.propellant_kg).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let wet = Vector3::from(self.inertia_wet_kg_m2);
+        let dry = Vector3::from(self.inertia_dry_kg_m2);
+        dry + (wet - dry) * frac
+    }
+}
+
+/// The reference GNC as flight software.
+#[derive(Debug, Clone)]
+pub struct ReferenceGnc {
+    cfg: GncConfig,
+    nav: NavFilter,
+    guidance: Guidance,
+    attitude: AttitudeController,
+    allocator: ThrustAllocator,
+    thrust_loop: ThrustLoop,
+    engine_set: EngineSet,
+    /// Four engines forced back after the pair saturated (latched).
+    pair_abandoned: bool,
+    pair_saturated_s: f64,
+    last_cmd_total_n: f64,
+    last_t_s: f64,
+}
+
+impl ReferenceGnc {
+    /// Builds the GNC; allocation happens here, never in `step`.
+    pub fn new(cfg: GncConfig) -> Result<Self, GncConfigError> {
+        cfg.validate()?;
+        let allocator = ThrustAllocator::new(&cfg).ok_or(GncConfigError {
+            field: "engine_positions_body_m",
+            why: "engines must be able to produce x/y torque",
+        })?;
+        Ok(Self {
+            nav: NavFilter::new(&cfg),
+            guidance: Guidance::new(&cfg),
+            attitude: AttitudeController::new(&cfg),
+            thrust_loop: ThrustLoop::new(&cfg),
+            allocator,
+            engine_set: EngineSet::Four,
+            pair_abandoned: false,
+            pair_saturated_s: 0.0,
+            last_cmd_total_n: 0.0,
+            last_t_s: 0.0,
+            cfg,
+        })
+    }
+
+    /// Current descent phase.
+    pub fn phase(&self) -> Phase {
+        self.guidance.phase()
+    }
+
+    /// Engines in use.
+    pub fn engine_set(&self) -> EngineSet {
+        self.engine_set
+    }
+
+    /// The landing site, once chosen.
+    pub fn site(&self) -> Option<guidance::LandingSite> {
+        self.guidance.site()
+    }
+
+    /// Thrust efficiency the thrust loop has learned.
+    pub fn thrust_efficiency(&self) -> f64 {
+        self.thrust_loop.efficiency()
+    }
+
+    /// Chooses the engine set: the pair from hover on, once both the weight and the
+    /// current demand fit under its maximum with margin; back to four (for good) if the
+    /// pair runs out of thrust.
+    fn manage_engines(&mut self, mass_kg: f64, gravity_m_s2: f64, wanted_n: f64, dt_s: f64) {
+        let phase = self.guidance.phase();
+        let late = matches!(phase, Phase::Hover | Phase::FinalDescent);
+        match self.engine_set {
+            EngineSet::Four => {
+                let pair_max = self.allocator.max_total_n(EngineSet::DiagonalPair)
+                    * self.thrust_loop.efficiency();
+                let weight = mass_kg * gravity_m_s2;
+                let margin = 1.0 + self.cfg.two_engine_margin;
+                if self.cfg.two_engine_enabled
+                    && late
+                    && !self.pair_abandoned
+                    && pair_max >= weight * margin
+                    && wanted_n * margin <= pair_max
+                {
+                    self.engine_set = EngineSet::DiagonalPair;
+                    self.pair_saturated_s = 0.0;
+                }
+            }
+            EngineSet::DiagonalPair => {
+                let max = self.allocator.max_total_n(EngineSet::DiagonalPair);
+                if wanted_n > max {
+                    self.pair_saturated_s += dt_s;
+                } else {
+                    self.pair_saturated_s = 0.0;
+                }
+                if self.pair_saturated_s > self.cfg.two_engine_saturation_s {
+                    self.engine_set = EngineSet::Four;
+                    self.pair_abandoned = true;
+                }
+            }
+        }
+    }
+}
 
 impl FlightSoftware for ReferenceGnc {
     fn name(&self) -> &'static str {
         "gnc"
     }
-    fn step(&mut self, _tlm: &Telemetry) -> Command {
-        Command::default()
+
+    fn step(&mut self, tlm: &Telemetry) -> Command {
+        let nav = self.nav.update(tlm);
+        let dt_s = (nav.t_s - self.last_t_s).max(0.0);
+        self.last_t_s = nav.t_s;
+        let mass_kg = if nav.mass_kg > 0.0 {
+            nav.mass_kg
+        } else {
+            self.cfg.dry_mass_kg + self.cfg.propellant_kg
+        };
+        self.thrust_loop.update(
+            nav.t_s,
+            nav.specific_force_body_m_s2.z * mass_kg,
+            self.last_cmd_total_n,
+        );
+        let eta = self.thrust_loop.efficiency();
+        let set = self.engine_set;
+        let max_accel = self.allocator.max_total_n(set) * eta / mass_kg;
+        let min_accel = self.allocator.min_total_n(set) * eta / mass_kg;
+        let guid = self.guidance.update(&nav, max_accel, min_accel);
+
+        let accel = guid.accel_mci_m_s2;
+        let accel_norm = accel.norm();
+        let dir = if accel_norm > 1e-9 {
+            accel / accel_norm
+        } else {
+            nav.up_mci
+        };
+        // Thrust along the axis the vehicle actually points: the projection keeps the
+        // vertical channel right while the attitude loop catches up.
+        let wanted_n = match guid.throttle_frac {
+            Some(frac) => frac * self.allocator.max_total_n(set),
+            None => (accel.dot(&nav.thrust_axis_mci()) * mass_kg / eta).max(0.0),
+        };
+        self.manage_engines(mass_kg, nav.gravity_m_s2, wanted_n, dt_s);
+        let set = self.engine_set;
+
+        let inertia = self.cfg.inertia_kg_m2(mass_kg);
+        let torque = self.attitude.torque_body_nm(&nav, &dir, &inertia);
+        let alloc = self.allocator.allocate(set, wanted_n, torque);
+        self.last_cmd_total_n = alloc.thrust_cmd_n.iter().sum();
+
+        Command {
+            thrust_cmd_n: alloc.thrust_cmd_n,
+            engine_on: alloc.on.map(u32::from),
+            torque_cmd_body_nm: alloc.rcs_torque_body_nm.into(),
+            ..Default::default()
+        }
     }
 }
