@@ -361,9 +361,11 @@ mod tests {
 
     #[test]
     fn bytes_round_trip() {
-        let mut t = Telemetry::default();
-        t.header = PacketHeader::new(42, 7, 70_000_000);
-        t.altitude_m = 123.5;
+        let t = Telemetry {
+            header: PacketHeader::new(42, 7, 70_000_000),
+            altitude_m: 123.5,
+            ..Default::default()
+        };
         let back = Telemetry::from_bytes(t.as_bytes()).unwrap();
         assert_eq!(back, t);
         assert!(Telemetry::from_bytes(&[0u8; 3]).is_none());
