@@ -181,6 +181,10 @@ impl Abort {
     }
 }
 
+/// Called after each integrated step with the step index; a seam for tests and tools
+/// (the allocation proof samples its counter here). Must not allocate or block.
+pub type StepObserver<'a> = &'a mut dyn FnMut(u64);
+
 /// Runs one bench run over an established link. The plant is built, the stub connected.
 pub fn run(
     cfg: &SchedulerConfig,
@@ -189,6 +193,19 @@ pub fn run(
     link: &EmulatorLink,
     recorder: Option<&Recorder>,
     stop: &AtomicBool,
+) -> Result<RunSummary, SchedulerError> {
+    run_observed(cfg, scenario, plant, link, recorder, stop, None)
+}
+
+/// [`run`], calling `observer` after every integrated step.
+pub fn run_observed(
+    cfg: &SchedulerConfig,
+    scenario: &ScenarioConfig,
+    plant: &mut Plant,
+    link: &EmulatorLink,
+    recorder: Option<&Recorder>,
+    stop: &AtomicBool,
+    mut observer: Option<StepObserver<'_>>,
 ) -> Result<RunSummary, SchedulerError> {
     cfg.validate()?;
     let max_thrust_n = scenario.propulsion.max_thrust_n;
@@ -326,6 +343,9 @@ pub fn run(
             })?;
         }
         status = plant.step(&applied, cfg.dt_ns);
+        if let Some(observe) = observer.as_mut() {
+            observe(k);
+        }
         steps += 1;
         k += 1;
     }
