@@ -21,10 +21,9 @@ fn read_csv(name: &str) -> Vec<Vec<f64>> {
 fn lasso_matches_sklearn() {
     let x = read_csv("x.csv");
     let y: Vec<f64> = read_csv("y.csv").into_iter().map(|r| r[0]).collect();
-    let expected: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(data_dir().join("expected.json")).unwrap(),
-    )
-    .unwrap();
+    let expected: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data_dir().join("expected.json")).unwrap())
+            .unwrap();
     let p = x[0].len();
     let flat: Vec<f64> = x.iter().flatten().copied().collect();
     let stats = GramStats::from_block(&flat, &y, p, 1);

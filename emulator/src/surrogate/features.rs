@@ -295,7 +295,10 @@ mod tests {
             t: 3,
         };
         spec.fill(&h, 2, &mut out);
-        assert_eq!(spec.names(), ["T_r[t]", "T_r[t-1]", "T_o[t-1]", "P[t-1]", "P[t-2]", "S_e[t]"]);
+        assert_eq!(
+            spec.names(),
+            ["T_r[t]", "T_r[t-1]", "T_o[t-1]", "P[t-1]", "P[t-2]", "S_e[t]"]
+        );
         assert_eq!(out, [30.0, 30.0, 3.0, 5.0, 5.0, 1.0]);
     }
 }

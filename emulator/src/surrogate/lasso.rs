@@ -499,10 +499,22 @@ mod tests {
         let alpha_max = c.xty.iter().fold(0.0f64, |m, v| m.max(v.abs())) / c.n;
         let mut w = vec![0.5; p];
         let mut h = vec![0.0; p];
-        lasso_gram(&prob, alpha_max * 1.001, &LassoSettings::default(), &mut w, &mut h);
+        lasso_gram(
+            &prob,
+            alpha_max * 1.001,
+            &LassoSettings::default(),
+            &mut w,
+            &mut h,
+        );
         assert_eq!(w, vec![0.0; p]);
         let mut w = vec![0.0; p];
-        lasso_gram(&prob, alpha_max * 0.5, &LassoSettings::default(), &mut w, &mut h);
+        lasso_gram(
+            &prob,
+            alpha_max * 0.5,
+            &LassoSettings::default(),
+            &mut w,
+            &mut h,
+        );
         assert!(w.iter().any(|v| *v != 0.0));
     }
 

@@ -127,7 +127,11 @@ mod tests {
             for degree in 1..=3 {
                 let lib = Library::new(dim, degree, &vec![false; dim]);
                 // Monomials of degree 1..=d in dim variables: C(dim+d, d) - 1.
-                assert_eq!(lib.len(), choose(dim + degree, degree) - 1, "{dim} {degree}");
+                assert_eq!(
+                    lib.len(),
+                    choose(dim + degree, degree) - 1,
+                    "{dim} {degree}"
+                );
             }
         }
     }

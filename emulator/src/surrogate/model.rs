@@ -1,0 +1,453 @@
+//! A fitted surrogate (what the model file holds) and its free-running predictor (what
+//! cross-validation scores and what the runtime steps). One predictor for both, so the
+//! model is chosen on exactly the behaviour it has in the loop.
+
+use super::features::{
+    FeatureSpec, History, InputVec, Layout, StateVec, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO,
+    STATE_NAMES, STATE_P,
+};
+use super::library::{eval_term, term_name, Term, MAX_DEGREE};
+use oils_shared::ENGINE_COUNT;
+use serde::{Deserialize, Serialize};
+
+/// What a row of coefficients predicts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Target {
+    /// The output itself, `y[t]` (the paper).
+    Absolute,
+    /// The change over the step, `y[t] - y[t-1]`: the penalty then shrinks towards
+    /// "nothing changes" rather than towards zero, and cumulative masses never appear as
+    /// a level the polynomial must reproduce.
+    Increment,
+}
+
+/// One non-zero coefficient.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ActiveTerm {
+    /// Readable name, e.g. `T_o1[t-2]*P[t-1]` (of scaled features).
+    pub name: String,
+    /// Indices into the scaled feature vector extended by a 1.0 slot (index = `dim`).
+    pub factors: Term,
+    /// Coefficient.
+    pub coef: f64,
+}
+
+/// The coefficients of one output.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OutputRow {
+    /// Output name (`T_o1` .. `m_o`; `T_o` for the shared per-engine row).
+    pub output: String,
+    /// Intercept.
+    pub intercept: f64,
+    /// Active terms only, in library order.
+    pub terms: Vec<ActiveTerm>,
+}
+
+/// A block of outputs predicted from one feature layout.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Submodel {
+    /// Feature layout and history length.
+    pub features: FeatureSpec,
+    /// Polynomial degree of the library.
+    pub degree: usize,
+    /// Number of terms in the full library (the active ones are in `rows`).
+    pub library_size: usize,
+    /// Absolute or increment targets.
+    pub target: Target,
+    /// State indices predicted. For [`Layout::PerEngine`] these are the four thrusts and
+    /// `rows` holds one shared row applied to each engine.
+    pub outputs: Vec<usize>,
+    /// Feature names, in order.
+    pub feature_names: Vec<String>,
+    /// Feature scaling: scaled = (raw - mean) / std.
+    pub feature_mean: Vec<f64>,
+    /// See `feature_mean`.
+    pub feature_std: Vec<f64>,
+    /// Training envelope of each raw feature (widened by a margin): values outside are
+    /// counted and clamped, never extrapolated.
+    pub envelope_lo: Vec<f64>,
+    /// See `envelope_lo`.
+    pub envelope_hi: Vec<f64>,
+    /// Coefficients.
+    pub rows: Vec<OutputRow>,
+}
+
+/// A whole surrogate: every state output predicted by exactly one submodel.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Model {
+    /// Sample time, nanoseconds.
+    pub sample_time_ns: u64,
+    /// State the runtime starts from (the reference model at construction).
+    pub initial_state: StateVec,
+    /// The submodels.
+    pub submodels: Vec<Submodel>,
+}
+
+impl Submodel {
+    /// Number of evaluations per step (four for a per-engine model).
+    pub fn evaluations(&self) -> usize {
+        match self.features.layout {
+            Layout::Mimo => 1,
+            Layout::PerEngine => ENGINE_COUNT,
+        }
+    }
+
+    /// Active terms over all rows.
+    pub fn active_terms(&self) -> usize {
+        self.rows.iter().map(|r| r.terms.len()).sum()
+    }
+}
+
+impl Model {
+    /// Checks the structure (every output covered once, sizes consistent, finite
+    /// numbers). Returns a description of the first problem.
+    pub fn check(&self) -> Result<(), String> {
+        let mut covered = [0usize; STATE_DIM];
+        for (i, s) in self.submodels.iter().enumerate() {
+            let dim = s.features.dim();
+            let ctx = |m: &str| format!("submodel {i}: {m}");
+            if s.features.history == 0 || s.features.history > 64 {
+                return Err(ctx("history length must be 1..=64"));
+            }
+            if !(1..=MAX_DEGREE).contains(&s.degree) {
+                return Err(ctx("degree must be 1..=3"));
+            }
+            for (name, v) in [
+                ("feature_names", s.feature_names.len()),
+                ("feature_mean", s.feature_mean.len()),
+                ("feature_std", s.feature_std.len()),
+                ("envelope_lo", s.envelope_lo.len()),
+                ("envelope_hi", s.envelope_hi.len()),
+            ] {
+                if v != dim {
+                    return Err(ctx(&format!("{name} has {v} entries, features need {dim}")));
+                }
+            }
+            let expect_rows = match s.features.layout {
+                Layout::Mimo => s.outputs.len(),
+                Layout::PerEngine => {
+                    if s.outputs != (0..ENGINE_COUNT).collect::<Vec<_>>() {
+                        return Err(ctx("a per-engine submodel predicts the four thrusts"));
+                    }
+                    1
+                }
+            };
+            if s.rows.len() != expect_rows {
+                return Err(ctx("one coefficient row per output expected"));
+            }
+            for &o in &s.outputs {
+                if o >= STATE_DIM {
+                    return Err(ctx("output index out of range"));
+                }
+                covered[o] += 1;
+            }
+            let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+            if !finite(&s.feature_mean)
+                || !finite(&s.envelope_lo)
+                || !finite(&s.envelope_hi)
+                || !s.feature_std.iter().all(|x| x.is_finite() && *x > 0.0)
+            {
+                return Err(ctx(
+                    "scaling or envelope has a non-finite or non-positive value",
+                ));
+            }
+            for r in &s.rows {
+                if !r.intercept.is_finite() {
+                    return Err(ctx(&format!("{}: intercept is not finite", r.output)));
+                }
+                for t in &r.terms {
+                    if !t.coef.is_finite() {
+                        return Err(ctx(&format!(
+                            "{}: coefficient of {} is not finite",
+                            r.output, t.name
+                        )));
+                    }
+                    if t.factors.iter().any(|&f| f as usize > dim) {
+                        return Err(ctx(&format!("{}: term {} out of range", r.output, t.name)));
+                    }
+                }
+            }
+        }
+        if covered.iter().any(|&c| c != 1) {
+            return Err(format!(
+                "every output must be predicted exactly once (counts {covered:?})"
+            ));
+        }
+        if !self.initial_state.iter().all(|x| x.is_finite()) {
+            return Err("initial state is not finite".into());
+        }
+        Ok(())
+    }
+
+    /// Total active terms.
+    pub fn active_terms(&self) -> usize {
+        self.submodels.iter().map(Submodel::active_terms).sum()
+    }
+
+    /// Size of the full libraries (rows x library), for sparsity.
+    pub fn total_terms(&self) -> usize {
+        self.submodels
+            .iter()
+            .map(|s| s.rows.len() * s.library_size)
+            .sum()
+    }
+
+    /// Sparsity: share of library coefficients that are zero, percent.
+    pub fn sparsity_pct(&self) -> f64 {
+        100.0 * (1.0 - self.active_terms() as f64 / self.total_terms().max(1) as f64)
+    }
+
+    /// The model printed by name: each output's intercept and its `top` largest terms
+    /// (by |coefficient|, all features being scaled to unit variance).
+    pub fn describe(&self, top: usize) -> String {
+        let mut s = String::new();
+        for sub in &self.submodels {
+            s.push_str(&format!(
+                "submodel {:?} n={} degree={} target={:?}: {} of {} terms active\n",
+                sub.features.layout,
+                sub.features.history,
+                sub.degree,
+                sub.target,
+                sub.active_terms(),
+                sub.rows.len() * sub.library_size
+            ));
+            for r in &sub.rows {
+                s.push_str(&format!(
+                    "  {} = {:+.6e}  ({} active)\n",
+                    r.output,
+                    r.intercept,
+                    r.terms.len()
+                ));
+                let mut idx: Vec<usize> = (0..r.terms.len()).collect();
+                idx.sort_by(|&a, &b| r.terms[b].coef.abs().total_cmp(&r.terms[a].coef.abs()));
+                for &i in idx.iter().take(top) {
+                    let t = &r.terms[i];
+                    s.push_str(&format!("      {:+.6e} * {}\n", t.coef, t.name));
+                }
+            }
+        }
+        s
+    }
+}
+
+/// Builds the named active terms of a coefficient vector over a library.
+pub fn active_terms_of(
+    terms: &[Term],
+    coefs: &[f64],
+    dim: usize,
+    names: &[String],
+) -> Vec<ActiveTerm> {
+    terms
+        .iter()
+        .zip(coefs)
+        .filter(|(_, c)| **c != 0.0)
+        .map(|(t, c)| ActiveTerm {
+            name: term_name(t, dim, names),
+            factors: *t,
+            coef: *c,
+        })
+        .collect()
+}
+
+/// A row compiled for evaluation: factor indices and coefficients in flat arrays.
+#[derive(Debug, Clone)]
+struct CompiledRow {
+    intercept: f64,
+    factors: Vec<Term>,
+    coefs: Vec<f64>,
+}
+
+#[derive(Debug, Clone)]
+struct CompiledSub {
+    spec: FeatureSpec,
+    evaluations: usize,
+    target: Target,
+    outputs: Vec<usize>,
+    mean: Vec<f64>,
+    inv_std: Vec<f64>,
+    lo: Vec<f64>,
+    hi: Vec<f64>,
+    /// Scaled features followed by the constant 1.0.
+    x: Vec<f64>,
+    rows: Vec<CompiledRow>,
+}
+
+/// Ring of past inputs and states, seen from the step being predicted (`head`).
+#[derive(Debug, Clone)]
+struct Ring {
+    inputs: Vec<InputVec>,
+    states: Vec<StateVec>,
+    head: usize,
+}
+
+impl Ring {
+    #[inline]
+    fn at(&self, lag: usize) -> usize {
+        let len = self.inputs.len();
+        (self.head + len - lag) % len
+    }
+}
+
+impl History for Ring {
+    #[inline]
+    fn input(&self, lag: usize) -> &InputVec {
+        &self.inputs[self.at(lag)]
+    }
+    #[inline]
+    fn state(&self, lag: usize) -> &StateVec {
+        &self.states[self.at(lag)]
+    }
+}
+
+/// Free-running evaluation of a [`Model`]: its own predictions become its history.
+/// Every buffer is sized in [`Predictor::new`]; [`Predictor::step`] does not allocate.
+#[derive(Debug, Clone)]
+pub struct Predictor {
+    subs: Vec<CompiledSub>,
+    ring: Ring,
+    out_of_envelope_steps: u64,
+}
+
+impl Predictor {
+    /// Compiles a model (assumed checked) and starts it from its initial state.
+    pub fn new(model: &Model) -> Self {
+        let subs: Vec<CompiledSub> = model
+            .submodels
+            .iter()
+            .map(|s| CompiledSub {
+                spec: s.features,
+                evaluations: s.evaluations(),
+                target: s.target,
+                outputs: s.outputs.clone(),
+                mean: s.feature_mean.clone(),
+                inv_std: s.feature_std.iter().map(|v| 1.0 / v).collect(),
+                lo: s.envelope_lo.clone(),
+                hi: s.envelope_hi.clone(),
+                x: vec![1.0; s.features.dim() + 1],
+                rows: s
+                    .rows
+                    .iter()
+                    .map(|r| CompiledRow {
+                        intercept: r.intercept,
+                        factors: r.terms.iter().map(|t| t.factors).collect(),
+                        coefs: r.terms.iter().map(|t| t.coef).collect(),
+                    })
+                    .collect(),
+            })
+            .collect();
+        let depth = subs
+            .iter()
+            .map(|s| s.spec.max_state_lag())
+            .max()
+            .unwrap_or(1)
+            + 1;
+        let mut p = Self {
+            subs,
+            ring: Ring {
+                inputs: vec![[0.0; INPUT_DIM]; depth],
+                states: vec![model.initial_state; depth],
+                head: 0,
+            },
+            out_of_envelope_steps: 0,
+        };
+        p.reset_to(&model.initial_state);
+        p
+    }
+
+    /// Restarts from a state at rest: engines off for all of the history, every past
+    /// state equal to `state` (how the reference model is started).
+    pub fn reset_to(&mut self, state: &StateVec) {
+        self.ring.inputs.fill([0.0; INPUT_DIM]);
+        self.ring.states.fill(*state);
+        self.ring.head = 0;
+        self.out_of_envelope_steps = 0;
+    }
+
+    /// Loads a true history (oldest first; the last state is the latest known) so that a
+    /// free run can start mid-trajectory, as cross-validation does on a test block.
+    pub fn seed_history<H: History>(&mut self, h: &H) {
+        let depth = self.ring.inputs.len();
+        // Slot `head` is the step about to be predicted; lags 1..depth-1 are the past.
+        self.ring.head = 0;
+        for lag in 1..depth {
+            let i = self.ring.at(lag);
+            self.ring.inputs[i] = *h.input(lag);
+            self.ring.states[i] = *h.state(lag);
+        }
+        // One slot back, so the next step() advances onto slot 0.
+        self.ring.head = depth - 1;
+    }
+
+    /// Number of steps on which some feature was outside the training envelope.
+    pub fn out_of_envelope_steps(&self) -> u64 {
+        self.out_of_envelope_steps
+    }
+
+    /// The latest state.
+    pub fn state(&self) -> &StateVec {
+        &self.ring.states[self.ring.head]
+    }
+
+    /// Predicts the state at the end of a step with `input` held, and makes it history.
+    #[inline]
+    pub fn step(&mut self, input: &InputVec) -> StateVec {
+        let depth = self.ring.inputs.len();
+        let prev = self.ring.states[self.ring.head];
+        self.ring.head = (self.ring.head + 1) % depth;
+        let head = self.ring.head;
+        self.ring.inputs[head] = *input;
+        // The slot still holds an old state; it is never read (state lags start at 1).
+        let mut next = prev;
+        let mut outside = false;
+        for sub in &mut self.subs {
+            let dim = sub.spec.dim();
+            for e in 0..sub.evaluations {
+                sub.spec.fill(&self.ring, e, &mut sub.x[..dim]);
+                for j in 0..dim {
+                    let raw = sub.x[j];
+                    let v = raw.clamp(sub.lo[j], sub.hi[j]);
+                    outside |= v != raw;
+                    sub.x[j] = (v - sub.mean[j]) * sub.inv_std[j];
+                }
+                for (r, row) in sub.rows.iter().enumerate() {
+                    let mut y = row.intercept;
+                    for (t, c) in row.factors.iter().zip(&row.coefs) {
+                        y += c * eval_term(t, &sub.x);
+                    }
+                    let o = if sub.evaluations > 1 {
+                        sub.outputs[e]
+                    } else {
+                        sub.outputs[r]
+                    };
+                    next[o] = match sub.target {
+                        Target::Absolute => y,
+                        Target::Increment => prev[o] + y,
+                    };
+                }
+            }
+        }
+        // Physical guards: thrust and pressure are not negative, ejected mass never
+        // falls. A non-finite prediction keeps the previous state (and counts).
+        for (o, v) in next.iter_mut().enumerate() {
+            if !v.is_finite() {
+                *v = prev[o];
+                outside = true;
+            }
+        }
+        for v in next.iter_mut().take(ENGINE_COUNT) {
+            *v = v.max(0.0);
+        }
+        next[STATE_P] = next[STATE_P].max(0.0);
+        next[STATE_MF] = next[STATE_MF].max(prev[STATE_MF]);
+        next[STATE_MO] = next[STATE_MO].max(prev[STATE_MO]);
+        self.out_of_envelope_steps += u64::from(outside);
+        self.ring.states[head] = next;
+        next
+    }
+}
+
+/// Name of a state output.
+pub fn output_name(o: usize) -> &'static str {
+    STATE_NAMES[o]
+}
