@@ -71,6 +71,9 @@ pub trait Propulsion: Send {
 pub enum PropulsionKind {
     /// First-order thrust lag; quick tests.
     Ideal,
+    /// The learned sparse surrogate (seed paper); the committed default model unless a
+    /// model file is given to [`surrogate_from_path`].
+    Surrogate,
 }
 
 impl PropulsionKind {
@@ -78,6 +81,7 @@ impl PropulsionKind {
     pub fn as_str(&self) -> &'static str {
         match self {
             PropulsionKind::Ideal => "ideal",
+            PropulsionKind::Surrogate => "surrogate",
         }
     }
 }
@@ -86,5 +90,24 @@ impl PropulsionKind {
 pub fn build(kind: PropulsionKind, cfg: &PropulsionConfig) -> Box<dyn Propulsion> {
     match kind {
         PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
+        PropulsionKind::Surrogate => Box::new(
+            // The default model is compiled in and checked by the test
+            // `committed_default_model_loads`, so this cannot fail on user input.
+            crate::surrogate::runtime::SurrogatePropulsion::default_model(cfg, None)
+                .unwrap_or_else(|e| panic!("committed default surrogate model: {e}")),
+        ),
     }
+}
+
+/// The surrogate loaded from a model file, for a bench stepping every `bench_step_ns`.
+/// Refuses (typed error) a file of the wrong version, a truncated or non-finite one, or
+/// one whose sample time does not divide the bench step.
+pub fn surrogate_from_path(
+    path: &std::path::Path,
+    cfg: &PropulsionConfig,
+    bench_step_ns: u64,
+) -> Result<Box<dyn Propulsion>, crate::surrogate::model_file::ModelFileError> {
+    Ok(Box::new(
+        crate::surrogate::runtime::SurrogatePropulsion::from_path(path, cfg, bench_step_ns)?,
+    ))
 }

@@ -121,7 +121,7 @@ impl ExcitationConfig {
             ("ramp_duration_s", self.ramp_duration_s),
             ("switch_hold_s", self.switch_hold_s),
         ] {
-            if !(v.is_finite() && v >= 0.0 && v < 1e6) {
+            if !(0.0..1e6).contains(&v) {
                 return Err(format!("excitation.{name} = {v}: need finite, >= 0"));
             }
         }

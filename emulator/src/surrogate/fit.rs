@@ -362,9 +362,23 @@ pub fn sse(s: &GramStats, c: usize, w: &[f64], b: f64, y_shift: f64) -> f64 {
 
 /// Assembles a model from fitted submodels.
 pub fn assemble(data: &Dataset, subs: Vec<Submodel>) -> Model {
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for i in &data.inputs {
+        for e in 0..ENGINE_COUNT {
+            if i[ENGINE_COUNT + e] > 0.5 {
+                lo = lo.min(i[e]);
+                hi = hi.max(i[e]);
+            }
+        }
+    }
+    if lo > hi {
+        (lo, hi) = (0.0, 0.0);
+    }
     Model {
         sample_time_ns: data.sample_time_ns,
         initial_state: data.initial,
+        on_command_range_n: [lo, hi],
         submodels: subs,
     }
 }

@@ -6,6 +6,9 @@
 //! it is tested on the `ideal` model and run on `hifi`. `docs/surrogate.md` documents the
 //! features, the causal reading of the paper, the scaling and the file format.
 
+// Index loops read like the equations in this numerical code.
+#![allow(clippy::needless_range_loop)]
+
 pub mod cv;
 pub mod dataset;
 pub mod excitation;

@@ -80,6 +80,9 @@ pub struct Model {
     pub sample_time_ns: u64,
     /// State the runtime starts from (the reference model at construction).
     pub initial_state: StateVec,
+    /// Range of thrust commands seen for engines that are on, newtons: the per-feature
+    /// envelope cannot tell "on at 50 N" from "off" (0 N), this can.
+    pub on_command_range_n: [f64; 2],
     /// The submodels.
     pub submodels: Vec<Submodel>,
 }
@@ -173,6 +176,10 @@ impl Model {
             return Err(format!(
                 "every output must be predicted exactly once (counts {covered:?})"
             ));
+        }
+        let [lo, hi] = self.on_command_range_n;
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err("on_command_range_n must be finite and ordered".into());
         }
         if !self.initial_state.iter().all(|x| x.is_finite()) {
             return Err("initial state is not finite".into());
@@ -304,6 +311,7 @@ impl History for Ring {
 /// Every buffer is sized in [`Predictor::new`]; [`Predictor::step`] does not allocate.
 #[derive(Debug, Clone)]
 pub struct Predictor {
+    on_command_range_n: [f64; 2],
     subs: Vec<CompiledSub>,
     ring: Ring,
     out_of_envelope_steps: u64,
@@ -343,6 +351,7 @@ impl Predictor {
             .unwrap_or(1)
             + 1;
         let mut p = Self {
+            on_command_range_n: model.on_command_range_n,
             subs,
             ring: Ring {
                 inputs: vec![[0.0; INPUT_DIM]; depth],
@@ -397,9 +406,18 @@ impl Predictor {
         self.ring.head = (self.ring.head + 1) % depth;
         let head = self.ring.head;
         self.ring.inputs[head] = *input;
+        let mut outside = false;
+        let [lo, hi] = self.on_command_range_n;
+        for e in 0..ENGINE_COUNT {
+            if self.ring.inputs[head][ENGINE_COUNT + e] > 0.5 {
+                let raw = self.ring.inputs[head][e];
+                let v = raw.clamp(lo, hi);
+                outside |= v != raw;
+                self.ring.inputs[head][e] = v;
+            }
+        }
         // The slot still holds an old state; it is never read (state lags start at 1).
         let mut next = prev;
-        let mut outside = false;
         for sub in &mut self.subs {
             let dim = sub.spec.dim();
             for e in 0..sub.evaluations {

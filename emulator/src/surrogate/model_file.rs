@@ -207,7 +207,7 @@ impl ModelFile {
     /// Model steps per bench step, or an error if the bench step is not a whole multiple.
     pub fn check_step(&self, bench_step_ns: u64) -> Result<u64, ModelFileError> {
         let sample_ns = self.model.sample_time_ns;
-        if bench_step_ns == 0 || bench_step_ns % sample_ns != 0 {
+        if bench_step_ns == 0 || !bench_step_ns.is_multiple_of(sample_ns) {
             return Err(ModelFileError::SampleTime {
                 sample_ns,
                 bench_ns: bench_step_ns,

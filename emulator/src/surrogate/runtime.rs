@@ -57,12 +57,14 @@ impl SurrogatePropulsion {
         Self::new(&ModelFile::load(path)?, cfg, bench_step_ns)
     }
 
-    /// The committed default model.
+    /// The committed default model; `bench_step_ns` defaults to its sample time.
     pub fn default_model(
         cfg: &PropulsionConfig,
-        bench_step_ns: u64,
+        bench_step_ns: Option<u64>,
     ) -> Result<Self, ModelFileError> {
-        Self::new(&ModelFile::parse(DEFAULT_MODEL_JSON)?, cfg, bench_step_ns)
+        let file = ModelFile::parse(DEFAULT_MODEL_JSON)?;
+        let step = bench_step_ns.unwrap_or(file.model.sample_time_ns);
+        Self::new(&file, cfg, step)
     }
 
     /// Steps on which some feature left the training envelope (and was clamped).
@@ -109,7 +111,10 @@ impl Propulsion for SurrogatePropulsion {
     }
 
     fn step(&mut self, cmd: &EngineCommand, dt_ns: u64) -> PropulsionOutput {
-        debug_assert!(dt_ns % self.sample_time_ns == 0, "checked at construction");
+        debug_assert!(
+            dt_ns.is_multiple_of(self.sample_time_ns),
+            "checked at construction"
+        );
         let input = input_of(cmd);
         let start = *self.predictor.state();
         let substeps = (dt_ns / self.sample_time_ns).max(1);
