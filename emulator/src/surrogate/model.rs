@@ -286,13 +286,15 @@ struct Ring {
     inputs: Vec<InputVec>,
     states: Vec<StateVec>,
     head: usize,
+    /// Length - 1; the length is a power of two so wrapping is a mask, not a division
+    /// (the step reads the ring some fifty times).
+    mask: usize,
 }
 
 impl Ring {
     #[inline]
     fn at(&self, lag: usize) -> usize {
-        let len = self.inputs.len();
-        (self.head + len - lag) % len
+        (self.head + self.inputs.len() - lag) & self.mask
     }
 }
 
@@ -349,7 +351,8 @@ impl Predictor {
             .map(|s| s.spec.max_state_lag())
             .max()
             .unwrap_or(1)
-            + 1;
+            .saturating_add(1)
+            .next_power_of_two();
         let mut p = Self {
             on_command_range_n: model.on_command_range_n,
             subs,
@@ -357,6 +360,7 @@ impl Predictor {
                 inputs: vec![[0.0; INPUT_DIM]; depth],
                 states: vec![model.initial_state; depth],
                 head: 0,
+                mask: depth - 1,
             },
             out_of_envelope_steps: 0,
         };
@@ -401,9 +405,8 @@ impl Predictor {
     /// Predicts the state at the end of a step with `input` held, and makes it history.
     #[inline]
     pub fn step(&mut self, input: &InputVec) -> StateVec {
-        let depth = self.ring.inputs.len();
         let prev = self.ring.states[self.ring.head];
-        self.ring.head = (self.ring.head + 1) % depth;
+        self.ring.head = (self.ring.head + 1) & self.ring.mask;
         let head = self.ring.head;
         self.ring.inputs[head] = *input;
         let mut outside = false;
