@@ -306,6 +306,7 @@ mod tests {
             steps: 0,
             ramps: 0,
             switches: 0,
+            cycles: 1,
             ..Default::default()
         };
         let ex = cfg.generate(10_000_000);

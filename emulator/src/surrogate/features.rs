@@ -152,6 +152,7 @@ impl FeatureSpec {
             Layout::Mimo => (0, ENGINE_COUNT),
             Layout::PerEngine => (engine, engine + 1),
         };
+        let out = &mut out[..self.dim()];
         let mut i = 0;
         let mut put = |x: f64| {
             out[i] = x;

@@ -6,7 +6,7 @@ use super::features::{
     FeatureSpec, History, InputVec, Layout, StateVec, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO,
     STATE_NAMES, STATE_P,
 };
-use super::library::{eval_term, term_name, Term, MAX_DEGREE};
+use super::library::{term_name, Term, MAX_DEGREE};
 use oils_shared::ENGINE_COUNT;
 use serde::{Deserialize, Serialize};
 
@@ -271,13 +271,106 @@ struct CompiledSub {
     evaluations: usize,
     target: Target,
     outputs: Vec<usize>,
-    mean: Vec<f64>,
-    inv_std: Vec<f64>,
-    lo: Vec<f64>,
-    hi: Vec<f64>,
+    /// Per feature: envelope and scaling side by side (one bounds check, one cache line).
+    scaling: Vec<FeatureScaling>,
     /// Scaled features followed by the constant 1.0.
     x: Vec<f64>,
+    /// Per-engine models: the four engines' scaled features side by side, so every term
+    /// is evaluated for the four engines at once (vectorised; same arithmetic per lane).
+    x4: Vec<[f64; ENGINE_COUNT]>,
     rows: Vec<CompiledRow>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct FeatureScaling {
+    lo: f64,
+    hi: f64,
+    mean: f64,
+    inv_std: f64,
+}
+
+impl FeatureScaling {
+    /// Clamps to the envelope and scales one raw value; reports whether it was outside.
+    /// (`max().min()` rather than `clamp`, which asserts lo <= hi on every call; the
+    /// model check guarantees it.)
+    #[inline(always)]
+    fn apply(&self, raw: f64) -> (f64, bool) {
+        let v = raw.max(self.lo).min(self.hi);
+        ((v - self.mean) * self.inv_std, v != raw)
+    }
+}
+
+impl CompiledSub {
+    fn eval_mimo(&mut self, ring: &Ring, prev: &StateVec, next: &mut StateVec) -> bool {
+        let dim = self.spec.dim();
+        let mut outside = false;
+        let mut x = std::mem::take(&mut self.x);
+        self.spec.fill(ring, 0, &mut x[..dim]);
+        for (x, sc) in x[..dim].iter_mut().zip(&self.scaling) {
+            let (v, out) = sc.apply(*x);
+            *x = v;
+            outside |= out;
+        }
+        for (row, &o) in self.rows.iter().zip(&self.outputs) {
+            let mut y = row.intercept;
+            for (t, c) in row.factors.iter().zip(&row.coefs) {
+                // SAFETY: `Predictor::new` clamps every factor to <= dim and `x` has
+                // dim + 1 entries, so the three reads are in bounds.
+                let term = unsafe {
+                    x.get_unchecked(t[0] as usize)
+                        * x.get_unchecked(t[1] as usize)
+                        * x.get_unchecked(t[2] as usize)
+                };
+                y += c * term;
+            }
+            next[o] = match self.target {
+                Target::Absolute => y,
+                Target::Increment => prev[o] + y,
+            };
+        }
+        self.x = x;
+        outside
+    }
+
+    fn eval_per_engine(&mut self, ring: &Ring, prev: &StateVec, next: &mut StateVec) -> bool {
+        let dim = self.spec.dim();
+        let mut outside = false;
+        let mut x = std::mem::take(&mut self.x);
+        let mut x4 = std::mem::take(&mut self.x4);
+        for e in 0..ENGINE_COUNT {
+            self.spec.fill(ring, e, &mut x[..dim]);
+            for ((x, x4), sc) in x[..dim].iter().zip(x4.iter_mut()).zip(&self.scaling) {
+                let (v, out) = sc.apply(*x);
+                x4[e] = v;
+                outside |= out;
+            }
+        }
+        let row = &self.rows[0];
+        let mut y = [row.intercept; ENGINE_COUNT];
+        for (t, c) in row.factors.iter().zip(&row.coefs) {
+            // SAFETY: as in `eval_mimo`; `x4` has dim + 1 entries.
+            let (a, b, d) = unsafe {
+                (
+                    x4.get_unchecked(t[0] as usize),
+                    x4.get_unchecked(t[1] as usize),
+                    x4.get_unchecked(t[2] as usize),
+                )
+            };
+            for e in 0..ENGINE_COUNT {
+                y[e] += c * (a[e] * b[e] * d[e]);
+            }
+        }
+        for e in 0..ENGINE_COUNT {
+            let o = self.outputs[e];
+            next[o] = match self.target {
+                Target::Absolute => y[e],
+                Target::Increment => prev[o] + y[e],
+            };
+        }
+        self.x = x;
+        self.x4 = x4;
+        outside
+    }
 }
 
 /// Ring of past inputs and states, seen from the step being predicted (`head`).
@@ -330,17 +423,28 @@ impl Predictor {
                 evaluations: s.evaluations(),
                 target: s.target,
                 outputs: s.outputs.clone(),
-                mean: s.feature_mean.clone(),
-                inv_std: s.feature_std.iter().map(|v| 1.0 / v).collect(),
-                lo: s.envelope_lo.clone(),
-                hi: s.envelope_hi.clone(),
+                scaling: (0..s.features.dim())
+                    .map(|j| FeatureScaling {
+                        lo: s.envelope_lo[j],
+                        hi: s.envelope_hi[j].max(s.envelope_lo[j]),
+                        mean: s.feature_mean[j],
+                        inv_std: 1.0 / s.feature_std[j],
+                    })
+                    .collect(),
                 x: vec![1.0; s.features.dim() + 1],
+                x4: vec![[1.0; ENGINE_COUNT]; s.features.dim() + 1],
                 rows: s
                     .rows
                     .iter()
                     .map(|r| CompiledRow {
                         intercept: r.intercept,
-                        factors: r.terms.iter().map(|t| t.factors).collect(),
+                        // A checked model never has a factor above dim; clamping
+                        // makes the unchecked reads in `step` sound for any model.
+                        factors: r
+                            .terms
+                            .iter()
+                            .map(|t| t.factors.map(|f| f.min(s.features.dim() as u16)))
+                            .collect(),
                         coefs: r.terms.iter().map(|t| t.coef).collect(),
                     })
                     .collect(),
@@ -422,30 +526,10 @@ impl Predictor {
         // The slot still holds an old state; it is never read (state lags start at 1).
         let mut next = prev;
         for sub in &mut self.subs {
-            let dim = sub.spec.dim();
-            for e in 0..sub.evaluations {
-                sub.spec.fill(&self.ring, e, &mut sub.x[..dim]);
-                for j in 0..dim {
-                    let raw = sub.x[j];
-                    let v = raw.clamp(sub.lo[j], sub.hi[j]);
-                    outside |= v != raw;
-                    sub.x[j] = (v - sub.mean[j]) * sub.inv_std[j];
-                }
-                for (r, row) in sub.rows.iter().enumerate() {
-                    let mut y = row.intercept;
-                    for (t, c) in row.factors.iter().zip(&row.coefs) {
-                        y += c * eval_term(t, &sub.x);
-                    }
-                    let o = if sub.evaluations > 1 {
-                        sub.outputs[e]
-                    } else {
-                        sub.outputs[r]
-                    };
-                    next[o] = match sub.target {
-                        Target::Absolute => y,
-                        Target::Increment => prev[o] + y,
-                    };
-                }
+            if sub.evaluations == ENGINE_COUNT {
+                outside |= sub.eval_per_engine(&self.ring, &prev, &mut next);
+            } else {
+                outside |= sub.eval_mimo(&self.ring, &prev, &mut next);
             }
         }
         // Physical guards: thrust and pressure are not negative, ejected mass never
