@@ -98,7 +98,8 @@ pub fn lasso_gram(
         let last = sweep + 1 == settings.max_iter;
         if w_max == 0.0 || d_w_max / w_max < settings.tol || last {
             gap = duality_gap(prob, l1, w, h);
-            if gap < tol {
+            // `<=`: a constant output has yty = 0 and a zero gap at w = 0.
+            if gap <= tol {
                 return LassoReport {
                     sweeps: sweep + 1,
                     gap,
@@ -342,7 +343,7 @@ pub struct Standardised {
     pub centred: Centred,
     /// Standard deviation of each term (0: constant term, never selected).
     pub x_std: Vec<f64>,
-    /// Standard deviation of each output (floored to avoid division by zero).
+    /// Standard deviation of each output (1 for a constant output).
     pub y_std: Vec<f64>,
     gram: Vec<f64>,
     xty: Vec<f64>,
@@ -366,7 +367,8 @@ impl Standardised {
         let y_std: Vec<f64> = centred
             .yty
             .iter()
-            .map(|v| (v / n).sqrt().max(1e-300))
+            // A constant output keeps scale 1: its problem is all zeros and converges at once.
+            .map(|v| if *v > 0.0 { (v / n).sqrt() } else { 1.0 })
             .collect();
         let inv = |s: f64| if s > 0.0 { 1.0 / s } else { 0.0 };
         let mut gram = vec![0.0; p * p];
