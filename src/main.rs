@@ -2,6 +2,8 @@
 //! process and spawns the onboard stub as a separate OS process (this same executable,
 //! `oils stub ...`), so `cargo run --release` needs no other binary built.
 
+mod cmd;
+
 use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
 use oils_emulator::session::{run_session, FswArg, RunArgs, SessionError};
@@ -27,6 +29,8 @@ enum Cmd {
     Run(Box<RunCmd>),
     /// Turn a run log into CSV.
     Export(ExportArgs),
+    /// Train the propulsion surrogate (seed paper): excitation, data, Lasso, CV, model file.
+    Train(cmd::train::TrainArgs),
     /// Run the onboard stub (what `oils run` spawns; also usable by hand).
     #[command(hide = true)]
     Stub(StubArgs),
@@ -69,6 +73,7 @@ fn real_main() -> anyhow::Result<()> {
     match cli.command {
         Cmd::Run(cmd) => run(*cmd),
         Cmd::Export(a) => export(&a),
+        Cmd::Train(a) => cmd::train::run(&a),
         Cmd::Stub(a) => {
             let stop =
                 oils_shared::signals::termination_flag().context("installing signal handlers")?;

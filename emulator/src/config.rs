@@ -91,7 +91,8 @@ impl Default for PropulsionConfig {
 }
 
 impl PropulsionConfig {
-    fn validate(&self) -> Result<(), ConfigError> {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
         check(
             self.max_thrust_n > 0.0,
             "propulsion.max_thrust_n",

@@ -17,4 +17,5 @@ pub mod report;
 pub mod sanitize;
 pub mod scheduler;
 pub mod session;
+pub mod surrogate;
 pub mod timing;

@@ -4,7 +4,7 @@
 
 use crate::config::{ConfigError, ScenarioConfig};
 use crate::plant::Plant;
-use crate::propulsion::PropulsionKind;
+use crate::propulsion::{build_for_bench, ModelFiles, PropulsionKind};
 use crate::recorder::{Recorder, RecorderError};
 use crate::report::RunReport;
 use crate::scheduler::{self, MissPolicy, Mode, SchedulerConfig, SchedulerError};
@@ -56,9 +56,12 @@ pub struct RunArgs {
     /// Longest simulated time, seconds; the run ends `completed` if still flying.
     #[arg(long, default_value_t = 2000.0)]
     pub duration: f64,
-    /// Propulsion model: ideal (first-order lag).
+    /// Propulsion model: ideal (first-order lag) or surrogate (the learned model).
     #[arg(long, default_value = "ideal")]
     pub propulsion: String,
+    /// Surrogate model file for `--propulsion surrogate` (default: the committed model).
+    #[arg(long)]
+    pub model: Option<PathBuf>,
     /// Flight software of the spawned stub.
     #[arg(long, value_enum, default_value = "gnc")]
     pub fsw: FswArg,
@@ -146,8 +149,8 @@ pub enum SessionError {
     #[error(transparent)]
     Scheduler(#[from] SchedulerError),
     /// Propulsion model could not be built.
-    #[error("propulsion: {0}")]
-    Propulsion(String),
+    #[error("propulsion")]
+    Propulsion(#[from] crate::propulsion::BuildError),
 }
 
 /// A fresh run id: process id and monotonic time mixed (naming only; never enters the
@@ -303,7 +306,10 @@ pub fn run_session(
     let sched = args.scheduler_config(run_id)?;
     let wait = args.wait_strategy()?;
     let kind = args.propulsion_kind()?;
-    let propulsion = crate::propulsion::build(kind, &scenario.propulsion);
+    let files = ModelFiles {
+        surrogate_model: args.model.clone(),
+    };
+    let propulsion = build_for_bench(kind, &scenario.propulsion, &files, sched.dt_ns)?;
     let mut plant = Plant::new(&scenario, propulsion, args.seed)?;
 
     let node = create_node("oils-emulator")?;

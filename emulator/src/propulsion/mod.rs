@@ -71,6 +71,9 @@ pub trait Propulsion: Send {
 pub enum PropulsionKind {
     /// First-order thrust lag; quick tests.
     Ideal,
+    /// The learned sparse surrogate (seed paper); the committed default model unless a
+    /// model file is given to [`surrogate_from_path`].
+    Surrogate,
 }
 
 impl PropulsionKind {
@@ -78,6 +81,7 @@ impl PropulsionKind {
     pub fn as_str(&self) -> &'static str {
         match self {
             PropulsionKind::Ideal => "ideal",
+            PropulsionKind::Surrogate => "surrogate",
         }
     }
 }
@@ -87,8 +91,9 @@ impl std::str::FromStr for PropulsionKind {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "ideal" => Ok(PropulsionKind::Ideal),
+            "surrogate" => Ok(PropulsionKind::Surrogate),
             other => Err(format!(
-                "unknown propulsion model `{other}` (expected ideal)"
+                "unknown propulsion model `{other}` (expected ideal or surrogate)"
             )),
         }
     }
@@ -98,5 +103,60 @@ impl std::str::FromStr for PropulsionKind {
 pub fn build(kind: PropulsionKind, cfg: &PropulsionConfig) -> Box<dyn Propulsion> {
     match kind {
         PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
+        PropulsionKind::Surrogate => Box::new(
+            // The default model is compiled in and checked by the test
+            // `committed_default_model_loads`, so this cannot fail on user input.
+            crate::surrogate::runtime::SurrogatePropulsion::default_model(cfg, None)
+                .unwrap_or_else(|e| panic!("committed default surrogate model: {e}")),
+        ),
     }
+}
+
+/// Files some models load, chosen on the command line.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ModelFiles {
+    /// Surrogate model file (default: the committed model, compiled in).
+    pub surrogate_model: Option<std::path::PathBuf>,
+}
+
+/// A propulsion model could not be built for the bench.
+#[derive(Debug, thiserror::Error)]
+pub enum BuildError {
+    /// The surrogate model file was refused.
+    #[error(transparent)]
+    Surrogate(#[from] crate::surrogate::model_file::ModelFileError),
+}
+
+/// Builds the model a bench run asked for, checked against the bench step.
+/// Allocation happens here, once, before tick 0.
+pub fn build_for_bench(
+    kind: PropulsionKind,
+    cfg: &PropulsionConfig,
+    files: &ModelFiles,
+    bench_step_ns: u64,
+) -> Result<Box<dyn Propulsion>, BuildError> {
+    use crate::surrogate::runtime::SurrogatePropulsion;
+    Ok(match kind {
+        PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
+        PropulsionKind::Surrogate => match &files.surrogate_model {
+            Some(path) => Box::new(SurrogatePropulsion::from_path(path, cfg, bench_step_ns)?),
+            None => Box::new(SurrogatePropulsion::default_model(
+                cfg,
+                Some(bench_step_ns),
+            )?),
+        },
+    })
+}
+
+/// The surrogate loaded from a model file, for a bench stepping every `bench_step_ns`.
+/// Refuses (typed error) a file of the wrong version, a truncated or non-finite one, or
+/// one whose sample time does not divide the bench step.
+pub fn surrogate_from_path(
+    path: &std::path::Path,
+    cfg: &PropulsionConfig,
+    bench_step_ns: u64,
+) -> Result<Box<dyn Propulsion>, crate::surrogate::model_file::ModelFileError> {
+    Ok(Box::new(
+        crate::surrogate::runtime::SurrogatePropulsion::from_path(path, cfg, bench_step_ns)?,
+    ))
 }

@@ -1,0 +1,364 @@
+//! Contiguous-block k-fold cross-validation over history length `n` and penalty `mu`,
+//! scored on free-run error.
+//!
+//! Folds are contiguous blocks of time, never shuffled rows: with lagged features a
+//! shuffled fold would hold the neighbours of its test rows in the training set and leak.
+//! For every (n, mu) we report one-step RMSE (train and test, from Gram sums) and the
+//! free-run RMSE on each test block, where the model starts from the true history at the
+//! block's start and then feeds its own predictions back, as in the loop.
+
+use super::dataset::Dataset;
+use super::features::STATE_DIM;
+use super::fit::{assemble, fit_path, sse, sub_specs, Prepared, Variant, VariantConfig};
+use super::lasso::{mu_grid, GramStats, LassoSettings};
+use super::model::Predictor;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Cross-validation grid and solver settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CvConfig {
+    /// Number of contiguous folds k.
+    pub folds: usize,
+    /// Smallest history length tried.
+    pub history_min: usize,
+    /// Largest history length tried.
+    pub history_max: usize,
+    /// Smallest penalty.
+    pub mu_min: f64,
+    /// Largest penalty.
+    pub mu_max: f64,
+    /// Log-spaced penalties between them.
+    pub mu_count: usize,
+    /// Lasso duality-gap tolerance (scikit-learn's `tol`).
+    pub tol: f64,
+    /// Lasso sweep limit.
+    pub max_iter: usize,
+}
+
+impl Default for CvConfig {
+    fn default() -> Self {
+        Self {
+            folds: 5,
+            history_min: 1,
+            history_max: 10,
+            mu_min: 1e-5,
+            mu_max: 1.0,
+            mu_count: 11,
+            tol: 1e-4,
+            max_iter: 2000,
+        }
+    }
+}
+
+impl CvConfig {
+    /// Checks the numbers.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.folds < 2 {
+            return Err("cv.folds must be >= 2".into());
+        }
+        if self.history_min == 0 || self.history_max < self.history_min || self.history_max > 32 {
+            return Err("cv: need 1 <= history_min <= history_max <= 32".into());
+        }
+        let ok = self.mu_min > 0.0
+            && self.mu_max >= self.mu_min
+            && self.mu_max.is_finite()
+            && self.mu_count >= 1;
+        if !ok {
+            return Err("cv: need 0 < mu_min <= mu_max and mu_count >= 1".into());
+        }
+        if !(self.tol > 0.0 && self.tol.is_finite()) || self.max_iter == 0 {
+            return Err("cv: need tol > 0 and max_iter >= 1".into());
+        }
+        Ok(())
+    }
+
+    /// The penalties, largest first.
+    pub fn mus(&self) -> Vec<f64> {
+        mu_grid(self.mu_min, self.mu_max, self.mu_count)
+    }
+
+    /// Solver settings.
+    pub fn lasso(&self) -> LassoSettings {
+        LassoSettings {
+            tol: self.tol,
+            max_iter: self.max_iter,
+        }
+    }
+}
+
+/// Cross-validated errors of one (n, mu), averaged over folds.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct GridPoint {
+    /// History length.
+    pub n: usize,
+    /// Penalty (scikit-learn's alpha on the standardised problem).
+    pub mu: f64,
+    /// One-step RMSE on the training folds, per output.
+    pub train_rmse: [f64; STATE_DIM],
+    /// One-step RMSE on the test fold, per output.
+    pub test_rmse: [f64; STATE_DIM],
+    /// Free-run RMSE on the test fold, per output.
+    pub free_rmse: [f64; STATE_DIM],
+    /// Share of zero coefficients, percent.
+    pub sparsity_pct: f64,
+    /// Selection score: mean over outputs of free-run RMSE / output standard deviation.
+    pub score: f64,
+    /// Lasso fits that hit the sweep limit.
+    pub unconverged: usize,
+}
+
+impl GridPoint {
+    /// Mean over the four engines of a per-output thrust RMSE.
+    pub fn thrust(v: &[f64; STATE_DIM]) -> f64 {
+        v[..4].iter().sum::<f64>() / 4.0
+    }
+}
+
+/// The cross-validation of one variant.
+#[derive(Debug, Clone)]
+pub struct CvResult {
+    /// Which variant.
+    pub variant: Variant,
+    /// Every grid point, by n then mu (largest first).
+    pub points: Vec<GridPoint>,
+    /// Index of the chosen point (lowest finite score).
+    pub best: usize,
+}
+
+impl CvResult {
+    /// The chosen point.
+    pub fn chosen(&self) -> &GridPoint {
+        &self.points[self.best]
+    }
+}
+
+/// Contiguous fold boundaries over `len` steps.
+pub fn fold_bounds(len: usize, folds: usize) -> Vec<(usize, usize)> {
+    (0..folds)
+        .map(|k| (k * len / folds, (k + 1) * len / folds))
+        .collect()
+}
+
+/// Standard deviation of each state output over the dataset (score normalisation).
+pub fn output_std(data: &Dataset) -> [f64; STATE_DIM] {
+    let n = data.len().max(1) as f64;
+    std::array::from_fn(|o| {
+        let m = data.states.iter().map(|s| s[o]).sum::<f64>() / n;
+        let v = data.states.iter().map(|s| (s[o] - m).powi(2)).sum::<f64>() / n;
+        v.sqrt().max(1e-12)
+    })
+}
+
+/// Runs the grid for one variant. `tick` is called once per (n, fold) done.
+pub fn cross_validate(
+    variant: Variant,
+    data: &Dataset,
+    cv: &CvConfig,
+    vcfg: &VariantConfig,
+    tick: &(dyn Fn() + Sync),
+) -> CvResult {
+    let mus = cv.mus();
+    let bounds = fold_bounds(data.len(), cv.folds);
+    let ostd = output_std(data);
+    let per_n: Vec<Vec<GridPoint>> = (cv.history_min..=cv.history_max)
+        .into_par_iter()
+        .map(|n| grid_for_n(variant, n, data, cv, vcfg, &mus, &bounds, &ostd, tick))
+        .collect();
+    let points: Vec<GridPoint> = per_n.into_iter().flatten().collect();
+    let best = (0..points.len())
+        .min_by(|&a, &b| points[a].score.total_cmp(&points[b].score))
+        .unwrap_or(0);
+    CvResult {
+        variant,
+        points,
+        best,
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn grid_for_n(
+    variant: Variant,
+    n: usize,
+    data: &Dataset,
+    cv: &CvConfig,
+    vcfg: &VariantConfig,
+    mus: &[f64],
+    bounds: &[(usize, usize)],
+    ostd: &[f64; STATE_DIM],
+    tick: &(dyn Fn() + Sync),
+) -> Vec<GridPoint> {
+    let preps: Vec<Prepared> = sub_specs(variant, n, vcfg)
+        .into_iter()
+        .map(|s| Prepared::new(s, data))
+        .collect();
+    // Block sums once; a training set is the total minus its test block.
+    let blocks: Vec<Vec<GramStats>> = preps
+        .iter()
+        .map(|prep| {
+            bounds
+                .iter()
+                .map(|&(a, b)| prep.stats(data, a, b))
+                .collect()
+        })
+        .collect();
+    let totals: Vec<GramStats> = blocks
+        .iter()
+        .zip(&preps)
+        .map(|(bl, prep)| {
+            let mut t = GramStats::zeros(prep.library.len(), prep.spec.target_columns());
+            for b in bl {
+                t.accumulate(b, 1.0);
+            }
+            t
+        })
+        .collect();
+    let m = mus.len();
+    let folds = bounds.len() as f64;
+    let mut acc = vec![Acc::default(); m];
+    for (k, &(a, b)) in bounds.iter().enumerate() {
+        let mut fold_fits = Vec::new();
+        for (s, prep) in preps.iter().enumerate() {
+            let mut train = totals[s].clone();
+            train.accumulate(&blocks[s][k], -1.0);
+            let path = fit_path(prep, &train, mus, &cv.lasso());
+            fold_fits.push((train, path));
+        }
+        for (i, acc) in acc.iter_mut().enumerate() {
+            let mut subs = Vec::new();
+            let mut active = 0usize;
+            let mut total = 0usize;
+            for (s, prep) in preps.iter().enumerate() {
+                let (train, path) = &fold_fits[s];
+                let coefs = &path.coefs[i];
+                acc.unconverged += path.unconverged[i];
+                for (c, (w, b0)) in coefs.iter().enumerate() {
+                    let tr = (sse(train, c, w, *b0, prep.y_shift[c]) / train.n).sqrt();
+                    let test = &blocks[s][k];
+                    let te = (sse(test, c, w, *b0, prep.y_shift[c]) / test.n).sqrt();
+                    let outs: Vec<usize> =
+                        if prep.spec.target_columns() == 1 && prep.spec.evaluations() > 1 {
+                            prep.spec.outputs.clone()
+                        } else {
+                            vec![prep.spec.outputs[c]]
+                        };
+                    for o in outs {
+                        acc.train[o] += tr / folds;
+                        acc.test[o] += te / folds;
+                    }
+                    active += w.iter().filter(|v| **v != 0.0).count();
+                    total += w.len();
+                }
+                subs.push(prep.submodel(coefs));
+            }
+            acc.sparsity += 100.0 * (1.0 - active as f64 / total.max(1) as f64) / folds;
+            let model = assemble(data, subs);
+            let free = free_run_rmse(&model, data, a, b);
+            for o in 0..STATE_DIM {
+                acc.free[o] += free[o] / folds;
+            }
+        }
+        tick();
+    }
+    acc.into_iter()
+        .zip(mus)
+        .map(|(a, &mu)| {
+            let score = (0..STATE_DIM).map(|o| a.free[o] / ostd[o]).sum::<f64>() / STATE_DIM as f64;
+            GridPoint {
+                n,
+                mu,
+                train_rmse: a.train,
+                test_rmse: a.test,
+                free_rmse: a.free,
+                sparsity_pct: a.sparsity,
+                score: if score.is_finite() {
+                    score
+                } else {
+                    f64::INFINITY
+                },
+                unconverged: a.unconverged,
+            }
+        })
+        .collect()
+}
+
+#[derive(Debug, Clone, Default)]
+struct Acc {
+    train: [f64; STATE_DIM],
+    test: [f64; STATE_DIM],
+    free: [f64; STATE_DIM],
+    sparsity: f64,
+    unconverged: usize,
+}
+
+/// Free-run RMSE per output over steps `a..b`: the model starts from the true history at
+/// `a` and then runs on its own predictions.
+pub fn free_run_rmse(
+    model: &super::model::Model,
+    data: &Dataset,
+    a: usize,
+    b: usize,
+) -> [f64; STATE_DIM] {
+    let mut pred = Predictor::new(model);
+    pred.seed_history(&data.history_at(a));
+    let mut se = [0.0; STATE_DIM];
+    for t in a..b {
+        let y = pred.step(&data.inputs[t]);
+        for o in 0..STATE_DIM {
+            se[o] += (y[o] - data.states[t][o]).powi(2);
+        }
+    }
+    se.map(|s| (s / (b - a).max(1) as f64).sqrt())
+}
+
+/// Fits the chosen (n, mu) on all the data.
+pub fn fit_final(
+    variant: Variant,
+    n: usize,
+    mu: f64,
+    data: &Dataset,
+    cv: &CvConfig,
+    vcfg: &VariantConfig,
+) -> super::model::Model {
+    // Walk the grid's path down to mu for the warm start, then mu itself.
+    let mut mus: Vec<f64> = cv.mus().into_iter().filter(|m| *m > mu).collect();
+    mus.push(mu);
+    let subs = sub_specs(variant, n, vcfg)
+        .into_iter()
+        .map(|s| {
+            let prep = Prepared::new(s, data);
+            let stats = prep.stats(data, 0, data.len());
+            let path = fit_path(&prep, &stats, &mus, &cv.lasso());
+            prep.submodel(path.coefs.last().map_or(&[][..], |c| &c[..]))
+        })
+        .collect();
+    assemble(data, subs)
+}
+
+/// Wall-clock time of the final fit's two parts for one variant at (n, mu): building the
+/// Gram sums from the data, and coordinate descent from zero at `mu` alone (what
+/// scikit-learn's `Lasso(alpha=mu, precompute=True).fit` does). For the timing report
+/// only; nothing in a model reads the clock.
+pub fn time_final_fit(
+    variant: Variant,
+    n: usize,
+    mu: f64,
+    data: &Dataset,
+    cv: &CvConfig,
+    vcfg: &VariantConfig,
+) -> (f64, f64) {
+    let mut gram_s = 0.0;
+    let mut fit_s = 0.0;
+    for spec in sub_specs(variant, n, vcfg) {
+        let t0 = std::time::Instant::now();
+        let prep = Prepared::new(spec, data);
+        let stats = prep.stats(data, 0, data.len());
+        gram_s += t0.elapsed().as_secs_f64();
+        let t1 = std::time::Instant::now();
+        let path = fit_path(&prep, &stats, &[mu], &cv.lasso());
+        fit_s += t1.elapsed().as_secs_f64();
+        std::hint::black_box(path);
+    }
+    (gram_s, fit_s)
+}

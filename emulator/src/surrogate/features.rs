@@ -1,0 +1,305 @@
+//! History features of the seed paper, Section V, built from a window of past inputs and
+//! states. One code path serves training (over a recorded trajectory) and the runtime
+//! (over a ring buffer), so the model sees in the loop exactly what it was fitted on.
+//!
+//! Causal reading (the paper is loose here; see `docs/surrogate.md`): the model predicts
+//! the state at the end of step `t` from the command held over step `t` and what is known
+//! at its start. So commands and switches appear at `t` and earlier, while every state
+//! variable (thrust, gas pressure, ejected masses, lambda) appears at `t-1` and earlier.
+//! The paper's "current" gas pressure `P` is therefore `P[t-1]` and its history `P_h` is
+//! `P[t-2] .. P[t-n-1]`, which keeps the dimension at the paper's `11n+10`.
+
+use oils_shared::ENGINE_COUNT;
+use serde::{Deserialize, Serialize};
+
+/// Inputs per step: four thrust commands (N), then four on/off switches (0 or 1).
+pub const INPUT_DIM: usize = 2 * ENGINE_COUNT;
+/// States per step: four thrusts (N), gas pressure (Pa), ejected fuel and oxidiser (kg).
+pub const STATE_DIM: usize = ENGINE_COUNT + 3;
+/// Index of the gas pressure in a state vector.
+pub const STATE_P: usize = ENGINE_COUNT;
+/// Index of the ejected fuel mass in a state vector.
+pub const STATE_MF: usize = ENGINE_COUNT + 1;
+/// Index of the ejected oxidiser mass in a state vector.
+pub const STATE_MO: usize = ENGINE_COUNT + 2;
+
+/// One step's inputs, see [`INPUT_DIM`].
+pub type InputVec = [f64; INPUT_DIM];
+/// One step's state, see [`STATE_DIM`].
+pub type StateVec = [f64; STATE_DIM];
+
+/// Names of the state entries, as used in term names and dataset columns.
+pub const STATE_NAMES: [&str; STATE_DIM] = ["T_o1", "T_o2", "T_o3", "T_o4", "P", "m_f", "m_o"];
+
+/// Ejected mass below which lambda = 1/(m_f+m_o) is held constant, kg: at the start
+/// nothing has been ejected and the paper's lambda would be infinite.
+pub const LAMBDA_MASS_FLOOR_KG: f64 = 1.0;
+
+/// The paper's lambda, guarded near zero ejected mass.
+pub fn lambda_of(ejected_fuel_kg: f64, ejected_ox_kg: f64) -> f64 {
+    1.0 / (ejected_fuel_kg + ejected_ox_kg).max(LAMBDA_MASS_FLOOR_KG)
+}
+
+/// How features are laid out.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Layout {
+    /// The paper's MIMO vector: all four engines in one feature vector of `11n+10`.
+    Mimo,
+    /// One engine's view: its own command, switch and thrust history plus the shared gas
+    /// pressure (and masses); one model with shared coefficients serves all four engines.
+    PerEngine,
+}
+
+/// Which features, for which history length.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FeatureSpec {
+    /// Layout of the vector.
+    pub layout: Layout,
+    /// History length `n` (>= 1).
+    pub history: usize,
+    /// Include the ejected-mass histories and lambda (the paper does).
+    pub mass_features: bool,
+}
+
+/// Past inputs and states as seen from step `t`.
+pub trait History {
+    /// Inputs of step `t - lag` (lag 0: the command held over the step being predicted).
+    fn input(&self, lag: usize) -> &InputVec;
+    /// State at the end of step `t - lag` (lag >= 1).
+    fn state(&self, lag: usize) -> &StateVec;
+}
+
+impl FeatureSpec {
+    /// Deepest state lag read (`n+1`, for the gas pressure history).
+    pub fn max_state_lag(&self) -> usize {
+        self.history + 1
+    }
+
+    /// Number of features.
+    pub fn dim(&self) -> usize {
+        let n = self.history;
+        let m = usize::from(self.mass_features);
+        match self.layout {
+            // T_r 4, T_r-h 4n, T_o-h 4n, P 1, P_h n, m_f-h n, m_o-h n, S_e 4, lambda 1.
+            Layout::Mimo => 4 + 4 * n + 4 * n + 1 + n + m * 2 * n + 4 + m,
+            // T_r 1, T_r-h n, T_o-h n, P 1, P_h n, m_f-h n, m_o-h n, S_e 1, lambda 1.
+            Layout::PerEngine => 1 + n + n + 1 + n + m * 2 * n + 1 + m,
+        }
+    }
+
+    /// Feature names in order, e.g. `T_r2[t-1]`, `P[t-1]`, `lambda[t-1]`.
+    pub fn names(&self) -> Vec<String> {
+        let mut v = Vec::with_capacity(self.dim());
+        let n = self.history;
+        let engines: Vec<String> = match self.layout {
+            Layout::Mimo => (1..=ENGINE_COUNT).map(|e| e.to_string()).collect(),
+            Layout::PerEngine => vec![String::new()],
+        };
+        let lag = |k: usize| {
+            if k == 0 {
+                "[t]".to_string()
+            } else {
+                format!("[t-{k}]")
+            }
+        };
+        for e in &engines {
+            v.push(format!("T_r{e}{}", lag(0)));
+        }
+        for k in 1..=n {
+            for e in &engines {
+                v.push(format!("T_r{e}{}", lag(k)));
+            }
+        }
+        for k in 1..=n {
+            for e in &engines {
+                v.push(format!("T_o{e}{}", lag(k)));
+            }
+        }
+        for k in 1..=n + 1 {
+            v.push(format!("P{}", lag(k)));
+        }
+        if self.mass_features {
+            for k in 1..=n {
+                v.push(format!("m_f{}", lag(k)));
+            }
+            for k in 1..=n {
+                v.push(format!("m_o{}", lag(k)));
+            }
+        }
+        for e in &engines {
+            v.push(format!("S_e{e}{}", lag(0)));
+        }
+        if self.mass_features {
+            v.push(format!("lambda{}", lag(1)));
+        }
+        debug_assert_eq!(v.len(), self.dim());
+        v
+    }
+
+    /// Which features only take the values 0 and 1 (their powers are redundant).
+    pub fn binary_mask(&self) -> Vec<bool> {
+        self.names().iter().map(|s| s.starts_with("S_e")).collect()
+    }
+
+    /// Writes the feature vector of step `t` into `out` (length `dim()`). `engine` picks
+    /// the engine for [`Layout::PerEngine`] and is ignored for [`Layout::Mimo`].
+    /// No allocation: this runs in the surrogate's step.
+    #[inline]
+    pub fn fill<H: History + ?Sized>(&self, h: &H, engine: usize, out: &mut [f64]) {
+        let n = self.history;
+        let (e0, e1) = match self.layout {
+            Layout::Mimo => (0, ENGINE_COUNT),
+            Layout::PerEngine => (engine, engine + 1),
+        };
+        let out = &mut out[..self.dim()];
+        let mut i = 0;
+        let mut put = |x: f64| {
+            out[i] = x;
+            i += 1;
+        };
+        for e in e0..e1 {
+            put(h.input(0)[e]);
+        }
+        for k in 1..=n {
+            for e in e0..e1 {
+                put(h.input(k)[e]);
+            }
+        }
+        for k in 1..=n {
+            for e in e0..e1 {
+                put(h.state(k)[e]);
+            }
+        }
+        for k in 1..=n + 1 {
+            put(h.state(k)[STATE_P]);
+        }
+        if self.mass_features {
+            for k in 1..=n {
+                put(h.state(k)[STATE_MF]);
+            }
+            for k in 1..=n {
+                put(h.state(k)[STATE_MO]);
+            }
+        }
+        for e in e0..e1 {
+            put(h.input(0)[ENGINE_COUNT + e]);
+        }
+        if self.mass_features {
+            let s = h.state(1);
+            put(lambda_of(s[STATE_MF], s[STATE_MO]));
+        }
+        debug_assert_eq!(i, self.dim());
+    }
+}
+
+/// A recorded trajectory seen from one step, for training. Before the first step the
+/// engines were off and the state was the initial one (as the runtime starts).
+pub struct TrajectoryHistory<'a> {
+    /// Inputs of every step.
+    pub inputs: &'a [InputVec],
+    /// State at the end of every step.
+    pub states: &'a [StateVec],
+    /// State before the first step.
+    pub initial: &'a StateVec,
+    /// The step being predicted.
+    pub t: usize,
+}
+
+const OFF: InputVec = [0.0; INPUT_DIM];
+
+impl History for TrajectoryHistory<'_> {
+    fn input(&self, lag: usize) -> &InputVec {
+        self.t.checked_sub(lag).map_or(&OFF, |k| &self.inputs[k])
+    }
+    fn state(&self, lag: usize) -> &StateVec {
+        self.t
+            .checked_sub(lag)
+            .map_or(self.initial, |k| &self.states[k])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn paper_dimension_is_11n_plus_10() {
+        for n in 1..=10 {
+            let s = FeatureSpec {
+                layout: Layout::Mimo,
+                history: n,
+                mass_features: true,
+            };
+            assert_eq!(s.dim(), 11 * n + 10);
+            assert_eq!(s.names().len(), 11 * n + 10);
+        }
+    }
+
+    #[test]
+    fn fill_is_causal_and_matches_names() {
+        // Inputs and states encode their own step index, so each feature says where it
+        // was read from.
+        let inputs: Vec<InputVec> = (0..10).map(|k| [k as f64; INPUT_DIM]).collect();
+        let states: Vec<StateVec> = (0..10).map(|k| [100.0 + k as f64; STATE_DIM]).collect();
+        let initial = [-1.0; STATE_DIM];
+        let spec = FeatureSpec {
+            layout: Layout::Mimo,
+            history: 2,
+            mass_features: true,
+        };
+        let mut out = vec![0.0; spec.dim()];
+        let h = TrajectoryHistory {
+            inputs: &inputs,
+            states: &states,
+            initial: &initial,
+            t: 5,
+        };
+        spec.fill(&h, 0, &mut out);
+        let names = spec.names();
+        let pos = |name: &str| names.iter().position(|s| s == name).unwrap();
+        let at = |out: &[f64], name: &str| out[pos(name)];
+        assert_eq!(at(&out, "T_r3[t]"), 5.0);
+        assert_eq!(at(&out, "T_r1[t-2]"), 3.0);
+        assert_eq!(at(&out, "T_o4[t-1]"), 104.0);
+        assert_eq!(at(&out, "P[t-1]"), 104.0);
+        assert_eq!(at(&out, "P[t-3]"), 102.0);
+        assert_eq!(at(&out, "m_o[t-2]"), 103.0);
+        assert_eq!(at(&out, "S_e2[t]"), 5.0);
+        assert_eq!(at(&out, "lambda[t-1]"), 1.0 / 208.0);
+        // Before the start: engines off, initial state.
+        let h0 = TrajectoryHistory { t: 0, ..h };
+        spec.fill(&h0, 0, &mut out);
+        assert_eq!(at(&out, "T_r1[t-1]"), 0.0);
+        assert_eq!(at(&out, "P[t-1]"), -1.0);
+        assert_eq!(at(&out, "lambda[t-1]"), 1.0 / LAMBDA_MASS_FLOOR_KG);
+    }
+
+    #[test]
+    fn per_engine_reads_its_own_engine() {
+        let inputs: Vec<InputVec> = (0..4)
+            .map(|_| [10.0, 20.0, 30.0, 40.0, 1.0, 0.0, 1.0, 0.0])
+            .collect();
+        let states: Vec<StateVec> = (0..4)
+            .map(|_| [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0])
+            .collect();
+        let spec = FeatureSpec {
+            layout: Layout::PerEngine,
+            history: 1,
+            mass_features: false,
+        };
+        let mut out = vec![0.0; spec.dim()];
+        let h = TrajectoryHistory {
+            inputs: &inputs,
+            states: &states,
+            initial: &[0.0; STATE_DIM],
+            t: 3,
+        };
+        spec.fill(&h, 2, &mut out);
+        assert_eq!(
+            spec.names(),
+            ["T_r[t]", "T_r[t-1]", "T_o[t-1]", "P[t-1]", "P[t-2]", "S_e[t]"]
+        );
+        assert_eq!(out, [30.0, 30.0, 3.0, 5.0, 5.0, 1.0]);
+    }
+}

@@ -1,0 +1,384 @@
+//! From a dataset to coefficients: model variants, design blocks (library terms of scaled
+//! features, row by row), block Gram sums, and the warm-started Lasso path that turns them
+//! into [`Submodel`]s.
+
+use super::dataset::Dataset;
+use super::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
+use super::lasso::{lasso_gram, GramStats, LassoSettings, Standardised};
+use super::library::Library;
+use super::model::{active_terms_of, Model, OutputRow, Submodel, Target};
+use oils_shared::ENGINE_COUNT;
+use serde::{Deserialize, Serialize};
+
+/// Which model structure to train.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Variant {
+    /// The paper as written: one MIMO model, `11n+10` features, seven absolute outputs.
+    Paper,
+    /// Beyond the paper: one per-engine thrust model with coefficients shared by the
+    /// four engines (trained on all four engines' rows) predicting thrust increments,
+    /// plus a MIMO model of the increments of gas pressure and ejected masses.
+    SharedEngine,
+}
+
+impl Variant {
+    /// Name in reports and the model file.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Variant::Paper => "paper",
+            Variant::SharedEngine => "shared-engine",
+        }
+    }
+}
+
+/// Polynomial degrees and feature choices of the variants.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VariantConfig {
+    /// Degree of the paper model's library (1: K has the paper's stated 7 x (11n+10)).
+    pub paper_degree: usize,
+    /// Degree of the shared per-engine thrust model.
+    pub engine_degree: usize,
+    /// Degree of the shared-engine variant's pressure and mass model.
+    pub system_degree: usize,
+    /// Give the per-engine thrust model the ejected-mass histories and lambda.
+    pub engine_mass_features: bool,
+}
+
+impl Default for VariantConfig {
+    fn default() -> Self {
+        Self {
+            paper_degree: 1,
+            engine_degree: 2,
+            system_degree: 1,
+            engine_mass_features: false,
+        }
+    }
+}
+
+/// Structure of one submodel before fitting.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SubSpec {
+    /// Features.
+    pub features: FeatureSpec,
+    /// Library degree.
+    pub degree: usize,
+    /// Target kind.
+    pub target: Target,
+    /// State indices predicted.
+    pub outputs: Vec<usize>,
+}
+
+impl SubSpec {
+    /// Target columns in the design (one shared column for a per-engine model).
+    pub fn target_columns(&self) -> usize {
+        match self.features.layout {
+            Layout::Mimo => self.outputs.len(),
+            Layout::PerEngine => 1,
+        }
+    }
+
+    /// Rows per time step.
+    pub fn evaluations(&self) -> usize {
+        match self.features.layout {
+            Layout::Mimo => 1,
+            Layout::PerEngine => ENGINE_COUNT,
+        }
+    }
+}
+
+/// The submodels of a variant at history length `n`.
+pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec> {
+    match variant {
+        Variant::Paper => vec![SubSpec {
+            features: FeatureSpec {
+                layout: Layout::Mimo,
+                history: n,
+                mass_features: true,
+            },
+            degree: cfg.paper_degree,
+            target: Target::Absolute,
+            outputs: (0..STATE_DIM).collect(),
+        }],
+        Variant::SharedEngine => vec![
+            SubSpec {
+                features: FeatureSpec {
+                    layout: Layout::PerEngine,
+                    history: n,
+                    mass_features: cfg.engine_mass_features,
+                },
+                degree: cfg.engine_degree,
+                target: Target::Increment,
+                outputs: (0..ENGINE_COUNT).collect(),
+            },
+            SubSpec {
+                features: FeatureSpec {
+                    layout: Layout::Mimo,
+                    history: n,
+                    mass_features: true,
+                },
+                degree: cfg.system_degree,
+                target: Target::Increment,
+                outputs: (ENGINE_COUNT..STATE_DIM).collect(),
+            },
+        ],
+    }
+}
+
+/// Everything fixed about a submodel once the whole dataset is known: scaling, envelope,
+/// library, target shift.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    /// Structure.
+    pub spec: SubSpec,
+    /// Library.
+    pub library: Library,
+    /// Raw feature means.
+    pub mean: Vec<f64>,
+    /// Raw feature standard deviations (1 where a feature is constant).
+    pub std: Vec<f64>,
+    /// Envelope lower bound (widened).
+    pub lo: Vec<f64>,
+    /// Envelope upper bound (widened).
+    pub hi: Vec<f64>,
+    /// Mean of each target column over the dataset (the Gram sums are taken about it).
+    pub y_shift: Vec<f64>,
+}
+
+/// Envelope margin as a share of each feature's training range.
+pub const ENVELOPE_MARGIN: f64 = 0.05;
+
+impl Prepared {
+    /// Scans the dataset once for scaling and envelope.
+    pub fn new(spec: SubSpec, data: &Dataset) -> Self {
+        let fs = spec.features;
+        let dim = fs.dim();
+        let library = Library::new(dim, spec.degree, &fs.binary_mask());
+        let mut sum = vec![0.0; dim];
+        let mut sum2 = vec![0.0; dim];
+        let mut lo = vec![f64::INFINITY; dim];
+        let mut hi = vec![f64::NEG_INFINITY; dim];
+        let mut ysum = vec![0.0; spec.target_columns()];
+        let mut x = vec![0.0; dim];
+        let mut y = vec![0.0; spec.target_columns()];
+        let mut rows = 0.0;
+        for t in 0..data.len() {
+            for e in 0..spec.evaluations() {
+                fs.fill(&data.history_at(t), e, &mut x);
+                for j in 0..dim {
+                    sum[j] += x[j];
+                    sum2[j] += x[j] * x[j];
+                    lo[j] = lo[j].min(x[j]);
+                    hi[j] = hi[j].max(x[j]);
+                }
+                targets(&spec, data, t, e, &mut y);
+                for (s, v) in ysum.iter_mut().zip(&y) {
+                    *s += v;
+                }
+                rows += 1.0;
+            }
+        }
+        let mean: Vec<f64> = sum.iter().map(|s| s / rows).collect();
+        let std = (0..dim)
+            .map(|j| {
+                let v = (sum2[j] / rows - mean[j] * mean[j]).max(0.0).sqrt();
+                if v > 1e-12 * (1.0 + mean[j].abs()) {
+                    v
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        for j in 0..dim {
+            let margin = ENVELOPE_MARGIN * (hi[j] - lo[j]);
+            lo[j] -= margin;
+            hi[j] += margin;
+        }
+        Self {
+            spec,
+            library,
+            mean,
+            std,
+            lo,
+            hi,
+            y_shift: ysum.iter().map(|s| s / rows).collect(),
+        }
+    }
+
+    /// Design rows (library terms, row-major) and shifted targets for steps `a..b`.
+    pub fn block(&self, data: &Dataset, a: usize, b: usize) -> (Vec<f64>, Vec<f64>) {
+        let fs = self.spec.features;
+        let dim = fs.dim();
+        let p = self.library.len();
+        let cols = self.spec.target_columns();
+        let rows = (b - a) * self.spec.evaluations();
+        let mut xs = vec![0.0; rows * p];
+        let mut ys = vec![0.0; rows * cols];
+        let mut x = vec![1.0; dim + 1];
+        let mut r = 0;
+        for t in a..b {
+            for e in 0..self.spec.evaluations() {
+                fs.fill(&data.history_at(t), e, &mut x[..dim]);
+                for j in 0..dim {
+                    x[j] = (x[j] - self.mean[j]) / self.std[j];
+                }
+                self.library.eval(&x, &mut xs[r * p..(r + 1) * p]);
+                let y = &mut ys[r * cols..(r + 1) * cols];
+                targets(&self.spec, data, t, e, y);
+                for (v, s) in y.iter_mut().zip(&self.y_shift) {
+                    *v -= s;
+                }
+                r += 1;
+            }
+        }
+        (xs, ys)
+    }
+
+    /// Gram sums of steps `a..b`, built in chunks so the design never has to fit in
+    /// memory whole.
+    pub fn stats(&self, data: &Dataset, a: usize, b: usize) -> GramStats {
+        const CHUNK_STEPS: usize = 2048;
+        let p = self.library.len();
+        let cols = self.spec.target_columns();
+        let mut total = GramStats::zeros(p, cols);
+        let mut start = a;
+        while start < b {
+            let end = (start + CHUNK_STEPS).min(b);
+            let (xs, ys) = self.block(data, start, end);
+            total.accumulate(&GramStats::from_block(&xs, &ys, p, cols), 1.0);
+            start = end;
+        }
+        total
+    }
+
+    /// A submodel from raw-term coefficients (one vector and intercept per column).
+    pub fn submodel(&self, coefs: &[(Vec<f64>, f64)]) -> Submodel {
+        let fs = self.spec.features;
+        let names = fs.names();
+        let rows = coefs
+            .iter()
+            .enumerate()
+            .map(|(c, (w, b))| OutputRow {
+                output: match fs.layout {
+                    Layout::Mimo => STATE_NAMES[self.spec.outputs[c]].to_string(),
+                    Layout::PerEngine => "T_o".to_string(),
+                },
+                intercept: *b,
+                terms: active_terms_of(&self.library.terms, w, fs.dim(), &names),
+            })
+            .collect();
+        Submodel {
+            features: fs,
+            degree: self.spec.degree,
+            library_size: self.library.len(),
+            target: self.spec.target,
+            outputs: self.spec.outputs.clone(),
+            feature_names: names,
+            feature_mean: self.mean.clone(),
+            feature_std: self.std.clone(),
+            envelope_lo: self.lo.clone(),
+            envelope_hi: self.hi.clone(),
+            rows,
+        }
+    }
+}
+
+/// Target values of step `t` (engine `e` for a per-engine model), unshifted.
+fn targets(spec: &SubSpec, data: &Dataset, t: usize, e: usize, y: &mut [f64]) {
+    let now = &data.states[t];
+    let prev = data.previous_state(t);
+    let value = |o: usize| match spec.target {
+        Target::Absolute => now[o],
+        Target::Increment => now[o] - prev[o],
+    };
+    match spec.features.layout {
+        Layout::Mimo => {
+            for (c, &o) in spec.outputs.iter().enumerate() {
+                y[c] = value(o);
+            }
+        }
+        Layout::PerEngine => y[0] = value(spec.outputs[e]),
+    }
+}
+
+/// Coefficients of every target column along the penalty path.
+#[derive(Debug, Clone)]
+pub struct PathFit {
+    /// `coefs[mu_index][column]` = (raw-term coefficients, intercept in shifted units
+    /// plus shift, i.e. the real intercept).
+    pub coefs: Vec<Vec<(Vec<f64>, f64)>>,
+    /// Per penalty: fits that hit the sweep limit before the gap rule was met.
+    pub unconverged: Vec<usize>,
+}
+
+/// Lasso path over `mus` (descending), warm-started, on the standardised problem of
+/// `stats`. Returned coefficients apply to unscaled library terms.
+pub fn fit_path(
+    prep: &Prepared,
+    stats: &GramStats,
+    mus: &[f64],
+    settings: &LassoSettings,
+) -> PathFit {
+    let std = Standardised::new(stats.centred());
+    let p = prep.library.len();
+    let zero_shift = vec![0.0; p];
+    let mut coefs = vec![Vec::with_capacity(std.outputs()); mus.len()];
+    let mut unconverged = vec![0; mus.len()];
+    let mut h = vec![0.0; p];
+    for c in 0..std.outputs() {
+        let prob = std.problem(c);
+        let mut w = vec![0.0; p];
+        for (i, &mu) in mus.iter().enumerate() {
+            let r = lasso_gram(&prob, mu, settings, &mut w, &mut h);
+            unconverged[i] += usize::from(!r.converged);
+            coefs[i].push(std.unscale(c, &w, &zero_shift, prep.y_shift[c]));
+        }
+    }
+    PathFit { coefs, unconverged }
+}
+
+/// Sum of squared one-step errors of column `c` over the rows summed in `s`, for
+/// coefficients `w` and intercept `b` (real units; `y_shift` is what the sums were
+/// shifted by). Only active terms are visited.
+pub fn sse(s: &GramStats, c: usize, w: &[f64], b: f64, y_shift: f64) -> f64 {
+    let p = s.p;
+    let o = s.outputs;
+    let active: Vec<usize> = (0..p).filter(|&j| w[j] != 0.0).collect();
+    let b = b - y_shift;
+    let mut wxx = 0.0;
+    for &i in &active {
+        let mut acc = 0.0;
+        for &j in &active {
+            acc += s.xtx[i * p + j] * w[j];
+        }
+        wxx += w[i] * acc;
+    }
+    let wxy: f64 = active.iter().map(|&j| w[j] * s.xty[j * o + c]).sum();
+    let wx: f64 = active.iter().map(|&j| w[j] * s.sum_x[j]).sum();
+    let v = s.yty[c] - 2.0 * b * s.sum_y[c] - 2.0 * wxy + s.n * b * b + 2.0 * b * wx + wxx;
+    v.max(0.0)
+}
+
+/// Assembles a model from fitted submodels.
+pub fn assemble(data: &Dataset, subs: Vec<Submodel>) -> Model {
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for i in &data.inputs {
+        for e in 0..ENGINE_COUNT {
+            if i[ENGINE_COUNT + e] > 0.5 {
+                lo = lo.min(i[e]);
+                hi = hi.max(i[e]);
+            }
+        }
+    }
+    if lo > hi {
+        (lo, hi) = (0.0, 0.0);
+    }
+    Model {
+        sample_time_ns: data.sample_time_ns,
+        initial_state: data.initial,
+        on_command_range_n: [lo, hi],
+        submodels: subs,
+    }
+}

@@ -1,0 +1,159 @@
+//! The library phi: every monomial of the (scaled) features up to a degree, each with a
+//! readable name such as `T_o1[t-2]*P[t-1]`, so a fitted model can be printed and read.
+//!
+//! A term is stored as three factor indices into the feature vector extended by one slot
+//! that always holds 1.0; lower-degree terms are padded with that slot. Evaluation is then
+//! the same branch-free product for every term, in training and in the runtime.
+
+/// Highest supported polynomial degree.
+pub const MAX_DEGREE: usize = 3;
+
+/// One monomial: the product of three entries of the extended feature vector.
+pub type Term = [u16; MAX_DEGREE];
+
+/// All monomials of degree 1..=`degree` over `dim` features (no constant: the intercept is
+/// fitted separately and not penalised). Powers of binary features are left out: they
+/// equal the feature itself.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Library {
+    /// Number of features.
+    pub dim: usize,
+    /// Degree.
+    pub degree: usize,
+    /// Terms in a fixed order (by degree, then lexicographic).
+    pub terms: Vec<Term>,
+}
+
+impl Library {
+    /// Enumerates the library. `binary[i]` marks features that take only 0 and 1.
+    pub fn new(dim: usize, degree: usize, binary: &[bool]) -> Self {
+        assert!((1..=MAX_DEGREE).contains(&degree) && dim < u16::MAX as usize);
+        let one = dim as u16;
+        let mut terms = Vec::new();
+        let binary_power = |a: usize, b: usize| a == b && binary[a];
+        for i in 0..dim {
+            terms.push([i as u16, one, one]);
+        }
+        if degree >= 2 {
+            for i in 0..dim {
+                for j in i..dim {
+                    if !binary_power(i, j) {
+                        terms.push([i as u16, j as u16, one]);
+                    }
+                }
+            }
+        }
+        if degree >= 3 {
+            for i in 0..dim {
+                for j in i..dim {
+                    for k in j..dim {
+                        if !binary_power(i, j) && !binary_power(j, k) {
+                            terms.push([i as u16, j as u16, k as u16]);
+                        }
+                    }
+                }
+            }
+        }
+        Self { dim, degree, terms }
+    }
+
+    /// Number of terms.
+    pub fn len(&self) -> usize {
+        self.terms.len()
+    }
+
+    /// True when there are no terms.
+    pub fn is_empty(&self) -> bool {
+        self.terms.is_empty()
+    }
+
+    /// Name of a term from the feature names: factors joined by `*`, repeats as powers.
+    pub fn term_name(&self, term: &Term, feature_names: &[String]) -> String {
+        term_name(term, self.dim, feature_names)
+    }
+
+    /// Evaluates every term. `x_ext` is the scaled feature vector followed by 1.0.
+    #[inline]
+    pub fn eval(&self, x_ext: &[f64], out: &mut [f64]) {
+        debug_assert_eq!(x_ext.len(), self.dim + 1);
+        for (o, t) in out.iter_mut().zip(&self.terms) {
+            *o = eval_term(t, x_ext);
+        }
+    }
+}
+
+/// Product of a term's factors.
+#[inline(always)]
+pub fn eval_term(t: &Term, x_ext: &[f64]) -> f64 {
+    x_ext[t[0] as usize] * x_ext[t[1] as usize] * x_ext[t[2] as usize]
+}
+
+/// Name of a term, see [`Library::term_name`].
+pub fn term_name(term: &Term, dim: usize, feature_names: &[String]) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    let mut i = 0;
+    let f: Vec<usize> = term
+        .iter()
+        .map(|&x| x as usize)
+        .filter(|&x| x < dim)
+        .collect();
+    while i < f.len() {
+        let mut j = i;
+        while j < f.len() && f[j] == f[i] {
+            j += 1;
+        }
+        let name = feature_names.get(f[i]).map_or("?", String::as_str);
+        if j - i == 1 {
+            parts.push(name.to_string());
+        } else {
+            parts.push(format!("{name}^{}", j - i));
+        }
+        i = j;
+    }
+    parts.join("*")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn choose(n: usize, k: usize) -> usize {
+        (0..k).fold(1, |acc, i| acc * (n - i) / (i + 1))
+    }
+
+    #[test]
+    fn counts_match_multiset_formula() {
+        for dim in 1..6 {
+            for degree in 1..=3 {
+                let lib = Library::new(dim, degree, &vec![false; dim]);
+                // Monomials of degree 1..=d in dim variables: C(dim+d, d) - 1.
+                assert_eq!(
+                    lib.len(),
+                    choose(dim + degree, degree) - 1,
+                    "{dim} {degree}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn binary_powers_are_dropped_and_names_read() {
+        let names: Vec<String> = ["T_o1[t-2]", "P[t-1]", "S_e1[t]"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let lib = Library::new(3, 2, &[false, false, true]);
+        let all: Vec<String> = lib.terms.iter().map(|t| lib.term_name(t, &names)).collect();
+        assert!(all.contains(&"T_o1[t-2]*P[t-1]".to_string()));
+        assert!(all.contains(&"P[t-1]^2".to_string()));
+        assert!(!all.contains(&"S_e1[t]^2".to_string()));
+        assert_eq!(all.len(), 3 + 6 - 1);
+        let x = [2.0, 3.0, 1.0, 1.0];
+        let mut out = vec![0.0; lib.len()];
+        lib.eval(&x, &mut out);
+        let at = |n: &str| out[all.iter().position(|s| s == n).unwrap()];
+        assert_eq!(at("T_o1[t-2]*P[t-1]"), 6.0);
+        assert_eq!(at("P[t-1]^2"), 9.0);
+        assert_eq!(at("T_o1[t-2]"), 2.0);
+    }
+}

@@ -1,0 +1,292 @@
+//! The learned sparse surrogate of the propulsion system (seed paper, Sections III-V):
+//! excitation, data, history features, polynomial library, Lasso, cross-validation on
+//! free-run error, the model file, and the runtime that stands in for `hifi` in the loop.
+//!
+//! `train()` runs the whole pipeline against any reference model given as a factory, so
+//! it is tested on the `ideal` model and run on `hifi`. `docs/surrogate.md` documents the
+//! features, the causal reading of the paper, the scaling and the file format.
+
+// Index loops read like the equations in this numerical code.
+#![allow(clippy::needless_range_loop)]
+
+pub mod cv;
+pub mod dataset;
+pub mod excitation;
+pub mod features;
+pub mod fit;
+pub mod lasso;
+pub mod library;
+pub mod model;
+pub mod model_file;
+pub mod report;
+pub mod runtime;
+
+use crate::config::PropulsionConfig;
+use crate::propulsion::{Propulsion, PropulsionKind};
+use cv::{cross_validate, fit_final, CvConfig, CvResult};
+use dataset::Dataset;
+use excitation::{Excitation, ExcitationConfig};
+use fit::{Variant, VariantConfig};
+use model_file::{ModelFile, Provenance, Selection};
+use serde::{Deserialize, Serialize};
+
+/// Which variant goes into the model file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Deploy {
+    /// Whichever has the lower cross-validated free-run score.
+    Best,
+    /// The paper-faithful model.
+    Paper,
+    /// The shared per-engine model.
+    SharedEngine,
+}
+
+/// Everything `oils train` does, as plain numbers (committed as `emulator/config/train.toml`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Reference model the data comes from (the source: `hifi`).
+    pub reference: PropulsionKind,
+    /// Parameters of the reference model.
+    pub propulsion: PropulsionConfig,
+    /// Surrogate sample time, nanoseconds (the bench step, 10 ms, by default; the bench
+    /// step must be a whole multiple of it).
+    pub sample_time_ns: u64,
+    /// Excitation.
+    pub excitation: ExcitationConfig,
+    /// Cross-validation grid and solver.
+    pub cv: CvConfig,
+    /// Variant structure.
+    pub variants: VariantConfig,
+    /// Variants to cross-validate (the paper's is always among them).
+    pub train_variants: Vec<Variant>,
+    /// Which one to write as the model file.
+    pub deploy: Deploy,
+    /// Terms per output printed in the report.
+    pub top_terms: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            reference: PropulsionKind::Ideal,
+            propulsion: PropulsionConfig::default(),
+            sample_time_ns: 10_000_000,
+            excitation: ExcitationConfig::default(),
+            cv: CvConfig::default(),
+            variants: VariantConfig::default(),
+            train_variants: vec![Variant::Paper, Variant::SharedEngine],
+            deploy: Deploy::Best,
+            top_terms: 8,
+        }
+    }
+}
+
+/// A training configuration is unusable.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("invalid training configuration: {0}")]
+pub struct TrainConfigError(pub String);
+
+impl TrainConfig {
+    /// Checks every field before anything runs.
+    pub fn validate(&self) -> Result<(), TrainConfigError> {
+        let e = TrainConfigError;
+        if self.sample_time_ns == 0 || self.sample_time_ns > 1_000_000_000 {
+            return Err(e("sample_time_ns must be in (0, 1 s]".into()));
+        }
+        self.excitation.validate().map_err(e)?;
+        self.cv.validate().map_err(e)?;
+        let v = &self.variants;
+        for (name, d) in [
+            ("paper_degree", v.paper_degree),
+            ("engine_degree", v.engine_degree),
+            ("system_degree", v.system_degree),
+        ] {
+            if !(1..=library::MAX_DEGREE).contains(&d) {
+                return Err(e(format!("variants.{name} = {d}: must be 1..=3")));
+            }
+        }
+        if !self.train_variants.contains(&Variant::Paper) {
+            return Err(e("train_variants must include `paper`".into()));
+        }
+        let wanted = match self.deploy {
+            Deploy::Best | Deploy::Paper => Variant::Paper,
+            Deploy::SharedEngine => Variant::SharedEngine,
+        };
+        if !self.train_variants.contains(&wanted) {
+            return Err(e(format!(
+                "deploy {:?} needs that variant trained",
+                self.deploy
+            )));
+        }
+        let steps = self.excitation.duration_s() * 1e9 / self.sample_time_ns as f64;
+        if steps < 20.0 * self.cv.folds as f64 * (self.cv.history_max + 2) as f64 {
+            return Err(e(
+                "the excitation is too short for the folds and history".into()
+            ));
+        }
+        Ok(())
+    }
+
+    /// Parses TOML and validates it.
+    pub fn from_toml(text: &str) -> Result<Self, TrainConfigError> {
+        let cfg: Self = toml::from_str(text).map_err(|err| TrainConfigError(err.to_string()))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// A BLAKE3 hash of the configuration (provenance).
+    pub fn hash_hex(&self) -> String {
+        let text = serde_json::to_string(self).unwrap_or_default();
+        blake3::hash(text.as_bytes()).to_hex().to_string()
+    }
+}
+
+/// What the reference model is, for provenance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReferenceInfo {
+    /// Model name (`hifi`, `ideal`).
+    pub name: String,
+    /// Hash of its parameters (a BLAKE3 hex digest of their serialised form).
+    pub param_hash: String,
+}
+
+impl ReferenceInfo {
+    /// Name and parameter hash of the configured reference model.
+    pub fn of(cfg: &TrainConfig) -> Self {
+        let text = serde_json::to_string(&(cfg.reference, &cfg.propulsion)).unwrap_or_default();
+        Self {
+            name: cfg.reference.as_str().to_string(),
+            param_hash: blake3::hash(text.as_bytes()).to_hex().to_string(),
+        }
+    }
+}
+
+/// Runs [`train`] with the reference model the configuration names.
+pub fn train_configured(
+    cfg: &TrainConfig,
+    progress: &dyn Progress,
+) -> Result<TrainOutcome, TrainConfigError> {
+    cfg.propulsion
+        .validate()
+        .map_err(|e| TrainConfigError(e.to_string()))?;
+    let factory = || crate::propulsion::build(cfg.reference, &cfg.propulsion);
+    train(cfg, &factory, &ReferenceInfo::of(cfg), progress)
+}
+
+/// Progress reporting hooks (the CLI draws bars; tests pass [`Quiet`]).
+pub trait Progress: Sync {
+    /// A phase with `total` units of work begins.
+    fn begin(&self, phase: &str, total: u64);
+    /// One unit done.
+    fn tick(&self);
+    /// The phase is over.
+    fn finish(&self);
+}
+
+/// No progress output.
+pub struct Quiet;
+
+impl Progress for Quiet {
+    fn begin(&self, _: &str, _: u64) {}
+    fn tick(&self) {}
+    fn finish(&self) {}
+}
+
+/// Everything a training run produced.
+#[derive(Debug, Clone)]
+pub struct TrainOutcome {
+    /// The excitation.
+    pub excitation: Excitation,
+    /// The recorded data.
+    pub dataset: Dataset,
+    /// Cross-validation of each variant, in `train_variants` order.
+    pub cv: Vec<CvResult>,
+    /// The final model file of each variant, same order.
+    pub models: Vec<ModelFile>,
+    /// Index of the deployed one.
+    pub deployed: usize,
+}
+
+impl TrainOutcome {
+    /// The model file to write.
+    pub fn deployed_model(&self) -> &ModelFile {
+        &self.models[self.deployed]
+    }
+}
+
+/// Runs the pipeline: excitation, data from `reference`, cross-validation of each variant,
+/// final fits, model files. Deterministic: same config and reference, same bits.
+pub fn train(
+    cfg: &TrainConfig,
+    reference: &dyn Fn() -> Box<dyn Propulsion>,
+    info: &ReferenceInfo,
+    progress: &dyn Progress,
+) -> Result<TrainOutcome, TrainConfigError> {
+    cfg.validate()?;
+    let excitation = cfg.excitation.generate(cfg.sample_time_ns);
+    let mut model = reference();
+    progress.begin("data", excitation.inputs.len() as u64);
+    let dataset = Dataset::record(model.as_mut(), &excitation, || progress.tick());
+    progress.finish();
+    let initial_output = model_file::ReferenceOutput::of(&reference().output());
+    let mut results = Vec::new();
+    let mut models = Vec::new();
+    for &variant in &cfg.train_variants {
+        let span = (cfg.cv.history_max - cfg.cv.history_min + 1) * cfg.cv.folds;
+        progress.begin(&format!("cv {}", variant.as_str()), span as u64);
+        let res = cross_validate(variant, &dataset, &cfg.cv, &cfg.variants, &|| {
+            progress.tick()
+        });
+        progress.finish();
+        let chosen = res.chosen().clone();
+        let fitted = fit_final(
+            variant,
+            chosen.n,
+            chosen.mu,
+            &dataset,
+            &cfg.cv,
+            &cfg.variants,
+        );
+        models.push(ModelFile::new(
+            variant,
+            fitted,
+            Provenance {
+                reference: info.name.clone(),
+                reference_param_hash: info.param_hash.clone(),
+                excitation_seed: cfg.excitation.seed,
+                train_config_hash: cfg.hash_hex(),
+                tool: format!("oils-emulator {}", env!("CARGO_PKG_VERSION")),
+            },
+            Selection {
+                history: chosen.n,
+                mu: chosen.mu,
+                cv_free_run_rmse: chosen.free_rmse,
+                cv_one_step_test_rmse: chosen.test_rmse,
+                cv_score: chosen.score,
+            },
+            initial_output,
+        ));
+        results.push(res);
+    }
+    let index_of = |v: Variant| cfg.train_variants.iter().position(|x| *x == v);
+    let deployed = match cfg.deploy {
+        Deploy::Paper => index_of(Variant::Paper),
+        Deploy::SharedEngine => index_of(Variant::SharedEngine),
+        Deploy::Best => (0..results.len()).min_by(|&a, &b| {
+            results[a]
+                .chosen()
+                .score
+                .total_cmp(&results[b].chosen().score)
+        }),
+    }
+    .unwrap_or(0);
+    Ok(TrainOutcome {
+        excitation,
+        dataset,
+        cv: results,
+        models,
+        deployed,
+    })
+}

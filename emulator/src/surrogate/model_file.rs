@@ -1,0 +1,238 @@
+//! The surrogate model file: versioned, self-describing JSON (feature spec, term names,
+//! coefficients, scaling, envelope, sample time, provenance, the CV choice). Loading
+//! checks it and refuses a wrong format or version, a truncated file, non-finite numbers,
+//! an inconsistent structure, or a sample time that does not divide the bench step.
+//!
+//! JSON because it is readable, diffable and serde_json writes every f64 so it reads
+//! back bit for bit (shortest round-trip digits), which the reproduce test relies on.
+
+use super::features::STATE_DIM;
+use super::fit::Variant;
+use super::model::Model;
+use crate::propulsion::PropulsionOutput;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Value of the `format` field.
+pub const FORMAT: &str = "oils-surrogate";
+/// Current file version; bump on any change of meaning.
+pub const VERSION: u32 = 1;
+
+/// Where a model came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// Reference model that made the data (`hifi`).
+    pub reference: String,
+    /// BLAKE3 of the reference model's parameters.
+    pub reference_param_hash: String,
+    /// Seed of the excitation.
+    pub excitation_seed: u64,
+    /// BLAKE3 of the training configuration.
+    pub train_config_hash: String,
+    /// Tool and version that trained it.
+    pub tool: String,
+}
+
+/// What cross-validation chose and why.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Selection {
+    /// History length n.
+    pub history: usize,
+    /// Penalty mu (scikit-learn's alpha on standardised terms and outputs).
+    pub mu: f64,
+    /// Mean over folds of the free-run RMSE per output (N, N, N, N, Pa, kg, kg).
+    pub cv_free_run_rmse: [f64; STATE_DIM],
+    /// Mean over folds of the one-step test RMSE per output.
+    pub cv_one_step_test_rmse: [f64; STATE_DIM],
+    /// Selection score (mean normalised free-run RMSE).
+    pub cv_score: f64,
+}
+
+/// Reference outputs the surrogate does not model but reports (held constant).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ReferenceOutput {
+    /// Fuel tank pressure at the start, pascals.
+    pub fuel_tank_pressure_pa: f64,
+    /// Oxidiser tank pressure at the start, pascals.
+    pub ox_tank_pressure_pa: f64,
+}
+
+impl ReferenceOutput {
+    /// Taken from the reference model's initial output.
+    pub fn of(out: &PropulsionOutput) -> Self {
+        Self {
+            fuel_tank_pressure_pa: out.fuel_tank_pressure_pa,
+            ox_tank_pressure_pa: out.ox_tank_pressure_pa,
+        }
+    }
+}
+
+/// The file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelFile {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// File version, [`VERSION`].
+    pub version: u32,
+    /// One paragraph for a human reader.
+    pub description: String,
+    /// Which model structure.
+    pub variant: Variant,
+    /// Provenance.
+    pub provenance: Provenance,
+    /// The cross-validated choice.
+    pub selection: Selection,
+    /// Held outputs.
+    pub reference_output: ReferenceOutput,
+    /// Sparsity, percent of library coefficients that are zero.
+    pub sparsity_pct: f64,
+    /// The model itself.
+    pub model: Model,
+}
+
+/// Why a model file was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelFileError {
+    /// The file could not be read.
+    #[error("cannot read surrogate model {path}")]
+    Io {
+        /// Path.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The file ends early.
+    #[error("surrogate model file is truncated (JSON ends at line {line}, column {column})")]
+    Truncated {
+        /// Line.
+        line: usize,
+        /// Column.
+        column: usize,
+    },
+    /// Not JSON of the expected shape.
+    #[error("surrogate model file is malformed: {0}")]
+    Malformed(String),
+    /// Another kind of file.
+    #[error("not a surrogate model file (format `{0}`, expected `{FORMAT}`)")]
+    WrongFormat(String),
+    /// A version this build cannot read.
+    #[error("surrogate model file version {found} is not supported (this build reads {VERSION}); retrain with `oils train`")]
+    WrongVersion {
+        /// Version in the file.
+        found: u32,
+    },
+    /// The bench step is not a whole number of model steps.
+    #[error("surrogate sample time {sample_ns} ns does not fit the bench step {bench_ns} ns (the bench step must be a whole multiple)")]
+    SampleTime {
+        /// Model sample time.
+        sample_ns: u64,
+        /// Bench step.
+        bench_ns: u64,
+    },
+    /// Structure or numbers are wrong (non-finite coefficient, sizes that disagree).
+    #[error("surrogate model file is invalid: {0}")]
+    Invalid(String),
+}
+
+/// The paragraph written into every file.
+pub const DESCRIPTION: &str = "Sparse polynomial surrogate of the propulsion system (seed paper Sec. V). \
+Each step predicts the state at the end of a step from the command held over it and the known past: \
+features are scaled as (raw - feature_mean) / feature_std after clamping to [envelope_lo, envelope_hi]; \
+a term is the product of the scaled features named by `factors` (index = feature count means 1.0); \
+an output is intercept + sum(coef * term), an increment on the previous value when target = increment. \
+See docs/surrogate.md.";
+
+impl ModelFile {
+    /// Wraps a fitted model.
+    pub fn new(
+        variant: Variant,
+        model: Model,
+        provenance: Provenance,
+        selection: Selection,
+        reference_output: ReferenceOutput,
+    ) -> Self {
+        Self {
+            format: FORMAT.into(),
+            version: VERSION,
+            description: DESCRIPTION.into(),
+            variant,
+            provenance,
+            selection,
+            reference_output,
+            sparsity_pct: model.sparsity_pct(),
+            model,
+        }
+    }
+
+    /// Serialises (pretty JSON, trailing newline).
+    pub fn to_json(&self) -> String {
+        let mut s = serde_json::to_string_pretty(self).unwrap_or_default();
+        s.push('\n');
+        s
+    }
+
+    /// Parses and checks a file's text (the sample time is checked by [`Self::check_step`]).
+    pub fn parse(text: &str) -> Result<Self, ModelFileError> {
+        // Look at the header first so a wrong version is named as such even when the
+        // rest of the layout changed.
+        let value: serde_json::Value =
+            serde_json::from_str(text).map_err(|e| json_error(e, text))?;
+        let format = value.get("format").and_then(|v| v.as_str()).unwrap_or("");
+        if format != FORMAT {
+            return Err(ModelFileError::WrongFormat(format.to_string()));
+        }
+        let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
+        if version != u64::from(VERSION) {
+            return Err(ModelFileError::WrongVersion {
+                found: u32::try_from(version).unwrap_or(u32::MAX),
+            });
+        }
+        let file: Self = serde_json::from_value(value).map_err(|e| json_error(e, text))?;
+        file.model.check().map_err(ModelFileError::Invalid)?;
+        if file.model.sample_time_ns == 0 {
+            return Err(ModelFileError::Invalid("sample_time_ns is 0".into()));
+        }
+        Ok(file)
+    }
+
+    /// Reads and checks a file.
+    pub fn load(path: &Path) -> Result<Self, ModelFileError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ModelFileError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::parse(&text)
+    }
+
+    /// Model steps per bench step, or an error if the bench step is not a whole multiple.
+    pub fn check_step(&self, bench_step_ns: u64) -> Result<u64, ModelFileError> {
+        let sample_ns = self.model.sample_time_ns;
+        if bench_step_ns == 0 || !bench_step_ns.is_multiple_of(sample_ns) {
+            return Err(ModelFileError::SampleTime {
+                sample_ns,
+                bench_ns: bench_step_ns,
+            });
+        }
+        Ok(bench_step_ns / sample_ns)
+    }
+}
+
+fn json_error(e: serde_json::Error, text: &str) -> ModelFileError {
+    let msg = e.to_string();
+    if e.is_eof() {
+        ModelFileError::Truncated {
+            line: e.line(),
+            column: e.column(),
+        }
+    } else if msg.contains("number out of range")
+        || msg.contains("null, expected f64")
+        || text.contains("NaN")
+        || text.contains("Infinity")
+    {
+        // JSON has no NaN or infinity: serde_json writes them as null, other tools as
+        // bare words or overflowing numbers. Name the real problem.
+        ModelFileError::Invalid(format!("non-finite number (NaN or infinity): {msg}"))
+    } else {
+        ModelFileError::Malformed(msg)
+    }
+}

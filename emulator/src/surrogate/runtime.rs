@@ -1,0 +1,141 @@
+//! `SurrogatePropulsion`: the learned model in the loop. It runs free (its own predictions
+//! are its history), starts from the state the reference model starts from, evaluates
+//! only active terms, and allocates nothing per step. Inputs outside the training
+//! envelope are clamped and counted ([`SurrogatePropulsion::out_of_envelope_steps`]).
+
+use super::features::{InputVec, StateVec, INPUT_DIM, STATE_MF, STATE_MO, STATE_P};
+use super::model::Predictor;
+use super::model_file::{ModelFile, ModelFileError};
+use crate::config::PropulsionConfig;
+use crate::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
+use oils_shared::ENGINE_COUNT;
+use std::path::Path;
+
+/// The committed default model (`emulator/models/surrogate-default.json`), built into the
+/// binary so the bench runs without training.
+pub const DEFAULT_MODEL_JSON: &str = include_str!("../../models/surrogate-default.json");
+
+/// The surrogate propulsion model.
+#[derive(Debug, Clone)]
+pub struct SurrogatePropulsion {
+    predictor: Predictor,
+    sample_time_ns: u64,
+    max_thrust_n: f64,
+    chamber_pressure_max_pa: f64,
+    held: super::model_file::ReferenceOutput,
+    out: PropulsionOutput,
+}
+
+impl SurrogatePropulsion {
+    /// From a checked model file, for a bench stepping every `bench_step_ns`.
+    pub fn new(
+        file: &ModelFile,
+        cfg: &PropulsionConfig,
+        bench_step_ns: u64,
+    ) -> Result<Self, ModelFileError> {
+        file.check_step(bench_step_ns)?;
+        let predictor = Predictor::new(&file.model);
+        let mut s = Self {
+            predictor,
+            sample_time_ns: file.model.sample_time_ns,
+            max_thrust_n: cfg.max_thrust_n,
+            chamber_pressure_max_pa: cfg.chamber_pressure_max_pa,
+            held: file.reference_output,
+            out: PropulsionOutput::default(),
+        };
+        let initial = file.model.initial_state;
+        s.out = s.output_of(&initial, &initial, 0);
+        Ok(s)
+    }
+
+    /// Loads the model at `path`.
+    pub fn from_path(
+        path: &Path,
+        cfg: &PropulsionConfig,
+        bench_step_ns: u64,
+    ) -> Result<Self, ModelFileError> {
+        Self::new(&ModelFile::load(path)?, cfg, bench_step_ns)
+    }
+
+    /// The committed default model; `bench_step_ns` defaults to its sample time.
+    pub fn default_model(
+        cfg: &PropulsionConfig,
+        bench_step_ns: Option<u64>,
+    ) -> Result<Self, ModelFileError> {
+        let file = ModelFile::parse(DEFAULT_MODEL_JSON)?;
+        let step = bench_step_ns.unwrap_or(file.model.sample_time_ns);
+        Self::new(&file, cfg, step)
+    }
+
+    /// Steps on which some feature left the training envelope (and was clamped).
+    pub fn out_of_envelope_steps(&self) -> u64 {
+        self.predictor.out_of_envelope_steps()
+    }
+
+    fn output_of(&self, prev: &StateVec, now: &StateVec, dt_ns: u64) -> PropulsionOutput {
+        let mut o = PropulsionOutput {
+            gas_pressure_pa: now[STATE_P],
+            fuel_tank_pressure_pa: self.held.fuel_tank_pressure_pa,
+            ox_tank_pressure_pa: self.held.ox_tank_pressure_pa,
+            ejected_fuel_kg: now[STATE_MF],
+            ejected_ox_kg: now[STATE_MO],
+            ..Default::default()
+        };
+        for e in 0..ENGINE_COUNT {
+            o.thrust_n[e] = now[e];
+            // Trapezoid over the step: the model only knows the end points.
+            o.mean_thrust_n[e] = 0.5 * (prev[e] + now[e]);
+            o.chamber_pressure_pa[e] = now[e] / self.max_thrust_n * self.chamber_pressure_max_pa;
+        }
+        if dt_ns > 0 {
+            let dt_s = dt_ns as f64 * 1e-9;
+            o.fuel_flow_kg_s = (now[STATE_MF] - prev[STATE_MF]) / dt_s;
+            o.ox_flow_kg_s = (now[STATE_MO] - prev[STATE_MO]) / dt_s;
+        }
+        o
+    }
+}
+
+fn input_of(cmd: &EngineCommand) -> InputVec {
+    let mut v = [0.0; INPUT_DIM];
+    for e in 0..ENGINE_COUNT {
+        v[e] = if cmd.on[e] { cmd.thrust_cmd_n[e] } else { 0.0 };
+        v[ENGINE_COUNT + e] = f64::from(u8::from(cmd.on[e]));
+    }
+    v
+}
+
+impl Propulsion for SurrogatePropulsion {
+    fn name(&self) -> &'static str {
+        "surrogate"
+    }
+
+    fn step(&mut self, cmd: &EngineCommand, dt_ns: u64) -> PropulsionOutput {
+        debug_assert!(
+            dt_ns.is_multiple_of(self.sample_time_ns),
+            "checked at construction"
+        );
+        let input = input_of(cmd);
+        let start = *self.predictor.state();
+        let substeps = (dt_ns / self.sample_time_ns).max(1);
+        let mut sum_mean = [0.0; ENGINE_COUNT];
+        let mut prev = start;
+        for _ in 0..substeps {
+            let now = self.predictor.step(&input);
+            for e in 0..ENGINE_COUNT {
+                sum_mean[e] += 0.5 * (prev[e] + now[e]);
+            }
+            prev = now;
+        }
+        let mut out = self.output_of(&start, &prev, dt_ns);
+        for e in 0..ENGINE_COUNT {
+            out.mean_thrust_n[e] = sum_mean[e] / substeps as f64;
+        }
+        self.out = out;
+        out
+    }
+
+    fn output(&self) -> PropulsionOutput {
+        self.out
+    }
+}

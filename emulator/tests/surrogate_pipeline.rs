@@ -1,0 +1,191 @@
+//! The surrogate end to end: the committed default model loads and is what the committed
+//! configuration trains (bit for bit); bad model files are refused with a clear error; the
+//! runtime tracks its reference model on commands it was not trained on, starts where the
+//! reference starts, and counts inputs outside its envelope.
+
+use oils_emulator::config::PropulsionConfig;
+use oils_emulator::propulsion::{build, EngineCommand, Propulsion, PropulsionKind};
+use oils_emulator::surrogate::excitation::ExcitationConfig;
+use oils_emulator::surrogate::model_file::{ModelFile, ModelFileError};
+use oils_emulator::surrogate::runtime::{SurrogatePropulsion, DEFAULT_MODEL_JSON};
+use oils_emulator::surrogate::{train_configured, Quiet, TrainConfig};
+use std::path::PathBuf;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn committed_config() -> TrainConfig {
+    let text = std::fs::read_to_string(root().join("config/train.toml")).unwrap();
+    TrainConfig::from_toml(&text).unwrap()
+}
+
+#[test]
+fn retrain_reproduces_committed_model() {
+    let cfg = committed_config();
+    let outcome = train_configured(&cfg, &Quiet).unwrap();
+    let fresh = outcome.deployed_model().to_json();
+    let committed = std::fs::read_to_string(root().join("models/surrogate-default.json")).unwrap();
+    assert!(
+        fresh == committed,
+        "retraining emulator/config/train.toml does not reproduce \
+         emulator/models/surrogate-default.json; regenerate with \
+         `cargo run --release -- train --model emulator/models/surrogate-default.json`"
+    );
+    // And it is what the binary embeds.
+    assert_eq!(committed, DEFAULT_MODEL_JSON);
+}
+
+#[test]
+fn committed_default_model_loads_and_starts_at_rest() {
+    let file = ModelFile::parse(DEFAULT_MODEL_JSON).unwrap();
+    let cfg = committed_config();
+    let reference = build(cfg.reference, &cfg.propulsion);
+    let surrogate = build(PropulsionKind::Surrogate, &PropulsionConfig::default());
+    assert_eq!(surrogate.name(), "surrogate");
+    let (r, s) = (reference.output(), surrogate.output());
+    assert_eq!(r.thrust_n, s.thrust_n);
+    assert_eq!(r.gas_pressure_pa, s.gas_pressure_pa);
+    assert_eq!(r.ejected_kg(), s.ejected_kg());
+    assert!(file.sparsity_pct > 0.0 && file.sparsity_pct < 100.0);
+    assert_eq!(file.provenance.reference, cfg.reference.as_str());
+}
+
+fn refusal(text: &str, bench_step_ns: u64) -> ModelFileError {
+    match ModelFile::parse(text) {
+        Err(e) => e,
+        Ok(f) => f.check_step(bench_step_ns).unwrap_err(),
+    }
+}
+
+#[test]
+fn bad_model_files_are_refused_clearly() {
+    let good = DEFAULT_MODEL_JSON;
+    assert!(ModelFile::parse(good)
+        .unwrap()
+        .check_step(10_000_000)
+        .is_ok());
+    assert_eq!(
+        ModelFile::parse(good)
+            .unwrap()
+            .check_step(20_000_000)
+            .unwrap(),
+        2
+    );
+
+    let wrong_version = good.replacen("\"version\": 1", "\"version\": 99", 1);
+    let e = refusal(&wrong_version, 10_000_000);
+    assert!(
+        matches!(e, ModelFileError::WrongVersion { found: 99 }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("version 99"));
+
+    let e = refusal(good, 15_000_000);
+    assert!(matches!(e, ModelFileError::SampleTime { .. }), "{e}");
+    assert!(e.to_string().contains("does not fit the bench step"));
+
+    let truncated = &good[..good.len() / 2];
+    let e = refusal(truncated, 10_000_000);
+    assert!(matches!(e, ModelFileError::Truncated { .. }), "{e}");
+
+    // A coefficient replaced by NaN (bare), by null (serde_json's NaN) and by an
+    // overflowing number.
+    let at = good.find("\"coef\": ").unwrap() + "\"coef\": ".len();
+    let end = at + good[at..].find(['\n', ',']).unwrap();
+    for bad in ["NaN", "null", "1e999"] {
+        let text = format!("{}{bad}{}", &good[..at], &good[end..]);
+        let e = refusal(&text, 10_000_000);
+        assert!(matches!(e, ModelFileError::Invalid(_)), "{bad}: {e}");
+        assert!(e.to_string().contains("non-finite"), "{bad}: {e}");
+    }
+
+    let other = good.replacen("oils-surrogate", "something-else", 1);
+    assert!(matches!(
+        refusal(&other, 10_000_000),
+        ModelFileError::WrongFormat(_)
+    ));
+
+    let missing = std::env::temp_dir().join("oils-no-such-model.json");
+    let e = SurrogatePropulsion::from_path(&missing, &PropulsionConfig::default(), 10_000_000)
+        .unwrap_err();
+    assert!(matches!(e, ModelFileError::Io { .. }));
+}
+
+/// Drives reference and surrogate with the same commands; returns (RMSE, max |error|) of
+/// thrust over all engines, and the surrogate's out-of-envelope count.
+fn compare(commands: &[EngineCommand]) -> (f64, f64, u64, f64) {
+    let cfg = committed_config();
+    let mut reference = build(cfg.reference, &cfg.propulsion);
+    let mut surrogate =
+        SurrogatePropulsion::default_model(&PropulsionConfig::default(), None).unwrap();
+    let (mut se, mut max, mut n) = (0.0, 0.0f64, 0.0);
+    let mut mass_err = 0.0f64;
+    for c in commands {
+        let r = reference.step(c, 10_000_000);
+        let s = surrogate.step(c, 10_000_000);
+        for e in 0..4 {
+            let d = s.thrust_n[e] - r.thrust_n[e];
+            se += d * d;
+            max = max.max(d.abs());
+            n += 1.0;
+        }
+        mass_err = mass_err.max((s.ejected_kg() - r.ejected_kg()).abs());
+    }
+    (
+        (se / n).sqrt(),
+        max,
+        surrogate.out_of_envelope_steps(),
+        mass_err,
+    )
+}
+
+#[test]
+fn surrogate_tracks_reference_on_unseen_excitation() {
+    // A different seed and time scale than training: new stairs, ramps, switching.
+    let ex = ExcitationConfig {
+        seed: 12345,
+        time_scale: 0.7,
+        amplitude_n: 150.0,
+        ..committed_config().excitation
+    }
+    .generate(10_000_000);
+    let commands: Vec<EngineCommand> = ex
+        .inputs
+        .iter()
+        .map(oils_emulator::surrogate::dataset::command_of)
+        .collect();
+    let (rmse, max, outside, mass_err) = compare(&commands);
+    // Half the paper's bounds: +-20 N transient -> 10 N; mass +-1.5 kg -> 0.75 kg.
+    assert!(rmse < 2.0, "thrust RMSE {rmse} N");
+    assert!(max < 10.0, "max thrust error {max} N");
+    assert!(mass_err < 0.75, "mass error {mass_err} kg");
+    assert_eq!(outside, 0);
+}
+
+#[test]
+fn commands_outside_the_envelope_are_counted() {
+    let inside = EngineCommand {
+        thrust_cmd_n: [600.0; 4],
+        on: [true; 4],
+    };
+    let mut below = inside;
+    below.thrust_cmd_n[1] = 50.0; // on, but far below the 320 N trained on
+    let mut s = SurrogatePropulsion::default_model(&PropulsionConfig::default(), None).unwrap();
+    for _ in 0..100 {
+        s.step(&inside, 10_000_000);
+    }
+    assert_eq!(
+        s.out_of_envelope_steps(),
+        0,
+        "outside during normal commands"
+    );
+    for _ in 0..10 {
+        s.step(&below, 10_000_000);
+    }
+    assert_eq!(
+        s.out_of_envelope_steps(),
+        10,
+        "outside after the low commands"
+    );
+}
