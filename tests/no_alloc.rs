@@ -161,7 +161,6 @@ fn step_paths_do_not_allocate() {
         "iceoryx2's per-loan allocation changed: tighten this proof"
     );
     assert_eq!(receive_allocs, 0, "receiving must not allocate");
-    let base = (std::process::id() as u64) << 24;
     const FROM: u64 = 1000;
     let base = (std::process::id() as u64) << 24;
     for (i, wait) in [
