@@ -86,7 +86,8 @@ mod tests {
             ..Default::default()
         };
         let (a, rejected) = sanitize(&cmd, 800.0);
-        assert_eq!(rejected, 2 + 1 + 1 + 2 + 2);
+        // Four bad thrusts, one bad on/off word, two bad torque components.
+        assert_eq!(rejected, 4 + 1 + 2);
         assert_eq!(a.engines.thrust_cmd_n, [0.0, 0.0, 0.0, 800.0]);
         assert_eq!(a.engines.on, [false, false, true, false]);
         assert_eq!(a.torque_cmd_body_nm, [0.0, 0.5, 0.0]);
