@@ -32,7 +32,9 @@ use std::str::FromStr;
 /// microsecond but burns a core; event wake-ups cost tens of microseconds but sleep.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum WaitStrategy {
-    /// Spin on the subscriber. Fastest; one core per waiting process.
+    /// Spin on the subscriber. Fastest; one core per waiting process. After
+    /// [`WaitStrategy::BUSY_YIELD_AFTER_NS`] of spinning it yields the CPU between polls, so
+    /// on a loaded machine a descheduled peer gets to run instead of waiting a time slice.
     BusyPoll,
     /// Block on the peer's event notification.
     Event,
@@ -47,6 +49,10 @@ impl WaitStrategy {
     /// Default spin window of the hybrid strategy: long enough to catch a peer that
     /// answers within one plant or GNC step, short enough not to starve a 2-core machine.
     pub const DEFAULT_SPIN_NS: u64 = 50_000;
+    /// Busy-poll spins this long before it starts yielding between polls: far longer than
+    /// a lockstep peer needs on a quiet machine (a few microseconds), far shorter than a
+    /// scheduler time slice.
+    pub const BUSY_YIELD_AFTER_NS: u64 = 20_000;
 
     /// Whether a sender using this strategy must notify its peer after each packet.
     pub fn notifies(&self) -> bool {
@@ -465,6 +471,8 @@ where
         deadline_ns: u64,
         stop: &AtomicBool,
     ) -> Result<Option<Rx>, LinkError> {
+        let started_ns = monotonic_ns();
+        let yield_after_ns = started_ns.saturating_add(WaitStrategy::BUSY_YIELD_AFTER_NS);
         let spin_until_ns = match self.wait {
             WaitStrategy::BusyPoll => deadline_ns,
             WaitStrategy::Event => 0,
@@ -484,7 +492,11 @@ where
                 return Err(LinkError::Interrupted);
             }
             if now < spin_until_ns {
-                core::hint::spin_loop();
+                if self.wait == WaitStrategy::BusyPoll && now > yield_after_ns {
+                    std::thread::yield_now();
+                } else {
+                    core::hint::spin_loop();
+                }
                 continue;
             }
             // Sleep on the peer's event, in slices of at most 1 ms so a peer that does not
