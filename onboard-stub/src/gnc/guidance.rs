@@ -397,3 +397,91 @@ impl Guidance {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::UnitQuaternion;
+
+    fn nav_at(t_s: f64, r: Vector3<f64>, v: Vector3<f64>, cfg: &GncConfig) -> NavSolution {
+        let radius = 1_737_400.0 + 1.2;
+        let rn = r.norm();
+        NavSolution {
+            t_s,
+            pos_mci_m: r,
+            vel_mci_m_s: v,
+            q_mci_from_body: UnitQuaternion::identity(),
+            rate_body_rad_s: Vector3::zeros(),
+            specific_force_body_m_s2: Vector3::zeros(),
+            altitude_m: rn - radius,
+            mass_kg: 1000.0,
+            up_mci: r / rn,
+            gravity_m_s2: cfg.moon_mu_m3_s2 / (rn * rn),
+        }
+    }
+
+    /// Fine braking alone on a point mass flying exactly the commanded acceleration:
+    /// E-guidance must deliver the target state, within the planned acceleration.
+    #[test]
+    fn fine_braking_reaches_its_target_state_within_the_acceleration_limit() {
+        let cfg = GncConfig::default();
+        let mut g = Guidance::new(&cfg);
+        let radius = 1_737_400.0 + 1.2;
+        let mut r = Vector3::new(radius + 6_800.0, 0.0, 0.0);
+        let mut v = Vector3::new(-40.0, 340.0, 0.0);
+        let (max_accel, min_accel) = (3.0, 1.2);
+        let dt = 0.01;
+        let mut t = 0.0;
+        let mut peak: f64 = 0.0;
+        loop {
+            let nav = nav_at(t, r, v, &cfg);
+            let cmd = g.update(&nav, max_accel, min_accel);
+            if g.phase() != Phase::FineBraking {
+                break;
+            }
+            peak = peak.max(cmd.accel_mci_m_s2.norm());
+            let a = cmd.accel_mci_m_s2 - r * (cfg.moon_mu_m3_s2 / r.norm().powi(3));
+            v += a * dt;
+            r += v * dt;
+            t += dt;
+            assert!(t < 1_000.0, "fine braking never ended");
+        }
+        let site = g.site().unwrap();
+        let up = site.target_mci_m.normalize();
+        let v_h = (v - up * v.dot(&up)).norm();
+        assert!(
+            (r - site.target_mci_m).norm() < 5.0,
+            "{}",
+            (r - site.target_mci_m).norm()
+        );
+        assert!(v_h < 0.5, "horizontal {v_h}");
+        assert!((v.dot(&up) - cfg.fine_target_vertical_speed_m_s).abs() < 0.5);
+        // Planned within fine_accel_fraction of the maximum (a little slack for the
+        // closed loop's replanning and the held command).
+        assert!(
+            peak <= 1.02 * cfg.fine_accel_fraction * max_accel,
+            "peak {peak}"
+        );
+    }
+
+    #[test]
+    fn starts_in_the_phase_that_fits_the_initial_state() {
+        let cfg = GncConfig::default();
+        let radius = 1_737_400.0 + 1.2;
+        let start = |h: f64, v_h: f64| {
+            let mut g = Guidance::new(&cfg);
+            let nav = nav_at(
+                0.0,
+                Vector3::new(radius + h, 0.0, 0.0),
+                Vector3::new(0.0, v_h, 0.0),
+                &cfg,
+            );
+            g.update(&nav, 3.0, 1.2);
+            g.phase()
+        };
+        assert_eq!(start(30_000.0, 1_680.0), Phase::RoughBraking);
+        assert_eq!(start(5_000.0, 200.0), Phase::FineBraking);
+        assert_eq!(start(500.0, 0.0), Phase::TerminalDescent);
+        assert_eq!(start(20.0, 0.0), Phase::FinalDescent);
+    }
+}
