@@ -5,6 +5,7 @@
 //! back per-engine thrust and the propellant it ejected. Models own their propellant
 //! accounting: the vehicle mass is the initial mass minus what the model reports ejected.
 
+pub mod hifi;
 pub mod ideal;
 
 use crate::config::PropulsionConfig;
@@ -71,6 +72,8 @@ pub trait Propulsion: Send {
 pub enum PropulsionKind {
     /// First-order thrust lag; quick tests.
     Ideal,
+    /// Lumped-parameter physics of the pressure-fed system: the truth model.
+    Hifi,
 }
 
 impl PropulsionKind {
@@ -78,13 +81,35 @@ impl PropulsionKind {
     pub fn as_str(&self) -> &'static str {
         match self {
             PropulsionKind::Ideal => "ideal",
+            PropulsionKind::Hifi => "hifi",
         }
     }
 }
 
 /// Builds the model chosen in the configuration. Allocation happens here, once.
+///
+/// `hifi` is built with its default parameters.
+///
+/// # Panics
+/// For `hifi` only, when the scenario's propellant load does not fit the default tanks
+/// (or another `PropulsionConfig` value is unusable by it). Use
+/// [`build_with_hifi_params`] to get that as an error instead.
 pub fn build(kind: PropulsionKind, cfg: &PropulsionConfig) -> Box<dyn Propulsion> {
-    match kind {
-        PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
+    match build_with_hifi_params(kind, cfg, &hifi::HifiParams::default()) {
+        Ok(model) => model,
+        Err(e) => panic!("cannot build the {} propulsion model: {e}", kind.as_str()),
     }
+}
+
+/// Builds the model chosen in the configuration, with explicit `hifi` parameters
+/// (ignored by the other models). Allocation happens here, once.
+pub fn build_with_hifi_params(
+    kind: PropulsionKind,
+    cfg: &PropulsionConfig,
+    hifi_params: &hifi::HifiParams,
+) -> Result<Box<dyn Propulsion>, hifi::HifiError> {
+    Ok(match kind {
+        PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
+        PropulsionKind::Hifi => Box::new(hifi::HifiPropulsion::new(hifi_params, cfg)?),
+    })
 }

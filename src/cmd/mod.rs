@@ -1,0 +1,3 @@
+//! Subcommands of the `oils` binary.
+
+pub mod hifi;
