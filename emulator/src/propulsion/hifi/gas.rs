@@ -25,6 +25,8 @@ pub struct Helium {
     c: f64,
     /// Critical pressure ratio `(2/(gamma+1))^(gamma/(gamma-1))`.
     critical_ratio: f64,
+    /// The subsonic flow function `r^(2/g) - r^((g+1)/g)` at the critical ratio.
+    critical_psi2: f64,
     /// Subsonic factor `2 gamma / (gamma - 1)`.
     subsonic_factor: f64,
 }
@@ -33,13 +35,15 @@ impl Helium {
     /// Properties from parameters.
     pub fn new(p: &HeliumParams) -> Self {
         let g = p.gamma;
+        let rc = (2.0 / (g + 1.0)).powf(g / (g - 1.0));
         Self {
             r: p.gas_constant_j_kg_k,
             cv: p.gas_constant_j_kg_k / (g - 1.0),
             gamma: g,
             b: p.virial_b_m3_kg,
             c: p.virial_c_m6_kg2,
-            critical_ratio: (2.0 / (g + 1.0)).powf(g / (g - 1.0)),
+            critical_ratio: rc,
+            critical_psi2: rc.powf(2.0 / g) - rc.powf((g + 1.0) / g),
             subsonic_factor: 2.0 * g / (g - 1.0),
         }
     }
@@ -124,8 +128,11 @@ impl Helium {
         // Below the critical ratio the flow is choked: the flux stays at its value at
         // the critical ratio (evaluated with the same blend, so the two branches join
         // exactly).
-        let r = ratio.max(self.critical_ratio);
-        let psi2 = r.powf(2.0 / g) - r.powf((g + 1.0) / g);
+        let psi2 = if ratio <= self.critical_ratio {
+            self.critical_psi2
+        } else {
+            ratio.powf(2.0 / g) - ratio.powf((g + 1.0) / g)
+        };
         // psi2 ~ (g-1)/g (1 - ratio) near ratio 1: blend there.
         let psi2_laminar = (g - 1.0) / g * laminar_frac;
         scale * self.subsonic_factor.sqrt() * soft_sqrt(psi2.max(0.0), psi2_laminar)

@@ -186,7 +186,7 @@ pub struct RegulatorParams {
 impl Default for RegulatorParams {
     fn default() -> Self {
         Self {
-            lockup_pressure_pa: 17.4e5,
+            lockup_pressure_pa: 17.3e5,
             sensing_area_m2: 2e-4,
             spring_rate_n_m: 1.06e5,
             moving_mass_kg: 0.067,
