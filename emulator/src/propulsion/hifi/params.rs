@@ -191,7 +191,7 @@ impl Default for RegulatorParams {
             spring_rate_n_m: 1.06e5,
             moving_mass_kg: 0.067,
             damping_ratio: 0.5,
-            seat_diameter_m: 2e-3,
+            seat_diameter_m: 4e-3,
             discharge_coefficient: 0.8,
             unbalanced_area_m2: 8e-8,
             outlet_volume_m3: 5e-4,
