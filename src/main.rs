@@ -29,6 +29,8 @@ enum Cmd {
     Run(Box<RunCmd>),
     /// Turn a run log into CSV.
     Export(ExportArgs),
+    /// Drive the high-fidelity propulsion model open loop with a profile, or draw its figures.
+    Hifi(cmd::hifi::HifiArgs),
     /// Train the propulsion surrogate (seed paper): excitation, data, Lasso, CV, model file.
     Train(cmd::train::TrainArgs),
     /// Run the onboard stub (what `oils run` spawns; also usable by hand).
@@ -73,6 +75,7 @@ fn real_main() -> anyhow::Result<()> {
     match cli.command {
         Cmd::Run(cmd) => run(*cmd),
         Cmd::Export(a) => export(&a),
+        Cmd::Hifi(a) => cmd::hifi::run(&a),
         Cmd::Train(a) => cmd::train::run(&a),
         Cmd::Stub(a) => {
             let stop =

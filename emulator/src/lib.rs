@@ -11,6 +11,7 @@
 pub mod config;
 pub mod digest;
 pub mod plant;
+pub mod plot;
 pub mod propulsion;
 pub mod recorder;
 pub mod report;

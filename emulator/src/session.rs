@@ -56,9 +56,13 @@ pub struct RunArgs {
     /// Longest simulated time, seconds; the run ends `completed` if still flying.
     #[arg(long, default_value_t = 2000.0)]
     pub duration: f64,
-    /// Propulsion model: ideal (first-order lag) or surrogate (the learned model).
+    /// Propulsion model: ideal (first-order lag), hifi (physics, the truth model) or
+    /// surrogate (the learned model).
     #[arg(long, default_value = "ideal")]
     pub propulsion: String,
+    /// Hifi parameter TOML for `--propulsion hifi` (default: emulator/config/hifi.toml's values).
+    #[arg(long)]
+    pub hifi_params: Option<PathBuf>,
     /// Surrogate model file for `--propulsion surrogate` (default: the committed model).
     #[arg(long)]
     pub model: Option<PathBuf>,
@@ -308,6 +312,7 @@ pub fn run_session(
     let kind = args.propulsion_kind()?;
     let files = ModelFiles {
         surrogate_model: args.model.clone(),
+        hifi_params: args.hifi_params.clone(),
     };
     let propulsion = build_for_bench(kind, &scenario.propulsion, &files, sched.dt_ns)?;
     let mut plant = Plant::new(&scenario, propulsion, args.seed)?;

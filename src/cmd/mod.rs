@@ -1,3 +1,4 @@
 //! Subcommands of the `oils` binary.
 
+pub mod hifi;
 pub mod train;

@@ -5,6 +5,7 @@
 //! back per-engine thrust and the propellant it ejected. Models own their propellant
 //! accounting: the vehicle mass is the initial mass minus what the model reports ejected.
 
+pub mod hifi;
 pub mod ideal;
 
 use crate::config::PropulsionConfig;
@@ -71,8 +72,10 @@ pub trait Propulsion: Send {
 pub enum PropulsionKind {
     /// First-order thrust lag; quick tests.
     Ideal,
+    /// Lumped-parameter physics of the pressure-fed system: the truth model.
+    Hifi,
     /// The learned sparse surrogate (seed paper); the committed default model unless a
-    /// model file is given to [`surrogate_from_path`].
+    /// model file is given.
     Surrogate,
 }
 
@@ -81,6 +84,7 @@ impl PropulsionKind {
     pub fn as_str(&self) -> &'static str {
         match self {
             PropulsionKind::Ideal => "ideal",
+            PropulsionKind::Hifi => "hifi",
             PropulsionKind::Surrogate => "surrogate",
         }
     }
@@ -91,32 +95,24 @@ impl std::str::FromStr for PropulsionKind {
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s {
             "ideal" => Ok(PropulsionKind::Ideal),
+            "hifi" => Ok(PropulsionKind::Hifi),
             "surrogate" => Ok(PropulsionKind::Surrogate),
             other => Err(format!(
-                "unknown propulsion model `{other}` (expected ideal or surrogate)"
+                "unknown propulsion model `{other}` (expected ideal, hifi or surrogate)"
             )),
         }
     }
 }
 
-/// Builds the model chosen in the configuration. Allocation happens here, once.
-pub fn build(kind: PropulsionKind, cfg: &PropulsionConfig) -> Box<dyn Propulsion> {
-    match kind {
-        PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
-        PropulsionKind::Surrogate => Box::new(
-            // The default model is compiled in and checked by the test
-            // `committed_default_model_loads`, so this cannot fail on user input.
-            crate::surrogate::runtime::SurrogatePropulsion::default_model(cfg, None)
-                .unwrap_or_else(|e| panic!("committed default surrogate model: {e}")),
-        ),
-    }
-}
-
-/// Files some models load, chosen on the command line.
+/// Files some models load, chosen on the command line. `None`: the defaults (the
+/// committed surrogate model compiled in; `HifiParams::default()`, equal to
+/// `emulator/config/hifi.toml`).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ModelFiles {
-    /// Surrogate model file (default: the committed model, compiled in).
+    /// Surrogate model file.
     pub surrogate_model: Option<std::path::PathBuf>,
+    /// Hifi parameter TOML.
+    pub hifi_params: Option<std::path::PathBuf>,
 }
 
 /// A propulsion model could not be built for the bench.
@@ -125,6 +121,9 @@ pub enum BuildError {
     /// The surrogate model file was refused.
     #[error(transparent)]
     Surrogate(#[from] crate::surrogate::model_file::ModelFileError),
+    /// The hifi parameters were refused.
+    #[error(transparent)]
+    Hifi(#[from] hifi::HifiError),
 }
 
 /// Builds the model a bench run asked for, checked against the bench step.
@@ -138,6 +137,13 @@ pub fn build_for_bench(
     use crate::surrogate::runtime::SurrogatePropulsion;
     Ok(match kind {
         PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
+        PropulsionKind::Hifi => {
+            let params = match &files.hifi_params {
+                Some(path) => hifi::HifiParams::load(path)?,
+                None => hifi::HifiParams::default(),
+            };
+            Box::new(hifi::HifiPropulsion::new(&params, cfg)?)
+        }
         PropulsionKind::Surrogate => match &files.surrogate_model {
             Some(path) => Box::new(SurrogatePropulsion::from_path(path, cfg, bench_step_ns)?),
             None => Box::new(SurrogatePropulsion::default_model(
@@ -148,15 +154,25 @@ pub fn build_for_bench(
     })
 }
 
-/// The surrogate loaded from a model file, for a bench stepping every `bench_step_ns`.
-/// Refuses (typed error) a file of the wrong version, a truncated or non-finite one, or
-/// one whose sample time does not divide the bench step.
-pub fn surrogate_from_path(
-    path: &std::path::Path,
+/// Builds a model with default files, for tests and tools.
+///
+/// # Panics
+/// When the defaults cannot be built for `cfg` (a `hifi` whose default tanks cannot hold
+/// the scenario's propellant): use [`build_for_bench`] to get that as an error.
+pub fn build(kind: PropulsionKind, cfg: &PropulsionConfig) -> Box<dyn Propulsion> {
+    // The committed surrogate's sample time is the default bench step, 10 ms.
+    build_for_bench(kind, cfg, &ModelFiles::default(), 10_000_000)
+        .unwrap_or_else(|e| panic!("cannot build the {} propulsion model: {e}", kind.as_str()))
+}
+
+/// Builds a model with explicit `hifi` parameters (ignored by the other models).
+pub fn build_with_hifi_params(
+    kind: PropulsionKind,
     cfg: &PropulsionConfig,
-    bench_step_ns: u64,
-) -> Result<Box<dyn Propulsion>, crate::surrogate::model_file::ModelFileError> {
-    Ok(Box::new(
-        crate::surrogate::runtime::SurrogatePropulsion::from_path(path, cfg, bench_step_ns)?,
-    ))
+    hifi_params: &hifi::HifiParams,
+) -> Result<Box<dyn Propulsion>, BuildError> {
+    match kind {
+        PropulsionKind::Hifi => Ok(Box::new(hifi::HifiPropulsion::new(hifi_params, cfg)?)),
+        other => build_for_bench(other, cfg, &ModelFiles::default(), 10_000_000),
+    }
 }
