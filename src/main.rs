@@ -51,9 +51,16 @@ struct RunCmd {
 struct ExportArgs {
     /// The log file (`.oilslog`).
     log: PathBuf,
-    /// Write CSV here.
+    /// Write every step as CSV here.
+    #[arg(long, required_unless_present = "profile")]
+    csv: Option<PathBuf>,
+    /// Write the applied commands as a thrust-command profile CSV here (replayable with
+    /// `oils run --fsw playback`, `oils hifi`, `oils validate`).
     #[arg(long)]
-    csv: PathBuf,
+    profile: Option<PathBuf>,
+    /// With --profile: keep one step in N (rows hold until the next).
+    #[arg(long, default_value_t = 1)]
+    every: usize,
 }
 
 /// Errors print as one chain of causes (no backtrace, whatever RUST_BACKTRACE says)
@@ -155,23 +162,41 @@ fn reap_stub(mut child: Child) -> Result<(), String> {
 
 fn export(a: &ExportArgs) -> anyhow::Result<()> {
     let log = oils_emulator::recorder::read_log(&a.log)?;
-    let file =
-        std::fs::File::create(&a.csv).with_context(|| format!("creating {}", a.csv.display()))?;
-    let mut out = std::io::BufWriter::new(file);
-    oils_emulator::recorder::export_csv(&log, &mut out)
-        .with_context(|| format!("writing {}", a.csv.display()))?;
-    eprintln!(
-        "oils export: {} records to {}{}",
-        log.records.len(),
-        a.csv.display(),
-        if log.trailing_bytes > 0 {
-            format!(
-                " ({} trailing bytes of a torn record ignored)",
-                log.trailing_bytes
-            )
-        } else {
-            String::new()
-        }
-    );
+    let torn = if log.trailing_bytes > 0 {
+        format!(
+            " ({} trailing bytes of a torn record ignored)",
+            log.trailing_bytes
+        )
+    } else {
+        String::new()
+    };
+    if let Some(csv) = &a.csv {
+        let file =
+            std::fs::File::create(csv).with_context(|| format!("creating {}", csv.display()))?;
+        let mut out = std::io::BufWriter::new(file);
+        oils_emulator::recorder::export_csv(&log, &mut out)
+            .with_context(|| format!("writing {}", csv.display()))?;
+        eprintln!(
+            "oils export: {} records to {}{torn}",
+            log.records.len(),
+            csv.display()
+        );
+    }
+    if let Some(path) = &a.profile {
+        // The engine rating the run used is in the log's header.
+        let header: serde_json::Value =
+            serde_json::from_str(&log.header_json).context("log header is not JSON")?;
+        let max_thrust_n = header["scenario"]["propulsion"]["max_thrust_n"]
+            .as_f64()
+            .context("log header lacks scenario.propulsion.max_thrust_n")?;
+        let profile = oils_emulator::recorder::commands_as_profile(&log, a.every, max_thrust_n)?;
+        std::fs::write(path, profile.to_csv())
+            .with_context(|| format!("writing {}", path.display()))?;
+        eprintln!(
+            "oils export: {} profile rows to {}{torn}",
+            profile.rows().len(),
+            path.display()
+        );
+    }
     Ok(())
 }

@@ -374,3 +374,69 @@ mod tests {
         assert!(matches!(read_log(&path), Err(RecorderError::Io { .. })));
     }
 }
+
+/// The commands a run applied, as a thrust-command profile (replay a closed-loop run
+/// open loop: `oils run --fsw playback`, `oils hifi`, `oils validate`). Values pass
+/// through the same sanitiser as in the run, so the profile holds what the plant got.
+/// `every` keeps one step in `every` (each row holds until the next), `max_thrust_n` is
+/// the engine rating the run used. Thrusts are rounded to 0.01 N, far below any throttle
+/// valve's resolution (quantisation 0.1-0.5 % of 800 N), to keep profiles small.
+pub fn commands_as_profile(
+    log: &Log,
+    every: usize,
+    max_thrust_n: f64,
+) -> Result<oils_shared::profile::ThrustProfile, oils_shared::profile::ProfileError> {
+    let rows = log
+        .records
+        .iter()
+        .filter(|r| r.flags & REC_COMMAND_RECEIVED != 0)
+        .step_by(every.max(1))
+        .map(|r| {
+            let (applied, _) = crate::sanitize::sanitize(&r.command, max_thrust_n);
+            oils_shared::profile::ProfileRow {
+                t_ns: r.telemetry.header.t_ns,
+                thrust_cmd_n: applied
+                    .engines
+                    .thrust_cmd_n
+                    .map(|t| (t * 100.0).round() / 100.0),
+                on: applied.engines.on,
+            }
+        })
+        .collect();
+    oils_shared::profile::ThrustProfile::from_rows(rows)
+}
+
+#[cfg(test)]
+mod profile_tests {
+    use super::*;
+
+    #[test]
+    fn applied_commands_become_a_profile() {
+        let mut records = Vec::new();
+        for k in 0..10u64 {
+            let mut r = Record {
+                flags: REC_COMMAND_RECEIVED,
+                ..Default::default()
+            };
+            r.telemetry.header.t_ns = k as i64 * 10_000_000;
+            r.command.thrust_cmd_n = [400.0 + k as f64 + 0.004, f64::NAN, 900.0, 500.0];
+            r.command.engine_on = [1, 1, 1, 0];
+            records.push(r);
+        }
+        records.push(Record {
+            flags: REC_END_OF_RUN,
+            ..Default::default()
+        });
+        let log = Log {
+            header_json: "{}".into(),
+            records,
+            trailing_bytes: 0,
+        };
+        let p = commands_as_profile(&log, 5, 800.0).unwrap();
+        assert_eq!(p.rows().len(), 2);
+        let r = p.rows()[1];
+        assert_eq!(r.t_ns, 50_000_000);
+        assert_eq!(r.thrust_cmd_n, [405.0, 0.0, 800.0, 500.0]);
+        assert_eq!(r.on, [true, false, true, false]);
+    }
+}

@@ -331,6 +331,10 @@ fn halving_the_substep_changes_thrust_by_less_than_0_1_n_over_a_descent() {
             }
         }
     }
+    eprintln!(
+        "halving the sub-step: worst thrust change {} N at {} s",
+        worst.0, worst.1
+    );
     assert!(
         worst.0 < 0.1,
         "thrust changed by {} N at {} s",

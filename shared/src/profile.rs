@@ -184,7 +184,7 @@ impl ThrustProfile {
         s.push_str(PROFILE_HEADER);
         s.push('\n');
         for r in &self.rows {
-            let _ = write!(s, "{}", r.t_ns as f64 * 1e-9);
+            write_seconds(&mut s, r.t_ns);
             for c in r.thrust_cmd_n {
                 let _ = write!(s, ",{c}");
             }
@@ -194,6 +194,21 @@ impl ThrustProfile {
             s.push('\n');
         }
         s
+    }
+}
+
+/// Writes integer nanoseconds as exact decimal seconds (`894.3`, not the float
+/// `894.3000000000001`), so profiles read back to the same nanosecond.
+fn write_seconds(s: &mut String, t_ns: i64) {
+    if t_ns < 0 {
+        s.push('-');
+    }
+    let abs = t_ns.unsigned_abs();
+    let (secs, nanos) = (abs / 1_000_000_000, abs % 1_000_000_000);
+    let _ = write!(s, "{secs}");
+    if nanos != 0 {
+        let frac = format!("{nanos:09}");
+        let _ = write!(s, ".{}", frac.trim_end_matches('0'));
     }
 }
 
@@ -219,6 +234,25 @@ mod tests {
     fn round_trips_through_csv() {
         let p = ThrustProfile::parse(TEXT).unwrap();
         assert_eq!(ThrustProfile::parse(&p.to_csv()).unwrap(), p);
+        let row = |t_ns| ProfileRow {
+            t_ns,
+            thrust_cmd_n: [1.0; 4],
+            on: [true; 4],
+        };
+        let q = ThrustProfile::from_rows(vec![
+            row(-5_000_000),
+            row(894_300_000_000),
+            row(894_300_000_001),
+        ])
+        .unwrap();
+        let csv = q.to_csv();
+        assert!(
+            csv.contains("\n-0.005,")
+                && csv.contains("\n894.3,")
+                && csv.contains("\n894.300000001,"),
+            "{csv}"
+        );
+        assert_eq!(ThrustProfile::parse(&csv).unwrap(), q);
     }
 
     #[test]
