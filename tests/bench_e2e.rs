@@ -259,3 +259,33 @@ fn malformed_profile_names_the_line() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("line 3"), "{err}");
 }
+
+#[test]
+fn rt_priority_runs_or_says_why_not() {
+    let dir = scratch("rtprio");
+    let rep = dir.join("report.json");
+    let out = run_oils(&[
+        "run",
+        "--mode",
+        "realtime",
+        "--speed",
+        "10",
+        "--duration",
+        "1",
+        "--no-log",
+        "--rt-priority",
+        "5",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    if out.status.success() {
+        // Permitted (root or CAP_SYS_NICE): the run paced all its steps.
+        assert_eq!(report(&rep)["steps"], 100);
+    } else {
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("--rt-priority 5") && err.contains("CAP_SYS_NICE"),
+            "{err}"
+        );
+    }
+}

@@ -109,6 +109,11 @@ pub struct RunArgs {
     /// How long to wait for the stub to connect, milliseconds.
     #[arg(long, default_value_t = 10000)]
     pub startup_timeout_ms: u64,
+    /// Run the emulator (and the stub it spawns) under SCHED_FIFO at this priority (1-99)
+    /// with memory locked: the way to a tight realtime wake error on a busy machine.
+    /// Needs root or CAP_SYS_NICE.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: Option<i32>,
     /// Run id (hex); default: a fresh one. It names the run's iceoryx2 services.
     #[arg(long)]
     pub run_id: Option<String>,
@@ -152,6 +157,15 @@ pub enum SessionError {
     /// Scheduler failure.
     #[error(transparent)]
     Scheduler(#[from] SchedulerError),
+    /// Real-time priority refused by the OS.
+    #[error("--rt-priority {priority} (needs root or CAP_SYS_NICE)")]
+    RealtimePriority {
+        /// The priority asked for.
+        priority: i32,
+        /// The OS error.
+        #[source]
+        source: std::io::Error,
+    },
     /// Propulsion model could not be built.
     #[error("propulsion")]
     Propulsion(#[from] crate::propulsion::BuildError),
@@ -317,6 +331,10 @@ pub fn run_session(
     let propulsion = build_for_bench(kind, &scenario.propulsion, &files, sched.dt_ns)?;
     let mut plant = Plant::new(&scenario, propulsion, args.seed)?;
 
+    if let Some(priority) = args.rt_priority {
+        oils_shared::clock::set_realtime_priority(priority)
+            .map_err(|source| SessionError::RealtimePriority { priority, source })?;
+    }
     let node = create_node("oils-emulator")?;
     let link = EmulatorLink::create(&node, run_id, wait)?;
     let log_path = if args.no_log {

@@ -37,6 +37,10 @@ pub struct StubArgs {
     /// Give up after this long without telemetry, milliseconds.
     #[arg(long, default_value_t = 5000)]
     pub timeout_ms: u64,
+    /// Run under SCHED_FIFO at this priority (1-99) with memory locked (root or
+    /// CAP_SYS_NICE). A stub spawned by `oils run --rt-priority` inherits it anyway.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: Option<i32>,
     /// How long to wait for the emulator's services to appear, milliseconds.
     #[arg(long, default_value_t = 10000)]
     pub startup_timeout_ms: u64,
@@ -89,6 +93,13 @@ pub fn run_stub(args: &StubArgs, stop: &AtomicBool) -> Result<StubSummary, StubC
         })?),
         None => None,
     };
+    if let Some(priority) = args.rt_priority {
+        oils_shared::clock::set_realtime_priority(priority).map_err(|e| {
+            StubCliError::Argument(format!(
+                "--rt-priority {priority}: {e} (needs root or CAP_SYS_NICE)"
+            ))
+        })?;
+    }
     let mut fsw = build_fsw(args.fsw, args.profile.as_ref())?;
     let node = create_node("oils-onboard-stub")?;
     let link = StubLink::open(&node, run_id, wait, args.startup_timeout_ms, stop)?;
