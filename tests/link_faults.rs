@@ -263,3 +263,38 @@ fn a_peer_speaking_another_protocol_is_refused_by_name() {
     let e = r["error"].as_str().unwrap();
     assert!(e.contains("v1") && e.contains("v99"), "{e}");
 }
+
+#[test]
+fn a_stub_refuses_an_emulator_announcing_another_protocol() {
+    use iceoryx2::prelude::*;
+    use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
+    use oils_shared::link::attribute_keys;
+    let id = run_id(4);
+    let run = u64::from_str_radix(&id, 16).unwrap();
+    // Play an emulator built from protocol v99: announce it on the telemetry-ready event.
+    let node = create_node("fake-emulator").unwrap();
+    let attrs = AttributeSpecifier::new()
+        .define(
+            &AttributeKey::new(attribute_keys::PROTOCOL_VERSION.as_bytes()).unwrap(),
+            &AttributeValue::new(b"99").unwrap(),
+        )
+        .unwrap()
+        .define(
+            &AttributeKey::new(attribute_keys::SCHEMA_HASH.as_bytes()).unwrap(),
+            &AttributeValue::new(b"0xbad").unwrap(),
+        )
+        .unwrap();
+    let name = oils_shared::service::RunServices::new(run).telemetry_event();
+    let _event = node
+        .service_builder(&ServiceName::new(name.as_str()).unwrap())
+        .event()
+        .create_with_attributes(&attrs)
+        .unwrap();
+    let out = run_oils(&["stub", "--run-id", &id, "--startup-timeout-ms", "3000"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("v1") && err.contains("v99") && err.contains("0x0000000000000bad"),
+        "{err}"
+    );
+}
