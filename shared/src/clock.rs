@@ -39,18 +39,6 @@ pub fn sleep_until_ns(deadline_ns: u64, spin_ns: u64) {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn never_wakes_early() {
-        let target = monotonic_ns() + 2_000_000;
-        sleep_until_ns(target, 100_000);
-        assert!(monotonic_ns() >= target);
-    }
-}
-
 /// Puts the calling process under `SCHED_FIFO` at `priority` (1-99) and locks its memory
 /// (`mlockall`), as real-time benches do: the kernel then wakes the stepping loop ahead
 /// of ordinary work, and no page fault lands in a step. Children spawned afterwards
@@ -74,4 +62,16 @@ pub fn set_realtime_priority(priority: i32) -> std::io::Result<()> {
         return Err(std::io::Error::last_os_error());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn never_wakes_early() {
+        let target = monotonic_ns() + 2_000_000;
+        sleep_until_ns(target, 100_000);
+        assert!(monotonic_ns() >= target);
+    }
 }
