@@ -23,6 +23,9 @@ pub struct Case {
     pub steady: Vec<bool>,
 }
 
+/// Window after an engine switches on that counts as its start transient, seconds.
+pub const START_S: f64 = 0.5;
+
 /// Settling time after a command change before a step counts as steady state, seconds.
 pub const SETTLE_S: f64 = 1.0;
 
@@ -131,6 +134,9 @@ pub struct CaseErrors {
     pub rms_thrust_n: f64,
     /// Largest |thrust error| over steady-state steps, N.
     pub max_steady_thrust_n: f64,
+    /// Largest |thrust error| outside engine starts (an engine switched on within the
+    /// last [`START_S`]), N: separates the start transient from the rest.
+    pub max_after_start_n: f64,
     /// Largest |error| of total ejected propellant mass, kg.
     pub max_mass_kg: f64,
     /// Steps whose inputs were outside the model's training envelope.
@@ -143,13 +149,25 @@ pub fn evaluate(model: &Model, case: &Case, truth: &Dataset) -> (CaseErrors, Vec
     let mut e = CaseErrors::default();
     let mut se = 0.0;
     let mut ys = Vec::with_capacity(truth.len());
+    let start_steps = (START_S * 1e9 / truth.sample_time_ns as f64).round() as usize;
+    let mut last_start = [None::<usize>; ENGINE_COUNT];
     for t in 0..truth.len() {
+        for k in 0..ENGINE_COUNT {
+            let was_on = t > 0 && truth.inputs[t - 1][ENGINE_COUNT + k] > 0.5;
+            if truth.inputs[t][ENGINE_COUNT + k] > 0.5 && !was_on {
+                last_start[k] = Some(t);
+            }
+        }
+        let starting = last_start.iter().any(|s| s.is_some_and(|s| t < s + start_steps));
         let y = p.step(&truth.inputs[t]);
         let r = &truth.states[t];
         for k in 0..ENGINE_COUNT {
             let d = (y[k] - r[k]).abs();
             e.max_thrust_n = e.max_thrust_n.max(d);
             se += d * d;
+            if !starting {
+                e.max_after_start_n = e.max_after_start_n.max(d);
+            }
             if case.steady[t] {
                 e.max_steady_thrust_n = e.max_steady_thrust_n.max(d);
             }
@@ -208,17 +226,18 @@ pub fn goal_of(case: &str) -> &'static str {
 pub fn table(results: &[CaseResult], names: &[&str]) -> String {
     use std::fmt::Write as _;
     let mut s = String::from(
-        "| case | model | max thrust err (N) | RMS thrust err (N) | max steady err (N) | max mass err (kg) | out-of-envelope steps | goal |\n|---|---|---|---|---|---|---|---|\n",
+        "| case | model | max thrust err (N) | max outside starts (N) | RMS thrust err (N) | max steady err (N) | max mass err (kg) | out-of-envelope steps | goal |\n|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in results {
         for (i, (e, _)) in r.runs.iter().enumerate() {
             let _ = writeln!(
                 s,
-                "| {} ({:.0} s) | {} | {:.2} | {:.3} | {:.2} | {:.3} | {} | {} |",
+                "| {} ({:.0} s) | {} | {:.2} | {:.2} | {:.3} | {:.2} | {:.3} | {} | {} |",
                 r.case.name,
                 r.truth.len() as f64 * r.truth.sample_time_ns as f64 * 1e-9,
                 names.get(i).copied().unwrap_or("?"),
                 e.max_thrust_n,
+                e.max_after_start_n,
                 e.rms_thrust_n,
                 e.max_steady_thrust_n,
                 e.max_mass_kg,
