@@ -34,7 +34,7 @@ fn fig2(res: &CvResult, path: &Path) -> Result<(), PlotError> {
         &title,
         &[
             Panel {
-                log_y: true,
+                log_y: false,
                 ..Panel::new(
                     "thrust RMSE, CV mean, best mu per n",
                     "history length n",
@@ -52,7 +52,7 @@ fn fig2(res: &CvResult, path: &Path) -> Result<(), PlotError> {
                 )
             },
             Panel {
-                log_y: true,
+                log_y: false,
                 ..Panel::new(
                     "selection score (mean free-run RMSE / output std)",
                     "history length n",

@@ -158,7 +158,9 @@ pub fn evaluate(model: &Model, case: &Case, truth: &Dataset) -> (CaseErrors, Vec
                 last_start[k] = Some(t);
             }
         }
-        let starting = last_start.iter().any(|s| s.is_some_and(|s| t < s + start_steps));
+        let starting = last_start
+            .iter()
+            .any(|s| s.is_some_and(|s| t < s + start_steps));
         let y = p.step(&truth.inputs[t]);
         let r = &truth.states[t];
         for k in 0..ENGINE_COUNT {
