@@ -33,6 +33,12 @@ pub struct TrainArgs {
     /// No progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// Descent profile for the held-out free-run check (never used for training).
+    #[arg(long, default_value = "emulator/data/descent-profile.csv")]
+    pub descent: PathBuf,
+    /// Skip the held-out free-run checks against the reference model.
+    #[arg(long)]
+    pub no_holdout: bool,
 }
 
 /// Progress bars on stderr (hidden when stderr is not a terminal).
@@ -127,14 +133,64 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             );
         }
     }
-    print!("{}", report::summary(&outcome, cfg.top_terms));
+    let figures = oils_emulator::surrogate::figures::write_figures(&outcome, &args.out)
+        .context("drawing the figures")?;
+    let mut summary = report::summary(&outcome, cfg.top_terms);
+    let mut holdout_pngs = Vec::new();
+    if !args.no_holdout {
+        let (text, pngs) = holdout(&cfg, &outcome, args)?;
+        summary.push_str(&text);
+        holdout_pngs = pngs;
+    }
+    std::fs::write(args.out.join("summary.md"), &summary).context("writing summary.md")?;
+    print!("{summary}");
     println!(
         "\ntraining took {train_s:.1} s; reports in {}:",
         args.out.display()
     );
-    for p in written {
+    for p in written.iter().chain(&figures).chain(&holdout_pngs) {
         println!("  {}", p.display());
     }
     println!("  {}", model_path.display());
     Ok(())
+}
+
+/// Free runs of every trained model against the reference on the held-out cases (sine,
+/// stair, descent profile); returns the summary section and the figures written.
+fn holdout(
+    cfg: &TrainConfig,
+    outcome: &oils_emulator::surrogate::TrainOutcome,
+    args: &TrainArgs,
+) -> Result<(String, Vec<PathBuf>)> {
+    use oils_emulator::surrogate::holdout::{run_cases, table, Case};
+    let dt = cfg.sample_time_ns;
+    let mut cases = vec![Case::sine(dt), Case::stair(dt)];
+    let mut note = String::new();
+    match oils_shared::profile::ThrustProfile::load(&args.descent) {
+        Ok(p) => cases.push(Case::from_profile("descent", &p, dt)),
+        Err(e) => note = format!("(descent case skipped: {e})\n"),
+    }
+    let hifi = oils_emulator::surrogate::hifi_params_of(cfg)?;
+    let reference = || {
+        oils_emulator::propulsion::build_with_hifi_params(cfg.reference, &cfg.propulsion, &hifi)
+            .unwrap_or_else(|e| unreachable!("the reference was built for training: {e}"))
+    };
+    let models: Vec<_> = outcome.models.iter().map(|m| &m.model).collect();
+    let names: Vec<&str> = outcome.models.iter().map(|m| m.variant.as_str()).collect();
+    let t0 = Instant::now();
+    let results = run_cases(cases, &reference, &models, dt);
+    let mut text = format!(
+        "\n## Held-out free runs against {} ({:.1} s)\n\n{note}",
+        cfg.reference.as_str(),
+        t0.elapsed().as_secs_f64()
+    );
+    text.push_str(&table(&results, &names));
+    let mut pngs = Vec::new();
+    for r in &results {
+        let p = args.out.join(format!("holdout_{}.png", r.case.name));
+        oils_emulator::surrogate::figures::holdout(r, &names, &p)
+            .with_context(|| format!("drawing {}", p.display()))?;
+        pngs.push(p);
+    }
+    Ok((text, pngs))
 }

@@ -40,6 +40,12 @@ pub struct ExcitationConfig {
     pub switches: usize,
     /// Hold time between switching events, seconds.
     pub switch_hold_s: f64,
+    /// Per cycle, a long burn (rough-braking-like) at a random level in the upper
+    /// `burn_band_n` of the range, all engines on, seconds: it ejects the propellant a
+    /// whole descent ejects, so bottle pressure and ejected mass cover a descent's range.
+    pub burn_s: f64,
+    /// Width of the burn's level band below `thrust_max_n`, newtons.
+    pub burn_band_n: f64,
     /// The whole sequence (sphere levels, stairs, ramps, switching) is played this many
     /// times, each with fresh random draws and a time-shifted sphere signal.
     pub cycles: usize,
@@ -61,6 +67,8 @@ impl Default for ExcitationConfig {
             ramp_duration_s: 2.0,
             switches: 4,
             switch_hold_s: 1.5,
+            burn_s: 0.0,
+            burn_band_n: 80.0,
             cycles: 5,
         }
     }
@@ -77,6 +85,8 @@ pub enum Segment {
     Ramps,
     /// On/off switching.
     Switching,
+    /// Long burn near full throttle.
+    Burn,
 }
 
 /// The excitation sampled at the surrogate's sample time.
@@ -120,6 +130,8 @@ impl ExcitationConfig {
             ("step_hold_s", self.step_hold_s),
             ("ramp_duration_s", self.ramp_duration_s),
             ("switch_hold_s", self.switch_hold_s),
+            ("burn_s", self.burn_s),
+            ("burn_band_n", self.burn_band_n),
         ] {
             if !(0.0..1e6).contains(&v) {
                 return Err(format!("excitation.{name} = {v}: need finite, >= 0"));
@@ -137,7 +149,8 @@ impl ExcitationConfig {
             * (self.levels as f64 * self.sphere_duration_s
                 + self.steps as f64 * self.step_hold_s
                 + self.ramps as f64 * self.ramp_duration_s
-                + self.switches as f64 * self.switch_hold_s)
+                + self.switches as f64 * self.switch_hold_s
+                + self.burn_s)
     }
 
     /// Generates the excitation at `sample_time_ns`.
@@ -222,6 +235,15 @@ impl ExcitationConfig {
                 let cmd = std::array::from_fn(|_| rng.gen_range(lo..=hi));
                 for _ in 0..steps_of(self.switch_hold_s) {
                     push(&mut ex, cmd, on, Segment::Switching);
+                }
+            }
+            // Long burn: propellant use of a descent (drawn last so the earlier segments
+            // keep their draws when only the burn changes).
+            if self.burn_s > 0.0 {
+                let band_lo = (hi - self.burn_band_n).max(lo);
+                let cmd: [f64; ENGINE_COUNT] = std::array::from_fn(|_| rng.gen_range(band_lo..=hi));
+                for _ in 0..steps_of(self.burn_s) {
+                    push(&mut ex, cmd, all_on, Segment::Burn);
                 }
             }
         }

@@ -13,7 +13,9 @@ pub mod cv;
 pub mod dataset;
 pub mod excitation;
 pub mod features;
+pub mod figures;
 pub mod fit;
+pub mod holdout;
 pub mod lasso;
 pub mod library;
 pub mod model;
@@ -22,6 +24,7 @@ pub mod report;
 pub mod runtime;
 
 use crate::config::PropulsionConfig;
+use crate::propulsion::hifi::HifiParams;
 use crate::propulsion::{Propulsion, PropulsionKind};
 use cv::{cross_validate, fit_final, CvConfig, CvResult};
 use dataset::Dataset;
@@ -50,6 +53,9 @@ pub struct TrainConfig {
     pub reference: PropulsionKind,
     /// Parameters of the reference model.
     pub propulsion: PropulsionConfig,
+    /// `hifi` parameter file (TOML, any subset of fields); none: `HifiParams::default()`,
+    /// which equals the committed `emulator/config/hifi.toml`.
+    pub hifi_params: Option<std::path::PathBuf>,
     /// Surrogate sample time, nanoseconds (the bench step, 10 ms, by default; the bench
     /// step must be a whole multiple of it).
     pub sample_time_ns: u64,
@@ -70,8 +76,9 @@ pub struct TrainConfig {
 impl Default for TrainConfig {
     fn default() -> Self {
         Self {
-            reference: PropulsionKind::Ideal,
+            reference: PropulsionKind::Hifi,
             propulsion: PropulsionConfig::default(),
+            hifi_params: None,
             sample_time_ns: 10_000_000,
             excitation: ExcitationConfig::default(),
             cv: CvConfig::default(),
@@ -148,18 +155,38 @@ impl TrainConfig {
 pub struct ReferenceInfo {
     /// Model name (`hifi`, `ideal`).
     pub name: String,
-    /// Hash of its parameters (a BLAKE3 hex digest of their serialised form).
+    /// Hash of its parameters (a BLAKE3 hex digest of their canonical JSON form: the
+    /// scenario's `PropulsionConfig`, and for `hifi` every `HifiParams` field as used).
     pub param_hash: String,
 }
 
 impl ReferenceInfo {
-    /// Name and parameter hash of the configured reference model.
-    pub fn of(cfg: &TrainConfig) -> Self {
-        let text = serde_json::to_string(&(cfg.reference, &cfg.propulsion)).unwrap_or_default();
+    /// Name and parameter hash of a reference model; `hifi` is the hifi parameter set
+    /// actually used (only read when `kind` is `Hifi`).
+    pub fn new(kind: PropulsionKind, propulsion: &PropulsionConfig, hifi: &HifiParams) -> Self {
+        let text = match kind {
+            PropulsionKind::Hifi => serde_json::to_string(&(kind, propulsion, hifi)),
+            _ => serde_json::to_string(&(kind, propulsion)),
+        }
+        .unwrap_or_default();
         Self {
-            name: cfg.reference.as_str().to_string(),
+            name: kind.as_str().to_string(),
             param_hash: blake3::hash(text.as_bytes()).to_hex().to_string(),
         }
+    }
+
+    /// Name and parameter hash of the configured reference model with default hifi
+    /// parameters (what the committed configuration uses).
+    pub fn of(cfg: &TrainConfig) -> Self {
+        Self::new(cfg.reference, &cfg.propulsion, &HifiParams::default())
+    }
+}
+
+/// The hifi parameters a configuration names (its file, or the defaults).
+pub fn hifi_params_of(cfg: &TrainConfig) -> Result<HifiParams, TrainConfigError> {
+    match &cfg.hifi_params {
+        Some(path) => HifiParams::load(path).map_err(|e| TrainConfigError(e.to_string())),
+        None => Ok(HifiParams::default()),
     }
 }
 
@@ -171,8 +198,16 @@ pub fn train_configured(
     cfg.propulsion
         .validate()
         .map_err(|e| TrainConfigError(e.to_string()))?;
-    let factory = || crate::propulsion::build(cfg.reference, &cfg.propulsion);
-    train(cfg, &factory, &ReferenceInfo::of(cfg), progress)
+    let hifi = hifi_params_of(cfg)?;
+    // Build once up front so a bad parameter set is an error, not a panic in the factory.
+    crate::propulsion::build_with_hifi_params(cfg.reference, &cfg.propulsion, &hifi)
+        .map_err(|e| TrainConfigError(e.to_string()))?;
+    let factory = || {
+        crate::propulsion::build_with_hifi_params(cfg.reference, &cfg.propulsion, &hifi)
+            .unwrap_or_else(|e| unreachable!("built once already: {e}"))
+    };
+    let info = ReferenceInfo::new(cfg.reference, &cfg.propulsion, &hifi);
+    train(cfg, &factory, &info, progress)
 }
 
 /// Progress reporting hooks (the CLI draws bars; tests pass [`Quiet`]).
