@@ -1,4 +1,6 @@
-//! Cost of one 10 ms control step of each propulsion model at mid throttle.
+//! Cost of one 10 ms control step of each propulsion model at mid throttle: hifi,
+//! ideal and the surrogate (committed default model, four engines) in one run, so their
+//! ratio comes from one measurement session.
 //!
 //! `cargo bench --bench propulsion -- --warm-up-time 1 --measurement-time 3`
 
@@ -7,6 +9,7 @@ use oils_emulator::config::PropulsionConfig;
 use oils_emulator::propulsion::hifi::{HifiParams, HifiPropulsion};
 use oils_emulator::propulsion::ideal::IdealPropulsion;
 use oils_emulator::propulsion::{EngineCommand, Propulsion};
+use oils_emulator::surrogate::runtime::SurrogatePropulsion;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -42,15 +45,21 @@ fn bench(c: &mut Criterion) {
     let cfg = PropulsionConfig::default();
     let mut hifi = HifiPropulsion::new(&HifiParams::default(), &cfg).expect("default hifi");
     let mut ideal = IdealPropulsion::new(&cfg);
+    let mut surrogate =
+        SurrogatePropulsion::default_model(&cfg, Some(STEP_NS)).expect("committed surrogate");
     for _ in 0..300 {
         hifi.step(&mid_throttle(), STEP_NS);
         ideal.step(&mid_throttle(), STEP_NS);
+        surrogate.step(&mid_throttle(), STEP_NS);
     }
     c.bench_function("hifi_step_10ms", |b| {
         b.iter_custom(|n| time_steps(&hifi, n))
     });
     c.bench_function("ideal_step_10ms", |b| {
         b.iter_custom(|n| time_steps(&ideal, n))
+    });
+    c.bench_function("surrogate_step_10ms_4_engines", |b| {
+        b.iter_custom(|n| time_steps(&surrogate, n))
     });
 }
 

@@ -33,6 +33,8 @@ enum Cmd {
     Hifi(cmd::hifi::HifiArgs),
     /// Train the propulsion surrogate (seed paper): excitation, data, Lasso, CV, model file.
     Train(cmd::train::TrainArgs),
+    /// Validate the surrogate against the hifi model (paper's cases, bounds, plots, uncertainty).
+    Validate(cmd::validate::ValidateArgs),
     /// Run the onboard stub (what `oils run` spawns; also usable by hand).
     #[command(hide = true)]
     Stub(StubArgs),
@@ -84,6 +86,7 @@ fn real_main() -> anyhow::Result<()> {
         Cmd::Export(a) => export(&a),
         Cmd::Hifi(a) => cmd::hifi::run(&a),
         Cmd::Train(a) => cmd::train::run(&a),
+        Cmd::Validate(a) => cmd::validate::run(&a),
         Cmd::Stub(a) => {
             let stop =
                 oils_shared::signals::termination_flag().context("installing signal handlers")?;

@@ -20,3 +20,4 @@ pub mod scheduler;
 pub mod session;
 pub mod surrogate;
 pub mod timing;
+pub mod validation;

@@ -111,11 +111,47 @@ impl RunReport {
         for v in &s.threshold_violations {
             let _ = writeln!(out, "THRESHOLD   {v}");
         }
+        if let Some(d) = &s.propulsion_diagnostics {
+            diagnostics_lines(&mut out, d);
+        }
         let _ = writeln!(out, "digest      {}", s.digest);
         if let Some(log) = &self.log {
             let _ = writeln!(out, "log         {log} ({} records)", s.log_records);
         }
         out
+    }
+}
+
+/// The propulsion diagnostics in a few table lines.
+fn diagnostics_lines(out: &mut String, d: &crate::propulsion::PropulsionDiagnostics) {
+    if let Some(n) = d.out_of_envelope_steps {
+        let _ = writeln!(
+            out,
+            "surrogate   {n} steps outside the training envelope (inputs clamped)"
+        );
+    }
+    if let Some(s) = &d.shadow {
+        let thrust_max = s.thrust_n.iter().map(|t| t.max_abs).fold(0.0, f64::max);
+        let thrust_rms = (s.thrust_n.iter().map(|t| t.rms * t.rms).sum::<f64>()
+            / s.thrust_n.len() as f64)
+            .sqrt();
+        let _ = writeln!(
+            out,
+            "shadow      surrogate - hifi over {} steps: thrust max {:.2} N rms {:.2} N; gas max {:.3} bar rms {:.3} bar",
+            s.steps,
+            thrust_max,
+            thrust_rms,
+            s.gas_pressure_pa.max_abs * 1e-5,
+            s.gas_pressure_pa.rms * 1e-5
+        );
+        let _ = writeln!(
+            out,
+            "            fuel max {:.3} kg, ox max {:.3} kg, total mass max {:.3} kg rms {:.3} kg",
+            s.ejected_fuel_kg.max_abs,
+            s.ejected_ox_kg.max_abs,
+            s.total_mass_kg.max_abs,
+            s.total_mass_kg.rms
+        );
     }
 }
 

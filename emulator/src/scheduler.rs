@@ -118,6 +118,9 @@ pub struct RunSummary {
     pub threshold_violations: Vec<String>,
     /// Records written to the log.
     pub log_records: u64,
+    /// What the propulsion model reported at the end (surrogate envelope exits, shadow
+    /// divergence); `None` for models with nothing to report.
+    pub propulsion_diagnostics: Option<crate::propulsion::PropulsionDiagnostics>,
 }
 
 /// Errors that stop a run before it starts.
@@ -378,5 +381,6 @@ pub fn run_observed(
         threshold_violations: cfg.thresholds.violations(&timing),
         timing,
         log_records: 0,
+        propulsion_diagnostics: plant.propulsion_diagnostics(),
     })
 }

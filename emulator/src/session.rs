@@ -56,14 +56,15 @@ pub struct RunArgs {
     /// Longest simulated time, seconds; the run ends `completed` if still flying.
     #[arg(long, default_value_t = 2000.0)]
     pub duration: f64,
-    /// Propulsion model: ideal (first-order lag), hifi (physics, the truth model) or
-    /// surrogate (the learned model).
+    /// Propulsion model: ideal (first-order lag), hifi (physics, the truth model),
+    /// surrogate (the learned model) or shadow (hifi drives, the surrogate runs beside
+    /// it; their divergence goes in the report).
     #[arg(long, default_value = "ideal")]
     pub propulsion: String,
-    /// Hifi parameter TOML for `--propulsion hifi` (default: emulator/config/hifi.toml's values).
+    /// Hifi parameter TOML for `--propulsion hifi|shadow` (default: emulator/config/hifi.toml's values).
     #[arg(long)]
     pub hifi_params: Option<PathBuf>,
-    /// Surrogate model file for `--propulsion surrogate` (default: the committed model).
+    /// Surrogate model file for `--propulsion surrogate|shadow` (default: the committed model).
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Flight software of the spawned stub.

@@ -2,3 +2,4 @@
 
 pub mod hifi;
 pub mod train;
+pub mod validate;

@@ -396,6 +396,12 @@ impl Plant {
         &self.state
     }
 
+    /// What the propulsion model reports about itself (envelope exits, shadow
+    /// divergence); for the end-of-run report.
+    pub fn propulsion_diagnostics(&self) -> Option<crate::propulsion::PropulsionDiagnostics> {
+        self.propulsion.diagnostics()
+    }
+
     /// Propellant used so far (main engines and attitude thrusters), kilograms.
     pub fn propellant_used_kg(&self) -> f64 {
         self.setup.wet_mass_kg - self.state.mass_kg

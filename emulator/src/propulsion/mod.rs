@@ -1,12 +1,17 @@
 //! Propulsion models behind one trait: `ideal` (first-order lag), `hifi` (lumped-parameter
-//! physics of the pressure-fed system) and `surrogate` (the learned sparse polynomial).
+//! physics of the pressure-fed system), `surrogate` (the learned sparse polynomial) and
+//! `shadow` (hifi drives, the surrogate runs beside it and its divergence is recorded).
 //!
 //! The plant asks a model to advance by one bench step with the command held, and reads
 //! back per-engine thrust and the propellant it ejected. Models own their propellant
 //! accounting: the vehicle mass is the initial mass minus what the model reports ejected.
 
+pub mod diagnostics;
 pub mod hifi;
 pub mod ideal;
+pub mod shadow;
+
+pub use diagnostics::PropulsionDiagnostics;
 
 use crate::config::PropulsionConfig;
 use oils_shared::ENGINE_COUNT;
@@ -64,6 +69,11 @@ pub trait Propulsion: Send {
     fn step(&mut self, cmd: &EngineCommand, dt_ns: u64) -> PropulsionOutput;
     /// The outputs now, without stepping (at construction: the initial state).
     fn output(&self) -> PropulsionOutput;
+    /// What the model reports about itself (envelope exits, shadow divergence); read at
+    /// the end of a run, not per step. `None`: nothing to report.
+    fn diagnostics(&self) -> Option<PropulsionDiagnostics> {
+        None
+    }
 }
 
 /// Which propulsion model a run uses.
@@ -77,6 +87,9 @@ pub enum PropulsionKind {
     /// The learned sparse surrogate (seed paper); the committed default model unless a
     /// model file is given.
     Surrogate,
+    /// Hifi drives the plant; the surrogate runs beside it on the same commands and its
+    /// per-output divergence is reported.
+    Shadow,
 }
 
 impl PropulsionKind {
@@ -86,6 +99,7 @@ impl PropulsionKind {
             PropulsionKind::Ideal => "ideal",
             PropulsionKind::Hifi => "hifi",
             PropulsionKind::Surrogate => "surrogate",
+            PropulsionKind::Shadow => "shadow",
         }
     }
 }
@@ -97,8 +111,9 @@ impl std::str::FromStr for PropulsionKind {
             "ideal" => Ok(PropulsionKind::Ideal),
             "hifi" => Ok(PropulsionKind::Hifi),
             "surrogate" => Ok(PropulsionKind::Surrogate),
+            "shadow" => Ok(PropulsionKind::Shadow),
             other => Err(format!(
-                "unknown propulsion model `{other}` (expected ideal, hifi or surrogate)"
+                "unknown propulsion model `{other}` (expected ideal, hifi, surrogate or shadow)"
             )),
         }
     }
@@ -134,23 +149,39 @@ pub fn build_for_bench(
     files: &ModelFiles,
     bench_step_ns: u64,
 ) -> Result<Box<dyn Propulsion>, BuildError> {
-    use crate::surrogate::runtime::SurrogatePropulsion;
     Ok(match kind {
         PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
-        PropulsionKind::Hifi => {
-            let params = match &files.hifi_params {
-                Some(path) => hifi::HifiParams::load(path)?,
-                None => hifi::HifiParams::default(),
-            };
-            Box::new(hifi::HifiPropulsion::new(&params, cfg)?)
-        }
-        PropulsionKind::Surrogate => match &files.surrogate_model {
-            Some(path) => Box::new(SurrogatePropulsion::from_path(path, cfg, bench_step_ns)?),
-            None => Box::new(SurrogatePropulsion::default_model(
-                cfg,
-                Some(bench_step_ns),
-            )?),
-        },
+        PropulsionKind::Hifi => Box::new(hifi_for_bench(cfg, files)?),
+        PropulsionKind::Surrogate => Box::new(surrogate_for_bench(cfg, files, bench_step_ns)?),
+        PropulsionKind::Shadow => Box::new(shadow::ShadowPropulsion::new(
+            hifi_for_bench(cfg, files)?,
+            surrogate_for_bench(cfg, files, bench_step_ns)?,
+        )),
+    })
+}
+
+/// The hifi model with the parameter file in `files` (or the defaults).
+pub fn hifi_for_bench(
+    cfg: &PropulsionConfig,
+    files: &ModelFiles,
+) -> Result<hifi::HifiPropulsion, BuildError> {
+    let params = match &files.hifi_params {
+        Some(path) => hifi::HifiParams::load(path)?,
+        None => hifi::HifiParams::default(),
+    };
+    Ok(hifi::HifiPropulsion::new(&params, cfg)?)
+}
+
+/// The surrogate with the model file in `files` (or the committed default).
+pub fn surrogate_for_bench(
+    cfg: &PropulsionConfig,
+    files: &ModelFiles,
+    bench_step_ns: u64,
+) -> Result<crate::surrogate::runtime::SurrogatePropulsion, BuildError> {
+    use crate::surrogate::runtime::SurrogatePropulsion;
+    Ok(match &files.surrogate_model {
+        Some(path) => SurrogatePropulsion::from_path(path, cfg, bench_step_ns)?,
+        None => SurrogatePropulsion::default_model(cfg, Some(bench_step_ns))?,
     })
 }
 

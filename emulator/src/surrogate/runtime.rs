@@ -138,4 +138,11 @@ impl Propulsion for SurrogatePropulsion {
     fn output(&self) -> PropulsionOutput {
         self.out
     }
+
+    fn diagnostics(&self) -> Option<crate::propulsion::PropulsionDiagnostics> {
+        Some(crate::propulsion::PropulsionDiagnostics {
+            out_of_envelope_steps: Some(self.out_of_envelope_steps()),
+            shadow: None,
+        })
+    }
 }

@@ -1,0 +1,201 @@
+//! `oils validate`: the surrogate, free-running, against the hifi model on the paper's
+//! validation profiles (and any profile CSV given); a table, a JSON report, one figure
+//! per case, and the error statistics written beside the model as its uncertainty.
+
+use anyhow::{bail, Context, Result};
+use oils_emulator::config::ScenarioConfig;
+use oils_emulator::propulsion::hifi::figures::DESCENT_PROFILE_CSV;
+use oils_emulator::propulsion::{
+    hifi_for_bench, surrogate_for_bench, BuildError, ModelFiles, Propulsion,
+};
+use oils_emulator::surrogate::model_file::ModelFile;
+use oils_emulator::surrogate::runtime::DEFAULT_MODEL_JSON;
+use oils_emulator::validation::cases::{self, CaseKind, TRANSIENT_WINDOW_S};
+use oils_emulator::validation::report::{Bounds, ValidationReport, GOAL_FACTOR};
+use oils_emulator::validation::uncertainty::ModelUncertainty;
+use oils_emulator::validation::{plots, run_cases};
+use oils_shared::profile::ThrustProfile;
+use std::path::{Path, PathBuf};
+
+/// The committed descent profile, read at run time (the file may be replaced).
+const DESCENT_PATH: &str = "emulator/data/descent-profile.csv";
+
+/// Arguments of `oils validate`.
+#[derive(Debug, clap::Args)]
+pub struct ValidateArgs {
+    /// Surrogate model file (default: the committed model).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// Also validate on this thrust-command profile CSV (repeatable), judged like the
+    /// descent (`t,cmd1..cmd4,on1..on4`: s, N, 0/1; rows hold).
+    #[arg(long, value_name = "CSV")]
+    pub profile: Vec<PathBuf>,
+    /// The descent profile (default: emulator/data/descent-profile.csv, or the copy built
+    /// into the binary when that path does not exist).
+    #[arg(long, value_name = "CSV")]
+    pub descent: Option<PathBuf>,
+    /// Write the JSON report here (default: <out>/validate.json).
+    #[arg(long, value_name = "JSON")]
+    pub report: Option<PathBuf>,
+    /// Write one PNG per case here (default: <out>/plots).
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
+    /// Write the error statistics (model uncertainty) here (default: beside --model as
+    /// <model>.uncertainty.json; for the committed model <out>/surrogate-default.uncertainty.json).
+    #[arg(long, value_name = "JSON")]
+    pub uncertainty: Option<PathBuf>,
+    /// Default folder for the outputs not given explicitly.
+    #[arg(long, value_name = "DIR", default_value = "target/oils-validate")]
+    pub out: PathBuf,
+    /// Hifi parameter TOML (default: emulator/config/hifi.toml's values).
+    #[arg(long, value_name = "TOML")]
+    pub hifi_params: Option<PathBuf>,
+    /// Only the built-in cases whose names contain one of these (e.g. `sine`, `rise`,
+    /// `descent`); user profiles always run.
+    #[arg(long, value_name = "NAME")]
+    pub only: Vec<String>,
+    /// Exit non-zero when a case breaks the paper's bounds.
+    #[arg(long)]
+    pub check: bool,
+}
+
+/// Runs `oils validate`.
+pub fn run(args: &ValidateArgs) -> Result<()> {
+    let scenario = ScenarioConfig::default();
+    let cfg = scenario.propulsion.clone();
+    let dt_ns: u64 = 10_000_000;
+    let files = ModelFiles {
+        surrogate_model: args.model.clone(),
+        hifi_params: args.hifi_params.clone(),
+    };
+    // Refuse a bad model or parameter file before anything runs.
+    let model_bytes = match &args.model {
+        Some(p) => std::fs::read(p).with_context(|| format!("reading {}", p.display()))?,
+        None => DEFAULT_MODEL_JSON.as_bytes().to_vec(),
+    };
+    let model_file = ModelFile::parse(&String::from_utf8_lossy(&model_bytes))
+        .with_context(|| format!("surrogate model {}", model_name(args)))?;
+    surrogate_for_bench(&cfg, &files, dt_ns).context("building the surrogate")?;
+    hifi_for_bench(&cfg, &files).context("building the hifi model")?;
+
+    let mut all = cases::builtin();
+    let descent = match &args.descent {
+        Some(p) => cases::from_path(p, CaseKind::Descent, cfg.max_thrust_n)?,
+        None if Path::new(DESCENT_PATH).exists() => {
+            cases::from_path(Path::new(DESCENT_PATH), CaseKind::Descent, cfg.max_thrust_n)?
+        }
+        None => {
+            eprintln!("oils validate: {DESCENT_PATH} not found; using the built-in copy");
+            let p = ThrustProfile::parse(DESCENT_PROFILE_CSV)
+                .map_err(|e| anyhow::anyhow!("built-in descent profile: {e}"))?;
+            cases::from_profile(
+                "descent",
+                CaseKind::Descent,
+                p,
+                "built-in",
+                cfg.max_thrust_n,
+            )?
+        }
+    };
+    all.push(descent);
+    if !args.only.is_empty() {
+        all.retain(|c| args.only.iter().any(|o| c.name.contains(o.as_str())));
+    }
+    for p in &args.profile {
+        all.push(cases::from_path(p, CaseKind::Profile, cfg.max_thrust_n)?);
+    }
+    if all.is_empty() {
+        bail!("no case selected (check --only)");
+    }
+
+    let truth = || -> Result<Box<dyn Propulsion>, BuildError> {
+        Ok(Box::new(hifi_for_bench(&cfg, &files)?))
+    };
+    let model = || -> Result<Box<dyn Propulsion>, BuildError> {
+        Ok(Box::new(surrogate_for_bench(&cfg, &files, dt_ns)?))
+    };
+    let bounds = Bounds::PAPER;
+    let (reports, traces) = run_cases(
+        &all,
+        &truth,
+        &model,
+        dt_ns,
+        scenario.wet_mass_kg(),
+        &bounds,
+        |r| {
+            eprintln!(
+                "  {:<12} thrust max|err| {:8.3} N  rms {:7.3} N  mass max|err| {:7.3} kg  {}",
+                r.name,
+                r.thrust_max_abs_error_n,
+                r.thrust_rms_error_n,
+                r.mass_max_abs_error_kg,
+                if r.pass {
+                    "within the paper's bounds"
+                } else {
+                    "OUTSIDE the paper's bounds"
+                }
+            )
+        },
+    )?;
+    let report = ValidationReport {
+        model: model_name(args),
+        model_reference: model_file.provenance.reference.clone(),
+        model_variant: format!("{:?}", model_file.variant),
+        truth: "hifi".into(),
+        hifi_params: args
+            .hifi_params
+            .as_ref()
+            .map_or_else(|| "defaults".into(), |p| p.display().to_string()),
+        dt_ms: dt_ns as f64 * 1e-6,
+        transient_window_s: TRANSIENT_WINDOW_S,
+        bounds,
+        goal: bounds.scaled(GOAL_FACTOR),
+        pass: reports.iter().all(|r| r.pass),
+        pass_goal: reports.iter().all(|r| r.pass_goal),
+        cases: reports,
+    };
+    print!("{}", report.table());
+
+    let json_path = args
+        .report
+        .clone()
+        .unwrap_or_else(|| args.out.join("validate.json"));
+    write_file(&json_path, &(report.to_json() + "\n"))?;
+    eprintln!("wrote {}", json_path.display());
+
+    let plot_dir = args.plots.clone().unwrap_or_else(|| args.out.join("plots"));
+    std::fs::create_dir_all(&plot_dir)
+        .with_context(|| format!("creating {}", plot_dir.display()))?;
+    for t in &traces {
+        let p = plots::write_case(&plot_dir, t, &bounds)
+            .with_context(|| format!("plotting case {}", t.case.name))?;
+        eprintln!("wrote {}", p.display());
+    }
+
+    let unc_path = match (&args.uncertainty, &args.model) {
+        (Some(p), _) => p.clone(),
+        (None, Some(m)) => ModelUncertainty::path_beside(m),
+        (None, None) => args.out.join("surrogate-default.uncertainty.json"),
+    };
+    ModelUncertainty::from_traces(&traces, &model_name(args), &model_bytes, "hifi", 10.0)
+        .save(&unc_path)?;
+    eprintln!("wrote {}", unc_path.display());
+
+    if args.check && !report.pass {
+        bail!("the surrogate breaks the paper's bounds (see the table above)");
+    }
+    Ok(())
+}
+
+fn model_name(args: &ValidateArgs) -> String {
+    args.model
+        .as_ref()
+        .map_or_else(|| "committed default".into(), |p| p.display().to_string())
+}
+
+fn write_file(path: &Path, text: &str) -> Result<()> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
