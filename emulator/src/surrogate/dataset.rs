@@ -164,6 +164,8 @@ mod tests {
             layout: Layout::Mimo,
             history: 2,
             mass_features: true,
+            start_steps: 0,
+            stop_steps: 0,
         };
         d.export_csv(&dir, &spec).unwrap();
         let f = std::fs::read_to_string(dir.join("features_n2.csv")).unwrap();

@@ -60,6 +60,97 @@ pub struct FeatureSpec {
     pub history: usize,
     /// Include the ejected-mass histories and lambda (the paper does).
     pub mass_features: bool,
+    /// Beyond the paper, per-engine layout only: start-phase indicators `start0..start{K-1}`
+    /// ("this engine switched on k steps ago"), so the delayed, dome-filling cold start is
+    /// a learned lookup rather than something a polynomial of 10 ms histories must
+    /// reproduce. 0 = none (the paper's features).
+    #[serde(default)]
+    pub start_steps: usize,
+    /// Beyond the paper, per-engine layout only: stop-phase indicators `stop0..stop{K-1}`
+    /// ("this engine switched off k steps ago") for the tail-off (dome dribble). 0 = none.
+    #[serde(default)]
+    pub stop_steps: usize,
+}
+
+/// Where one feature is read from: the runtime gathers only the features its active terms
+/// use, and a test checks that reading every source equals [`FeatureSpec::fill`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// Input component at a lag; for a per-engine feature the engine index is added.
+    Input {
+        /// Steps back (0: the step being predicted).
+        lag: usize,
+        /// Component (engine 0's for per-engine features).
+        comp: usize,
+        /// Add the engine index to `comp`.
+        per_engine: bool,
+    },
+    /// State component at a lag (>= 1); see `Input`.
+    State {
+        /// Steps back.
+        lag: usize,
+        /// Component (engine 0's for per-engine features).
+        comp: usize,
+        /// Add the engine index to `comp`.
+        per_engine: bool,
+    },
+    /// The guarded lambda at `t-1`.
+    Lambda,
+    /// 1 when the engine switched on exactly `k` steps before `t` (see [`phase_age`]).
+    Start(usize),
+    /// 1 when the engine switched off exactly `k` steps before `t`.
+    Stop(usize),
+}
+
+impl Source {
+    /// Whether the value depends on the engine (per-engine layouts).
+    pub fn per_engine(&self) -> bool {
+        match *self {
+            Source::Input { per_engine, .. } | Source::State { per_engine, .. } => per_engine,
+            Source::Lambda => false,
+            Source::Start(_) | Source::Stop(_) => true,
+        }
+    }
+
+    /// Reads the raw value from a history (phases by scanning it).
+    pub fn read<H: History + ?Sized>(&self, h: &H, engine: usize) -> f64 {
+        let off = |p: bool| if p { engine } else { 0 };
+        match *self {
+            Source::Input {
+                lag,
+                comp,
+                per_engine,
+            } => h.input(lag)[comp + off(per_engine)],
+            Source::State {
+                lag,
+                comp,
+                per_engine,
+            } => h.state(lag)[comp + off(per_engine)],
+            Source::Lambda => {
+                let s = h.state(1);
+                lambda_of(s[STATE_MF], s[STATE_MO])
+            }
+            Source::Start(k) => indicator(phase_age(h, engine, true, k + 1) == Some(k)),
+            Source::Stop(k) => indicator(phase_age(h, engine, false, k + 1) == Some(k)),
+        }
+    }
+}
+
+fn indicator(b: bool) -> f64 {
+    f64::from(u8::from(b))
+}
+
+/// Steps since engine `engine` entered its current on/off state `on`, as seen at step
+/// `t`: `Some(k)` when the switch was `on` over steps `t-k..=t` and not at `t-k-1`, for
+/// `k < cap`; `None` when the switch is not `on` at `t` or has been for `cap` steps or
+/// more. Before the first step the engines were off (as the history pads), so an engine
+/// never switched on has no stop phase.
+pub fn phase_age<H: History + ?Sized>(h: &H, engine: usize, on: bool, cap: usize) -> Option<usize> {
+    let is = |lag: usize| (h.input(lag)[ENGINE_COUNT + engine] > 0.5) == on;
+    if !is(0) {
+        return None;
+    }
+    (0..cap).find(|&k| !is(k + 1))
 }
 
 /// Past inputs and states as seen from step `t`.
@@ -76,6 +167,18 @@ impl FeatureSpec {
         self.history + 1
     }
 
+    /// Deepest lag read of anything (the phase indicators scan the switch history).
+    pub fn max_lag(&self) -> usize {
+        self.max_state_lag()
+            .max(self.start_steps)
+            .max(self.stop_steps)
+    }
+
+    /// Number of phase indicators.
+    pub fn phase_features(&self) -> usize {
+        self.start_steps + self.stop_steps
+    }
+
     /// Number of features.
     pub fn dim(&self) -> usize {
         let n = self.history;
@@ -84,7 +187,8 @@ impl FeatureSpec {
             // T_r 4, T_r-h 4n, T_o-h 4n, P 1, P_h n, m_f-h n, m_o-h n, S_e 4, lambda 1.
             Layout::Mimo => 4 + 4 * n + 4 * n + 1 + n + m * 2 * n + 4 + m,
             // T_r 1, T_r-h n, T_o-h n, P 1, P_h n, m_f-h n, m_o-h n, S_e 1, lambda 1.
-            Layout::PerEngine => 1 + n + n + 1 + n + m * 2 * n + 1 + m,
+            // ... then start and stop indicators.
+            Layout::PerEngine => 1 + n + n + 1 + n + m * 2 * n + 1 + m + self.phase_features(),
         }
     }
 
@@ -133,13 +237,94 @@ impl FeatureSpec {
         if self.mass_features {
             v.push(format!("lambda{}", lag(1)));
         }
+        if self.layout == Layout::PerEngine {
+            for k in 0..self.start_steps {
+                v.push(format!("start{k}{}", lag(0)));
+            }
+            for k in 0..self.stop_steps {
+                v.push(format!("stop{k}{}", lag(0)));
+            }
+        }
         debug_assert_eq!(v.len(), self.dim());
         v
     }
 
-    /// Which features only take the values 0 and 1 (their powers are redundant).
-    pub fn binary_mask(&self) -> Vec<bool> {
-        self.names().iter().map(|s| s.starts_with("S_e")).collect()
+    /// Where every feature is read from, in order (see [`Source`]).
+    pub fn sources(&self) -> Vec<Source> {
+        let n = self.history;
+        let per = self.layout == Layout::PerEngine;
+        let engines = if per { 1 } else { ENGINE_COUNT };
+        let input = |lag, comp| Source::Input {
+            lag,
+            comp,
+            per_engine: per,
+        };
+        let state = |lag, comp, per_engine| Source::State {
+            lag,
+            comp,
+            per_engine,
+        };
+        let mut v = Vec::with_capacity(self.dim());
+        for e in 0..engines {
+            v.push(input(0, e));
+        }
+        for k in 1..=n {
+            for e in 0..engines {
+                v.push(input(k, e));
+            }
+        }
+        for k in 1..=n {
+            for e in 0..engines {
+                v.push(state(k, e, per));
+            }
+        }
+        for k in 1..=n + 1 {
+            v.push(state(k, STATE_P, false));
+        }
+        if self.mass_features {
+            for k in 1..=n {
+                v.push(state(k, STATE_MF, false));
+            }
+            for k in 1..=n {
+                v.push(state(k, STATE_MO, false));
+            }
+        }
+        for e in 0..engines {
+            v.push(input(0, ENGINE_COUNT + e));
+        }
+        if self.mass_features {
+            v.push(Source::Lambda);
+        }
+        if per {
+            v.extend((0..self.start_steps).map(Source::Start));
+            v.extend((0..self.stop_steps).map(Source::Stop));
+        }
+        debug_assert_eq!(v.len(), self.dim());
+        v
+    }
+
+    /// Binary features (0 or 1 only) and their exclusion groups: 0 = not binary; two
+    /// binary features of the same group never multiply to anything new (the per-engine
+    /// switch and phase indicators: a start indicator implies the switch, start and stop
+    /// indicators exclude each other), so the library leaves such products out, as it
+    /// leaves out powers of binary features.
+    pub fn binary_groups(&self) -> Vec<u8> {
+        self.names()
+            .iter()
+            .map(|s| {
+                if let Some(rest) = s.strip_prefix("S_e") {
+                    // MIMO: each engine's switch its own group; per-engine: group 1.
+                    rest.chars()
+                        .next()
+                        .and_then(|c| c.to_digit(10))
+                        .map_or(1, |d| d as u8)
+                } else if s.starts_with("start") || s.starts_with("stop") {
+                    1
+                } else {
+                    0
+                }
+            })
+            .collect()
     }
 
     /// Writes the feature vector of step `t` into `out` (length `dim()`). `engine` picks
@@ -189,6 +374,16 @@ impl FeatureSpec {
             let s = h.state(1);
             put(lambda_of(s[STATE_MF], s[STATE_MO]));
         }
+        if self.layout == Layout::PerEngine && self.phase_features() > 0 {
+            let start = phase_age(h, engine, true, self.start_steps);
+            let stop = phase_age(h, engine, false, self.stop_steps);
+            for k in 0..self.start_steps {
+                put(indicator(start == Some(k)));
+            }
+            for k in 0..self.stop_steps {
+                put(indicator(stop == Some(k)));
+            }
+        }
         debug_assert_eq!(i, self.dim());
     }
 }
@@ -230,6 +425,8 @@ mod tests {
                 layout: Layout::Mimo,
                 history: n,
                 mass_features: true,
+                start_steps: 0,
+                stop_steps: 0,
             };
             assert_eq!(s.dim(), 11 * n + 10);
             assert_eq!(s.names().len(), 11 * n + 10);
@@ -247,6 +444,8 @@ mod tests {
             layout: Layout::Mimo,
             history: 2,
             mass_features: true,
+            start_steps: 0,
+            stop_steps: 0,
         };
         let mut out = vec![0.0; spec.dim()];
         let h = TrajectoryHistory {
@@ -287,6 +486,8 @@ mod tests {
             layout: Layout::PerEngine,
             history: 1,
             mass_features: false,
+            start_steps: 0,
+            stop_steps: 0,
         };
         let mut out = vec![0.0; spec.dim()];
         let h = TrajectoryHistory {
@@ -301,5 +502,108 @@ mod tests {
             ["T_r[t]", "T_r[t-1]", "T_o[t-1]", "P[t-1]", "P[t-2]", "S_e[t]"]
         );
         assert_eq!(out, [30.0, 30.0, 3.0, 5.0, 5.0, 1.0]);
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod source_tests {
+    use super::*;
+
+    /// A trajectory with engines switching on and off at different times.
+    pub(crate) fn switching_trajectory(steps: usize) -> (Vec<InputVec>, Vec<StateVec>) {
+        let mut inputs = Vec::new();
+        let mut states = Vec::new();
+        for t in 0..steps {
+            let mut u = [0.0; INPUT_DIM];
+            let mut x = [0.0; STATE_DIM];
+            for e in 0..ENGINE_COUNT {
+                let on = ((t + 3 * e) / (5 + e)) % 3 != 0;
+                u[ENGINE_COUNT + e] = f64::from(u8::from(on));
+                u[e] = if on {
+                    320.0 + ((t * 37 + e * 11) % 480) as f64
+                } else {
+                    0.0
+                };
+                x[e] = (t * 13 + e) as f64 % 800.0;
+            }
+            x[STATE_P] = 2.8e7 - 1e3 * t as f64;
+            x[STATE_MF] = 0.1 * t as f64;
+            x[STATE_MO] = 0.17 * t as f64;
+            inputs.push(u);
+            states.push(x);
+        }
+        (inputs, states)
+    }
+
+    #[test]
+    fn reading_every_source_equals_fill() {
+        let (inputs, states) = switching_trajectory(120);
+        let initial = [1.0, 2.0, 3.0, 4.0, 2.8e7, 0.0, 0.0];
+        for spec in [
+            FeatureSpec {
+                layout: Layout::Mimo,
+                history: 3,
+                mass_features: true,
+                start_steps: 0,
+                stop_steps: 0,
+            },
+            FeatureSpec {
+                layout: Layout::PerEngine,
+                history: 2,
+                mass_features: true,
+                start_steps: 7,
+                stop_steps: 4,
+            },
+        ] {
+            let sources = spec.sources();
+            assert_eq!(sources.len(), spec.dim());
+            let mut out = vec![0.0; spec.dim()];
+            let mut starts = 0.0;
+            for t in 0..inputs.len() {
+                let h = TrajectoryHistory {
+                    inputs: &inputs,
+                    states: &states,
+                    initial: &initial,
+                    t,
+                };
+                for e in 0..ENGINE_COUNT {
+                    spec.fill(&h, e, &mut out);
+                    for (j, s) in sources.iter().enumerate() {
+                        assert_eq!(s.read(&h, e), out[j], "t {t} engine {e} {s:?}");
+                    }
+                    starts += out[spec.dim() - spec.phase_features()..]
+                        .iter()
+                        .sum::<f64>();
+                }
+            }
+            // The trajectory does exercise the phase indicators.
+            assert!(spec.phase_features() == 0 || starts > 20.0);
+        }
+    }
+
+    #[test]
+    fn phase_age_counts_steps_since_the_switch() {
+        // Engine 0: off for 2 steps, on for 5, off again.
+        let inputs: Vec<InputVec> = (0..9)
+            .map(|t| {
+                let mut u = [0.0; INPUT_DIM];
+                u[ENGINE_COUNT] = f64::from(u8::from((2..7).contains(&t)));
+                u
+            })
+            .collect();
+        let states = vec![[0.0; STATE_DIM]; 9];
+        let h = |t| TrajectoryHistory {
+            inputs: &inputs,
+            states: &states,
+            initial: &[0.0; STATE_DIM],
+            t,
+        };
+        assert_eq!(phase_age(&h(2), 0, true, 10), Some(0));
+        assert_eq!(phase_age(&h(4), 0, true, 10), Some(2));
+        assert_eq!(phase_age(&h(4), 0, true, 2), None);
+        assert_eq!(phase_age(&h(4), 0, false, 10), None);
+        assert_eq!(phase_age(&h(8), 0, false, 10), Some(1));
+        // Never switched on: no stop phase at the start.
+        assert_eq!(phase_age(&h(1), 0, false, 10), None);
     }
 }

@@ -44,6 +44,12 @@ pub struct VariantConfig {
     pub system_degree: usize,
     /// Give the per-engine thrust model the ejected-mass histories and lambda.
     pub engine_mass_features: bool,
+    /// Beyond the paper: start-phase indicators of the per-engine thrust model (steps
+    /// after an engine switches on that get their own indicator; 0 = none, the original
+    /// shared-engine features). See [`FeatureSpec::start_steps`].
+    pub engine_start_steps: usize,
+    /// Beyond the paper: stop-phase indicators (tail-off); 0 = none.
+    pub engine_stop_steps: usize,
 }
 
 impl Default for VariantConfig {
@@ -53,6 +59,8 @@ impl Default for VariantConfig {
             engine_degree: 2,
             system_degree: 1,
             engine_mass_features: false,
+            engine_start_steps: 0,
+            engine_stop_steps: 0,
         }
     }
 }
@@ -96,6 +104,8 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                 layout: Layout::Mimo,
                 history: n,
                 mass_features: true,
+                start_steps: 0,
+                stop_steps: 0,
             },
             degree: cfg.paper_degree,
             target: Target::Absolute,
@@ -107,6 +117,8 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                     layout: Layout::PerEngine,
                     history: n,
                     mass_features: cfg.engine_mass_features,
+                    start_steps: cfg.engine_start_steps,
+                    stop_steps: cfg.engine_stop_steps,
                 },
                 degree: cfg.engine_degree,
                 target: Target::Increment,
@@ -117,6 +129,8 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                     layout: Layout::Mimo,
                     history: n,
                     mass_features: true,
+                    start_steps: 0,
+                    stop_steps: 0,
                 },
                 degree: cfg.system_degree,
                 target: Target::Increment,
@@ -154,7 +168,7 @@ impl Prepared {
     pub fn new(spec: SubSpec, data: &Dataset) -> Self {
         let fs = spec.features;
         let dim = fs.dim();
-        let library = Library::new(dim, spec.degree, &fs.binary_mask());
+        let library = Library::new(dim, spec.degree, &fs.binary_groups());
         let mut sum = vec![0.0; dim];
         let mut sum2 = vec![0.0; dim];
         let mut lo = vec![f64::INFINITY; dim];

@@ -13,7 +13,8 @@ pub type Term = [u16; MAX_DEGREE];
 
 /// All monomials of degree 1..=`degree` over `dim` features (no constant: the intercept is
 /// fitted separately and not penalised). Powers of binary features are left out: they
-/// equal the feature itself.
+/// equal the feature itself; so are products of two binary features of one exclusion
+/// group (see `FeatureSpec::binary_groups`), which are zero or equal to one of them.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Library {
     /// Number of features.
@@ -25,12 +26,13 @@ pub struct Library {
 }
 
 impl Library {
-    /// Enumerates the library. `binary[i]` marks features that take only 0 and 1.
-    pub fn new(dim: usize, degree: usize, binary: &[bool]) -> Self {
+    /// Enumerates the library. `group[i]` is 0 for a continuous feature and the exclusion
+    /// group of a feature that takes only 0 and 1.
+    pub fn new(dim: usize, degree: usize, group: &[u8]) -> Self {
         assert!((1..=MAX_DEGREE).contains(&degree) && dim < u16::MAX as usize);
         let one = dim as u16;
         let mut terms = Vec::new();
-        let binary_power = |a: usize, b: usize| a == b && binary[a];
+        let binary_power = |a: usize, b: usize| group[a] != 0 && group[a] == group[b];
         for i in 0..dim {
             terms.push([i as u16, one, one]);
         }
@@ -47,7 +49,7 @@ impl Library {
             for i in 0..dim {
                 for j in i..dim {
                     for k in j..dim {
-                        if !binary_power(i, j) && !binary_power(j, k) {
+                        if !binary_power(i, j) && !binary_power(j, k) && !binary_power(i, k) {
                             terms.push([i as u16, j as u16, k as u16]);
                         }
                     }
@@ -125,7 +127,7 @@ mod tests {
     fn counts_match_multiset_formula() {
         for dim in 1..6 {
             for degree in 1..=3 {
-                let lib = Library::new(dim, degree, &vec![false; dim]);
+                let lib = Library::new(dim, degree, &vec![0; dim]);
                 // Monomials of degree 1..=d in dim variables: C(dim+d, d) - 1.
                 assert_eq!(
                     lib.len(),
@@ -142,7 +144,7 @@ mod tests {
             .iter()
             .map(|s| s.to_string())
             .collect();
-        let lib = Library::new(3, 2, &[false, false, true]);
+        let lib = Library::new(3, 2, &[0, 0, 1]);
         let all: Vec<String> = lib.terms.iter().map(|t| lib.term_name(t, &names)).collect();
         assert!(all.contains(&"T_o1[t-2]*P[t-1]".to_string()));
         assert!(all.contains(&"P[t-1]^2".to_string()));

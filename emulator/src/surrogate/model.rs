@@ -3,8 +3,8 @@
 //! model is chosen on exactly the behaviour it has in the loop.
 
 use super::features::{
-    FeatureSpec, History, InputVec, Layout, StateVec, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO,
-    STATE_NAMES, STATE_P,
+    lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_DIM,
+    STATE_MF, STATE_MO, STATE_NAMES, STATE_P,
 };
 use super::library::{term_name, Term, MAX_DEGREE};
 use oils_shared::ENGINE_COUNT;
@@ -115,6 +115,12 @@ impl Model {
             }
             if !(1..=MAX_DEGREE).contains(&s.degree) {
                 return Err(ctx("degree must be 1..=3"));
+            }
+            if s.features.start_steps > 64 || s.features.stop_steps > 64 {
+                return Err(ctx("start_steps and stop_steps must be 0..=64"));
+            }
+            if s.features.layout == Layout::Mimo && s.features.phase_features() > 0 {
+                return Err(ctx("phase indicators are per-engine features only"));
             }
             for (name, v) in [
                 ("feature_names", s.feature_names.len()),
@@ -257,26 +263,114 @@ pub fn active_terms_of(
         .collect()
 }
 
-/// A row compiled for evaluation: factor indices and coefficients in flat arrays.
-#[derive(Debug, Clone)]
+/// A row compiled for evaluation: terms split by degree (factor slots into the gathered
+/// features, coefficients) in flat arrays, so a linear term costs one read and one
+/// multiply-add. The library lists terms by degree, so the sum runs in library order;
+/// leaving out factors of 1.0 changes no bit.
+#[derive(Debug, Clone, Default)]
 struct CompiledRow {
     intercept: f64,
-    factors: Vec<Term>,
-    coefs: Vec<f64>,
+    lin: Vec<(u16, f64)>,
+    quad: Vec<([u16; 2], f64)>,
+    cubic: Vec<([u16; 3], f64)>,
+}
+
+impl CompiledRow {
+    fn new(r: &OutputRow, slot: &[u16], dim: usize) -> Self {
+        let one = slot[dim];
+        let mut row = Self {
+            intercept: r.intercept,
+            ..Self::default()
+        };
+        for t in &r.terms {
+            // A checked model never has a factor above dim; clamping makes the
+            // unchecked reads in `eval` sound for any model.
+            let f: Vec<u16> = t
+                .factors
+                .iter()
+                .map(|&f| slot[(f as usize).min(dim)])
+                .filter(|&f| f != one)
+                .collect();
+            match f[..] {
+                [] => row.intercept += t.coef,
+                [a] => row.lin.push((a, t.coef)),
+                [a, b] => row.quad.push(([a, b], t.coef)),
+                _ => row.cubic.push(([f[0], f[1], f[2]], t.coef)),
+            }
+        }
+        row
+    }
+
+    /// Evaluates lane `L` of every engine lane at once (`LANES` = 1 or 4).
+    #[inline(always)]
+    fn eval<const LANES: usize>(&self, x: &[[f64; ENGINE_COUNT]]) -> [f64; LANES] {
+        let mut y = [self.intercept; LANES];
+        // SAFETY (all three loops): `CompiledSub::compile` maps every factor to a slot
+        // below the number of gathered features and `x` has that many entries plus one.
+        for &(a, c) in &self.lin {
+            let a = unsafe { x.get_unchecked(a as usize) };
+            for e in 0..LANES {
+                y[e] += c * a[e];
+            }
+        }
+        for &([a, b], c) in &self.quad {
+            let (a, b) = unsafe { (x.get_unchecked(a as usize), x.get_unchecked(b as usize)) };
+            for e in 0..LANES {
+                y[e] += c * (a[e] * b[e]);
+            }
+        }
+        for &([a, b, d], c) in &self.cubic {
+            let (a, b, d) = unsafe {
+                (
+                    x.get_unchecked(a as usize),
+                    x.get_unchecked(b as usize),
+                    x.get_unchecked(d as usize),
+                )
+            };
+            for e in 0..LANES {
+                y[e] += c * (a[e] * b[e] * d[e]);
+            }
+        }
+        y
+    }
+}
+
+/// One feature an active term uses, compiled to a ring read: the record `lag` steps back,
+/// component `comp` (for a per-engine feature, engine 0's; the four engines' values are
+/// the four components from there), then clamped to the envelope and scaled into `slot`.
+#[derive(Debug, Clone, Copy)]
+struct Gather {
+    slot: usize,
+    lag: usize,
+    comp: usize,
+    scaling: FeatureScaling,
+}
+
+/// A phase indicator an active term uses: 1 when the engine's switch is `on` and has been
+/// for exactly `run` steps.
+#[derive(Debug, Clone, Copy)]
+struct PhaseGather {
+    slot: usize,
+    on: bool,
+    run: usize,
+    scaling: FeatureScaling,
 }
 
 #[derive(Debug, Clone)]
 struct CompiledSub {
-    spec: FeatureSpec,
-    evaluations: usize,
+    per_engine: bool,
     target: Target,
     outputs: Vec<usize>,
-    /// Per feature: envelope and scaling side by side (one bounds check, one cache line).
-    scaling: Vec<FeatureScaling>,
-    /// Scaled features followed by the constant 1.0.
-    x: Vec<f64>,
-    /// Per-engine models: the four engines' scaled features side by side, so every term
-    /// is evaluated for the four engines at once (vectorised; same arithmetic per lane).
+    /// Features the active terms use, and only those (a model of 60 active terms reads
+    /// some 20-40 of its ~100 features): read once per step...
+    shared: Vec<Gather>,
+    /// ... read per engine (per-engine submodels only) ...
+    lanes: Vec<Gather>,
+    /// ... and the phase indicators (per engine).
+    phases: Vec<PhaseGather>,
+    /// Gathered scaled features followed by the constant 1.0, one lane per engine (MIMO
+    /// models use lane 0): every term is evaluated for the four engines at once
+    /// (vectorised; the same arithmetic per lane as for one).
     x4: Vec<[f64; ENGINE_COUNT]>,
     rows: Vec<CompiledRow>,
 }
@@ -291,75 +385,167 @@ struct FeatureScaling {
 
 impl FeatureScaling {
     /// Clamps to the envelope and scales one raw value; reports whether it was outside.
-    /// (`max().min()` rather than `clamp`, which asserts lo <= hi on every call; the
-    /// model check guarantees it.)
+    /// (Comparisons rather than `clamp`, which asserts lo <= hi on every call, or
+    /// `max`/`min`, which spend instructions on NaN: a NaN feature stays NaN, makes the
+    /// prediction non-finite, and the step's guard keeps the previous state.)
     #[inline(always)]
     fn apply(&self, raw: f64) -> (f64, bool) {
-        let v = raw.max(self.lo).min(self.hi);
+        let v = if raw < self.lo { self.lo } else { raw };
+        let v = if v > self.hi { self.hi } else { v };
         ((v - self.mean) * self.inv_std, v != raw)
     }
 }
 
+/// Per-engine switch phase at the latest step: the switch and how many consecutive steps
+/// it has had that value, saturated at `cap + 1`. Kept incrementally so the phase
+/// indicators cost a comparison; equal to scanning the history (`features::phase_age`).
+#[derive(Debug, Clone, Copy)]
+struct Phases {
+    on: [bool; ENGINE_COUNT],
+    run: [usize; ENGINE_COUNT],
+    cap: usize,
+}
+
+/// Components of a ring record: the step's inputs, then the state at its end, then lambda
+/// of that state (computed once when the state is stored, not per read).
+const REC_STATE: usize = INPUT_DIM;
+const REC_LAMBDA: usize = INPUT_DIM + STATE_DIM;
+const REC_DIM: usize = INPUT_DIM + STATE_DIM + 1;
+type Record = [f64; REC_DIM];
+
 impl CompiledSub {
-    fn eval_mimo(&mut self, ring: &Ring, prev: &StateVec, next: &mut StateVec) -> bool {
-        let dim = self.spec.dim();
+    fn compile(s: &Submodel) -> Self {
+        let dim = s.features.dim();
+        let sources = s.features.sources();
+        let per_engine = s.features.layout == Layout::PerEngine;
+        let mut used = vec![false; dim + 1];
+        for r in &s.rows {
+            for t in &r.terms {
+                for &f in &t.factors {
+                    // A checked model never has a factor above dim; clamping makes the
+                    // unchecked reads in `eval` sound for any model.
+                    used[(f as usize).min(dim)] = true;
+                }
+            }
+        }
+        // `slot[j]`: feature j's place among the used ones; `dim` maps to the 1.0 slot.
+        let mut slot = vec![0u16; dim + 1];
+        let (mut shared, mut lanes, mut phases) = (Vec::new(), Vec::new(), Vec::new());
+        let mut count = 0;
+        for j in (0..dim).filter(|&j| used[j]) {
+            slot[j] = count as u16;
+            let scaling = FeatureScaling {
+                lo: s.envelope_lo[j],
+                hi: s.envelope_hi[j].max(s.envelope_lo[j]),
+                mean: s.feature_mean[j],
+                inv_std: 1.0 / s.feature_std[j],
+            };
+            let read = |lag, comp| Gather {
+                slot: count,
+                lag,
+                comp,
+                scaling,
+            };
+            let lane = |p: bool| per_engine && p;
+            match sources[j] {
+                Source::Input {
+                    lag,
+                    comp,
+                    per_engine: p,
+                } => (if lane(p) { &mut lanes } else { &mut shared }).push(read(lag, comp)),
+                Source::State {
+                    lag,
+                    comp,
+                    per_engine: p,
+                } => (if lane(p) { &mut lanes } else { &mut shared })
+                    .push(read(lag, REC_STATE + comp)),
+                Source::Lambda => shared.push(read(1, REC_LAMBDA)),
+                Source::Start(k) | Source::Stop(k) => phases.push(PhaseGather {
+                    slot: count,
+                    on: matches!(sources[j], Source::Start(_)),
+                    run: k + 1,
+                    scaling,
+                }),
+            }
+            count += 1;
+        }
+        slot[dim] = count as u16;
+        Self {
+            per_engine,
+            target: s.target,
+            outputs: s.outputs.clone(),
+            x4: vec![[1.0; ENGINE_COUNT]; count + 1],
+            shared,
+            lanes,
+            phases,
+            rows: s
+                .rows
+                .iter()
+                .map(|r| CompiledRow::new(r, &slot, dim))
+                .collect(),
+        }
+    }
+
+    /// Gathers, clamps and scales the used features into `x4`; true when one was outside
+    /// its envelope.
+    #[inline]
+    fn gather(&mut self, ring: &Ring, phases: &Phases) -> bool {
         let mut outside = false;
-        let mut x = std::mem::take(&mut self.x);
-        self.spec.fill(ring, 0, &mut x[..dim]);
-        for (x, sc) in x[..dim].iter_mut().zip(&self.scaling) {
-            let (v, out) = sc.apply(*x);
-            *x = v;
+        let x4 = &mut self.x4;
+        for g in &self.shared {
+            let (v, out) = g.scaling.apply(ring.rec(g.lag)[g.comp]);
+            x4[g.slot] = [v; ENGINE_COUNT];
             outside |= out;
         }
-        for (row, &o) in self.rows.iter().zip(&self.outputs) {
-            let mut y = row.intercept;
-            for (t, c) in row.factors.iter().zip(&row.coefs) {
-                // SAFETY: `Predictor::new` clamps every factor to <= dim and `x` has
-                // dim + 1 entries, so the three reads are in bounds.
-                let term = unsafe {
-                    x.get_unchecked(t[0] as usize)
-                        * x.get_unchecked(t[1] as usize)
-                        * x.get_unchecked(t[2] as usize)
-                };
-                y += c * term;
+        for g in &self.lanes {
+            let rec = ring.rec(g.lag);
+            let raw: [f64; ENGINE_COUNT] = std::array::from_fn(|e| rec[g.comp + e]);
+            let x = &mut x4[g.slot];
+            for e in 0..ENGINE_COUNT {
+                let (v, out) = g.scaling.apply(raw[e]);
+                x[e] = v;
+                outside |= out;
             }
+        }
+        for g in &self.phases {
+            let x = &mut x4[g.slot];
+            for e in 0..ENGINE_COUNT {
+                let hit = phases.on[e] == g.on && phases.run[e] == g.run;
+                let (v, out) = g.scaling.apply(f64::from(u8::from(hit)));
+                x[e] = v;
+                outside |= out;
+            }
+        }
+        outside
+    }
+
+    fn eval_mimo(
+        &mut self,
+        ring: &Ring,
+        phases: &Phases,
+        prev: &StateVec,
+        next: &mut StateVec,
+    ) -> bool {
+        let outside = self.gather(ring, phases);
+        for (row, &o) in self.rows.iter().zip(&self.outputs) {
+            let [y] = row.eval::<1>(&self.x4);
             next[o] = match self.target {
                 Target::Absolute => y,
                 Target::Increment => prev[o] + y,
             };
         }
-        self.x = x;
         outside
     }
 
-    fn eval_per_engine(&mut self, ring: &Ring, prev: &StateVec, next: &mut StateVec) -> bool {
-        let dim = self.spec.dim();
-        let mut outside = false;
-        let mut x = std::mem::take(&mut self.x);
-        let mut x4 = std::mem::take(&mut self.x4);
-        for e in 0..ENGINE_COUNT {
-            self.spec.fill(ring, e, &mut x[..dim]);
-            for ((x, x4), sc) in x[..dim].iter().zip(x4.iter_mut()).zip(&self.scaling) {
-                let (v, out) = sc.apply(*x);
-                x4[e] = v;
-                outside |= out;
-            }
-        }
-        let row = &self.rows[0];
-        let mut y = [row.intercept; ENGINE_COUNT];
-        for (t, c) in row.factors.iter().zip(&row.coefs) {
-            // SAFETY: as in `eval_mimo`; `x4` has dim + 1 entries.
-            let (a, b, d) = unsafe {
-                (
-                    x4.get_unchecked(t[0] as usize),
-                    x4.get_unchecked(t[1] as usize),
-                    x4.get_unchecked(t[2] as usize),
-                )
-            };
-            for e in 0..ENGINE_COUNT {
-                y[e] += c * (a[e] * b[e] * d[e]);
-            }
-        }
+    fn eval_per_engine(
+        &mut self,
+        ring: &Ring,
+        phases: &Phases,
+        prev: &StateVec,
+        next: &mut StateVec,
+    ) -> bool {
+        let outside = self.gather(ring, phases);
+        let y = self.rows[0].eval::<ENGINE_COUNT>(&self.x4);
         for e in 0..ENGINE_COUNT {
             let o = self.outputs[e];
             next[o] = match self.target {
@@ -367,38 +553,38 @@ impl CompiledSub {
                 Target::Increment => prev[o] + y[e],
             };
         }
-        self.x = x;
-        self.x4 = x4;
         outside
     }
 }
 
-/// Ring of past inputs and states, seen from the step being predicted (`head`).
+/// Ring of past records (inputs, state, lambda), seen from the step being predicted
+/// (`head`). The length is a power of two so wrapping is a mask, not a division.
 #[derive(Debug, Clone)]
 struct Ring {
-    inputs: Vec<InputVec>,
-    states: Vec<StateVec>,
+    recs: Vec<Record>,
     head: usize,
-    /// Length - 1; the length is a power of two so wrapping is a mask, not a division
-    /// (the step reads the ring some fifty times).
     mask: usize,
 }
 
 impl Ring {
-    #[inline]
+    #[inline(always)]
     fn at(&self, lag: usize) -> usize {
-        (self.head + self.inputs.len() - lag) & self.mask
+        self.head.wrapping_sub(lag) & self.mask
     }
-}
 
-impl History for Ring {
-    #[inline]
-    fn input(&self, lag: usize) -> &InputVec {
-        &self.inputs[self.at(lag)]
+    #[inline(always)]
+    fn rec(&self, lag: usize) -> &Record {
+        &self.recs[self.at(lag)]
     }
-    #[inline]
-    fn state(&self, lag: usize) -> &StateVec {
-        &self.states[self.at(lag)]
+
+    fn set_state(&mut self, i: usize, s: &StateVec) {
+        let r = &mut self.recs[i];
+        r[REC_STATE..REC_LAMBDA].copy_from_slice(s);
+        r[REC_LAMBDA] = lambda_of(s[STATE_MF], s[STATE_MO]);
+    }
+
+    fn state(&self, i: usize) -> StateVec {
+        std::array::from_fn(|k| self.recs[i][REC_STATE + k])
     }
 }
 
@@ -409,62 +595,42 @@ pub struct Predictor {
     on_command_range_n: [f64; 2],
     subs: Vec<CompiledSub>,
     ring: Ring,
+    phases: Phases,
     out_of_envelope_steps: u64,
 }
 
 impl Predictor {
     /// Compiles a model (assumed checked) and starts it from its initial state.
     pub fn new(model: &Model) -> Self {
-        let subs: Vec<CompiledSub> = model
+        let subs: Vec<CompiledSub> = model.submodels.iter().map(CompiledSub::compile).collect();
+        // The phase indicators are kept incrementally, so the ring only has to hold the
+        // lags the features read directly.
+        let depth = model
             .submodels
             .iter()
-            .map(|s| CompiledSub {
-                spec: s.features,
-                evaluations: s.evaluations(),
-                target: s.target,
-                outputs: s.outputs.clone(),
-                scaling: (0..s.features.dim())
-                    .map(|j| FeatureScaling {
-                        lo: s.envelope_lo[j],
-                        hi: s.envelope_hi[j].max(s.envelope_lo[j]),
-                        mean: s.feature_mean[j],
-                        inv_std: 1.0 / s.feature_std[j],
-                    })
-                    .collect(),
-                x: vec![1.0; s.features.dim() + 1],
-                x4: vec![[1.0; ENGINE_COUNT]; s.features.dim() + 1],
-                rows: s
-                    .rows
-                    .iter()
-                    .map(|r| CompiledRow {
-                        intercept: r.intercept,
-                        // A checked model never has a factor above dim; clamping
-                        // makes the unchecked reads in `step` sound for any model.
-                        factors: r
-                            .terms
-                            .iter()
-                            .map(|t| t.factors.map(|f| f.min(s.features.dim() as u16)))
-                            .collect(),
-                        coefs: r.terms.iter().map(|t| t.coef).collect(),
-                    })
-                    .collect(),
-            })
-            .collect();
-        let depth = subs
-            .iter()
-            .map(|s| s.spec.max_state_lag())
+            .map(|s| s.features.max_state_lag())
             .max()
             .unwrap_or(1)
             .saturating_add(1)
             .next_power_of_two();
+        let cap = model
+            .submodels
+            .iter()
+            .map(|s| s.features.start_steps.max(s.features.stop_steps))
+            .max()
+            .unwrap_or(0);
         let mut p = Self {
             on_command_range_n: model.on_command_range_n,
             subs,
             ring: Ring {
-                inputs: vec![[0.0; INPUT_DIM]; depth],
-                states: vec![model.initial_state; depth],
+                recs: vec![[0.0; REC_DIM]; depth],
                 head: 0,
                 mask: depth - 1,
+            },
+            phases: Phases {
+                on: [false; ENGINE_COUNT],
+                run: [cap + 1; ENGINE_COUNT],
+                cap,
             },
             out_of_envelope_steps: 0,
         };
@@ -475,62 +641,84 @@ impl Predictor {
     /// Restarts from a state at rest: engines off for all of the history, every past
     /// state equal to `state` (how the reference model is started).
     pub fn reset_to(&mut self, state: &StateVec) {
-        self.ring.inputs.fill([0.0; INPUT_DIM]);
-        self.ring.states.fill(*state);
+        for i in 0..self.ring.recs.len() {
+            self.ring.recs[i][..INPUT_DIM].fill(0.0);
+            self.ring.set_state(i, state);
+        }
         self.ring.head = 0;
+        self.phases.on = [false; ENGINE_COUNT];
+        self.phases.run = [self.phases.cap + 1; ENGINE_COUNT];
         self.out_of_envelope_steps = 0;
     }
 
     /// Loads a true history (oldest first; the last state is the latest known) so that a
     /// free run can start mid-trajectory, as cross-validation does on a test block.
     pub fn seed_history<H: History>(&mut self, h: &H) {
-        let depth = self.ring.inputs.len();
+        let depth = self.ring.recs.len();
         // Slot `head` is the step about to be predicted; lags 1..depth-1 are the past.
         self.ring.head = 0;
         for lag in 1..depth {
             let i = self.ring.at(lag);
-            self.ring.inputs[i] = *h.input(lag);
-            self.ring.states[i] = *h.state(lag);
+            self.ring.recs[i][..INPUT_DIM].copy_from_slice(h.input(lag));
+            self.ring.set_state(i, h.state(lag));
         }
         // One slot back, so the next step() advances onto slot 0.
         self.ring.head = depth - 1;
+        // The switch phase at the latest known step, read from the history (which may
+        // reach further back than the ring).
+        let cap = self.phases.cap;
+        for e in 0..ENGINE_COUNT {
+            let sw = |lag: usize| h.input(lag)[ENGINE_COUNT + e] > 0.5;
+            let on = sw(1);
+            self.phases.on[e] = on;
+            self.phases.run[e] = (1..=cap).find(|&k| sw(k + 1) != on).unwrap_or(cap + 1);
+        }
     }
 
-    /// Number of steps on which some feature was outside the training envelope.
+    /// Number of steps on which some used feature was outside the training envelope.
     pub fn out_of_envelope_steps(&self) -> u64 {
         self.out_of_envelope_steps
     }
 
     /// The latest state.
-    pub fn state(&self) -> &StateVec {
-        &self.ring.states[self.ring.head]
+    pub fn state(&self) -> StateVec {
+        self.ring.state(self.ring.head)
     }
 
     /// Predicts the state at the end of a step with `input` held, and makes it history.
     #[inline]
     pub fn step(&mut self, input: &InputVec) -> StateVec {
-        let prev = self.ring.states[self.ring.head];
+        let prev = self.ring.state(self.ring.head);
         self.ring.head = (self.ring.head + 1) & self.ring.mask;
         let head = self.ring.head;
-        self.ring.inputs[head] = *input;
+        let rec = &mut self.ring.recs[head];
+        rec[..INPUT_DIM].copy_from_slice(input);
         let mut outside = false;
         let [lo, hi] = self.on_command_range_n;
         for e in 0..ENGINE_COUNT {
-            if self.ring.inputs[head][ENGINE_COUNT + e] > 0.5 {
-                let raw = self.ring.inputs[head][e];
+            let on = rec[ENGINE_COUNT + e] > 0.5;
+            if on {
+                let raw = rec[e];
                 let v = raw.clamp(lo, hi);
                 outside |= v != raw;
-                self.ring.inputs[head][e] = v;
+                rec[e] = v;
             }
+            let ph = &mut self.phases;
+            ph.run[e] = if on == ph.on[e] {
+                (ph.run[e] + 1).min(ph.cap + 1)
+            } else {
+                1
+            };
+            ph.on[e] = on;
         }
         // The slot still holds an old state; it is never read (state lags start at 1).
         let mut next = prev;
         for sub in &mut self.subs {
-            if sub.evaluations == ENGINE_COUNT {
-                outside |= sub.eval_per_engine(&self.ring, &prev, &mut next);
+            outside |= if sub.per_engine {
+                sub.eval_per_engine(&self.ring, &self.phases, &prev, &mut next)
             } else {
-                outside |= sub.eval_mimo(&self.ring, &prev, &mut next);
-            }
+                sub.eval_mimo(&self.ring, &self.phases, &prev, &mut next)
+            };
         }
         // Physical guards: thrust and pressure are not negative, ejected mass never
         // falls. A non-finite prediction keeps the previous state (and counts).
@@ -547,7 +735,7 @@ impl Predictor {
         next[STATE_MF] = next[STATE_MF].max(prev[STATE_MF]);
         next[STATE_MO] = next[STATE_MO].max(prev[STATE_MO]);
         self.out_of_envelope_steps += u64::from(outside);
-        self.ring.states[head] = next;
+        self.ring.set_state(head, &next);
         next
     }
 }
@@ -555,4 +743,159 @@ impl Predictor {
 /// Name of a state output.
 pub fn output_name(o: usize) -> &'static str {
     STATE_NAMES[o]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::surrogate::features::TrajectoryHistory;
+    use crate::surrogate::library::Library;
+
+    /// A model with every library term active (pseudo-random coefficients), so every
+    /// feature, phase indicator and term degree is exercised.
+    fn dense_model() -> Model {
+        let mut seed = 12345u64;
+        let mut rnd = move || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5
+        };
+        let specs = [
+            (
+                FeatureSpec {
+                    layout: Layout::PerEngine,
+                    history: 2,
+                    mass_features: true,
+                    start_steps: 5,
+                    stop_steps: 3,
+                },
+                3,
+                (0..ENGINE_COUNT).collect::<Vec<_>>(),
+            ),
+            (
+                FeatureSpec {
+                    layout: Layout::Mimo,
+                    history: 1,
+                    mass_features: true,
+                    start_steps: 0,
+                    stop_steps: 0,
+                },
+                2,
+                (ENGINE_COUNT..STATE_DIM).collect(),
+            ),
+        ];
+        let submodels = specs
+            .into_iter()
+            .map(|(features, degree, outputs)| {
+                let dim = features.dim();
+                let names = features.names();
+                let lib = Library::new(dim, degree, &features.binary_groups());
+                let rows = match features.layout {
+                    Layout::PerEngine => 1,
+                    Layout::Mimo => outputs.len(),
+                };
+                Submodel {
+                    features,
+                    degree,
+                    library_size: lib.len(),
+                    target: Target::Increment,
+                    feature_names: names.clone(),
+                    feature_mean: (0..dim).map(|_| rnd()).collect(),
+                    feature_std: (0..dim).map(|_| 1.0 + rnd()).collect(),
+                    envelope_lo: vec![-1e9; dim],
+                    envelope_hi: vec![1e9; dim],
+                    rows: (0..rows)
+                        .map(|o| OutputRow {
+                            output: format!("y{o}"),
+                            intercept: rnd(),
+                            terms: lib
+                                .terms
+                                .iter()
+                                .map(|t| ActiveTerm {
+                                    name: lib.term_name(t, &names),
+                                    factors: *t,
+                                    coef: 1e-12 * rnd(),
+                                })
+                                .collect(),
+                        })
+                        .collect(),
+                    outputs,
+                }
+            })
+            .collect();
+        Model {
+            sample_time_ns: 10_000_000,
+            initial_state: [0.0, 0.0, 0.0, 0.0, 2.8e7, 0.0, 0.0],
+            on_command_range_n: [320.0, 800.0],
+            submodels,
+        }
+    }
+
+    /// The straightforward evaluation: every feature by `fill`, every term in library
+    /// order. The compiled predictor must give the same bits.
+    #[test]
+    fn compiled_step_equals_full_evaluation() {
+        let model = dense_model();
+        model.check().unwrap();
+        let mut p = Predictor::new(&model);
+        let (cmds, _) = crate::surrogate::features::source_tests::switching_trajectory(150);
+        let mut inputs: Vec<InputVec> = Vec::new();
+        let mut states: Vec<StateVec> = Vec::new();
+        for (t, cmd) in cmds.iter().enumerate() {
+            let got = p.step(cmd);
+            let mut u = *cmd;
+            for e in 0..ENGINE_COUNT {
+                if u[ENGINE_COUNT + e] > 0.5 {
+                    u[e] = u[e].clamp(320.0, 800.0);
+                }
+            }
+            inputs.push(u);
+            let prev = states.last().copied().unwrap_or(model.initial_state);
+            let mut want = prev;
+            for s in &model.submodels {
+                let dim = s.features.dim();
+                let mut x = vec![1.0; dim + 1];
+                for (e, &o) in s.outputs.iter().enumerate() {
+                    let h = TrajectoryHistory {
+                        inputs: &inputs,
+                        states: &states,
+                        initial: &model.initial_state,
+                        t,
+                    };
+                    s.features.fill(&h, e, &mut x[..dim]);
+                    for j in 0..dim {
+                        x[j] = (x[j] - s.feature_mean[j]) * (1.0 / s.feature_std[j]);
+                    }
+                    let row = &s.rows[if s.rows.len() == 1 { 0 } else { e }];
+                    let mut y = row.intercept;
+                    for term in &row.terms {
+                        let f = term.factors.map(|f| x[f as usize]);
+                        y += term.coef * (f[0] * f[1] * f[2]);
+                    }
+                    want[o] = prev[o] + y;
+                }
+            }
+            for v in want.iter_mut().take(ENGINE_COUNT) {
+                *v = v.max(0.0);
+            }
+            want[STATE_P] = want[STATE_P].max(0.0);
+            want[STATE_MF] = want[STATE_MF].max(prev[STATE_MF]);
+            want[STATE_MO] = want[STATE_MO].max(prev[STATE_MO]);
+            assert_eq!(got, want, "step {t}");
+            states.push(want);
+        }
+        // Seeding from the recorded history mid-run continues identically.
+        let mut q = Predictor::new(&model);
+        let t0 = 77;
+        q.seed_history(&TrajectoryHistory {
+            inputs: &inputs,
+            states: &states,
+            initial: &model.initial_state,
+            t: t0,
+        });
+        for t in t0..cmds.len() {
+            assert_eq!(q.step(&cmds[t]), states[t], "seeded step {t}");
+        }
+    }
 }

@@ -116,7 +116,7 @@ impl Propulsion for SurrogatePropulsion {
             "checked at construction"
         );
         let input = input_of(cmd);
-        let start = *self.predictor.state();
+        let start = self.predictor.state();
         let substeps = (dt_ns / self.sample_time_ns).max(1);
         let mut sum_mean = [0.0; ENGINE_COUNT];
         let mut prev = start;
