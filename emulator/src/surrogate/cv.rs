@@ -35,6 +35,11 @@ pub struct CvConfig {
     pub tol: f64,
     /// Lasso sweep limit.
     pub max_iter: usize,
+    /// Parsimony, beyond-paper variants only: choose the grid point with the fewest
+    /// active coefficients among those whose score is within this fraction of the best
+    /// (0: the best score, the paper's rule, which the paper variant always uses). Fewer terms cost less per step, and a score a few percent higher is within
+    /// the fold-to-fold spread of the estimate.
+    pub score_tolerance: f64,
 }
 
 impl Default for CvConfig {
@@ -48,6 +53,7 @@ impl Default for CvConfig {
             mu_count: 11,
             tol: 1e-4,
             max_iter: 2000,
+            score_tolerance: 0.0,
         }
     }
 }
@@ -70,6 +76,9 @@ impl CvConfig {
         }
         if !(self.tol > 0.0 && self.tol.is_finite()) || self.max_iter == 0 {
             return Err("cv: need tol > 0 and max_iter >= 1".into());
+        }
+        if !(0.0..=1.0).contains(&self.score_tolerance) {
+            return Err("cv: need 0 <= score_tolerance <= 1".into());
         }
         Ok(())
     }
@@ -103,6 +112,8 @@ pub struct GridPoint {
     pub free_rmse: [f64; STATE_DIM],
     /// Share of zero coefficients, percent.
     pub sparsity_pct: f64,
+    /// Active coefficients, mean over folds.
+    pub active_terms: f64,
     /// Selection score: mean over outputs of free-run RMSE / output standard deviation.
     pub score: f64,
     /// Lasso fits that hit the sweep limit.
@@ -123,7 +134,8 @@ pub struct CvResult {
     pub variant: Variant,
     /// Every grid point, by n then mu (largest first).
     pub points: Vec<GridPoint>,
-    /// Index of the chosen point (lowest finite score).
+    /// Index of the chosen point (lowest finite score, or with `score_tolerance` the
+    /// fewest active terms within it of the lowest).
     pub best: usize,
 }
 
@@ -167,14 +179,38 @@ pub fn cross_validate(
         .map(|n| grid_for_n(variant, n, data, cv, vcfg, &mus, &bounds, &ostd, tick))
         .collect();
     let points: Vec<GridPoint> = per_n.into_iter().flatten().collect();
-    let best = (0..points.len())
-        .min_by(|&a, &b| points[a].score.total_cmp(&points[b].score))
-        .unwrap_or(0);
+    // The paper's model is chosen by the paper's rule, the lowest score.
+    let tolerance = match variant {
+        Variant::Paper => 0.0,
+        Variant::SharedEngine => cv.score_tolerance,
+    };
+    let best = select(&points, tolerance);
     CvResult {
         variant,
         points,
         best,
     }
+}
+
+/// The chosen grid point: the lowest score, or with a tolerance the fewest active terms
+/// among the points within `tolerance` of the lowest score (ties: the lower score).
+pub fn select(points: &[GridPoint], tolerance: f64) -> usize {
+    let lowest = (0..points.len())
+        .min_by(|&a, &b| points[a].score.total_cmp(&points[b].score))
+        .unwrap_or(0);
+    if tolerance <= 0.0 {
+        return lowest;
+    }
+    let limit = points[lowest].score * (1.0 + tolerance);
+    (0..points.len())
+        .filter(|&i| points[i].score <= limit)
+        .min_by(|&a, &b| {
+            points[a]
+                .active_terms
+                .total_cmp(&points[b].active_terms)
+                .then(points[a].score.total_cmp(&points[b].score))
+        })
+        .unwrap_or(lowest)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -253,6 +289,7 @@ fn grid_for_n(
                 subs.push(prep.submodel(coefs));
             }
             acc.sparsity += 100.0 * (1.0 - active as f64 / total.max(1) as f64) / folds;
+            acc.active += active as f64 / folds;
             let model = assemble(data, subs);
             let free = free_run_rmse(&model, data, a, b);
             for o in 0..STATE_DIM {
@@ -272,6 +309,7 @@ fn grid_for_n(
                 test_rmse: a.test,
                 free_rmse: a.free,
                 sparsity_pct: a.sparsity,
+                active_terms: a.active,
                 score: if score.is_finite() {
                     score
                 } else {
@@ -289,6 +327,7 @@ struct Acc {
     test: [f64; STATE_DIM],
     free: [f64; STATE_DIM],
     sparsity: f64,
+    active: f64,
     unconverged: usize,
 }
 

@@ -166,6 +166,8 @@ mod tests {
             mass_features: true,
             start_steps: 0,
             stop_steps: 0,
+            phase_degree: 0,
+            command_sum: false,
         };
         d.export_csv(&dir, &spec).unwrap();
         let f = std::fs::read_to_string(dir.join("features_n2.csv")).unwrap();

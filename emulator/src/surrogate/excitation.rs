@@ -46,6 +46,17 @@ pub struct ExcitationConfig {
     pub burn_s: f64,
     /// Width of the burn's level band below `thrust_max_n`, newtons.
     pub burn_band_n: f64,
+    /// Beyond the paper: per cycle, this many cold starts after the burn: all engines off
+    /// for `start_off_s` (longer than the dome drain, so the start is cold), then all on
+    /// for `start_on_s` at a common level or, with probability 1/2, a level per engine.
+    /// The switching events restart only a few engines, so without these a start
+    /// transient is learned from a few dozen events; the held-out cases and a descent
+    /// begin with all four engines starting at once.
+    pub starts: usize,
+    /// Off time before each cold start, seconds.
+    pub start_off_s: f64,
+    /// On time after each cold start, seconds.
+    pub start_on_s: f64,
     /// The whole sequence (sphere levels, stairs, ramps, switching) is played this many
     /// times, each with fresh random draws and a time-shifted sphere signal.
     pub cycles: usize,
@@ -69,6 +80,9 @@ impl Default for ExcitationConfig {
             switch_hold_s: 1.5,
             burn_s: 0.0,
             burn_band_n: 80.0,
+            starts: 0,
+            start_off_s: 1.0,
+            start_on_s: 1.0,
             cycles: 5,
         }
     }
@@ -87,6 +101,8 @@ pub enum Segment {
     Switching,
     /// Long burn near full throttle.
     Burn,
+    /// Cold starts of all engines.
+    Starts,
 }
 
 /// The excitation sampled at the surrogate's sample time.
@@ -132,6 +148,8 @@ impl ExcitationConfig {
             ("switch_hold_s", self.switch_hold_s),
             ("burn_s", self.burn_s),
             ("burn_band_n", self.burn_band_n),
+            ("start_off_s", self.start_off_s),
+            ("start_on_s", self.start_on_s),
         ] {
             if !(0.0..1e6).contains(&v) {
                 return Err(format!("excitation.{name} = {v}: need finite, >= 0"));
@@ -150,7 +168,8 @@ impl ExcitationConfig {
                 + self.steps as f64 * self.step_hold_s
                 + self.ramps as f64 * self.ramp_duration_s
                 + self.switches as f64 * self.switch_hold_s
-                + self.burn_s)
+                + self.burn_s
+                + self.starts as f64 * (self.start_off_s + self.start_on_s))
     }
 
     /// Generates the excitation at `sample_time_ns`.
@@ -244,6 +263,24 @@ impl ExcitationConfig {
                 let cmd: [f64; ENGINE_COUNT] = std::array::from_fn(|_| rng.gen_range(band_lo..=hi));
                 for _ in 0..steps_of(self.burn_s) {
                     push(&mut ex, cmd, all_on, Segment::Burn);
+                }
+            }
+            // Cold starts (drawn after the burn, so the earlier segments keep their draws).
+            for _ in 0..self.starts {
+                let common = rng.gen_range(lo..=hi);
+                let split = rng.gen_bool(0.5);
+                let cmd = std::array::from_fn(|_| {
+                    if split {
+                        rng.gen_range(lo..=hi)
+                    } else {
+                        common
+                    }
+                });
+                for _ in 0..steps_of(self.start_off_s) {
+                    push(&mut ex, cmd, [false; ENGINE_COUNT], Segment::Starts);
+                }
+                for _ in 0..steps_of(self.start_on_s) {
+                    push(&mut ex, cmd, all_on, Segment::Starts);
                 }
             }
         }

@@ -70,6 +70,41 @@ pub struct FeatureSpec {
     /// ("this engine switched off k steps ago") for the tail-off (dome dribble). 0 = none.
     #[serde(default)]
     pub stop_steps: usize,
+    /// Highest degree of library terms with a phase indicator (0: the library degree).
+    #[serde(default)]
+    pub phase_degree: usize,
+    /// Beyond the paper, per-engine layout only: the sum of the four engines' commands
+    /// over the step, `T_rsum[t]` (off engines count 0). The engines share feed lines and
+    /// manifolds, so how fast one engine's dome fills at a start depends on what the
+    /// others draw; a per-engine model cannot see that otherwise.
+    #[serde(default)]
+    pub command_sum: bool,
+}
+
+/// Sum of the four commands of one step (off engines are commanded 0), in engine order.
+#[inline(always)]
+pub fn command_sum_of(input: &InputVec) -> f64 {
+    input[0] + input[1] + input[2] + input[3]
+}
+
+/// The features a phase indicator is multiplied with in the library: the command, the
+/// latest thrust and the latest gas pressure. A start or stop transient is then a lookup
+/// of per-step gains on these (`start3[t]*T_r[t]`, ...) rather than products with every
+/// history feature, which would triple the library for terms that carry no physics.
+pub const PHASE_PARTNERS: [&str; 4] = ["T_r[t]", "T_o[t-1]", "P[t-1]", "T_rsum[t]"];
+
+/// How a feature may enter the library's products.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Role {
+    /// 0: continuous. Otherwise the feature takes only 0 and 1, and two binary features
+    /// of the same group never multiply to anything new (the per-engine switch and phase
+    /// indicators: a start indicator implies the switch, start and stop indicators
+    /// exclude each other), so such products and powers are left out.
+    pub group: u8,
+    /// A phase indicator: its products are only with [`PHASE_PARTNERS`].
+    pub phase: bool,
+    /// One of [`PHASE_PARTNERS`].
+    pub phase_partner: bool,
 }
 
 /// Where one feature is read from: the runtime gathers only the features its active terms
@@ -96,6 +131,8 @@ pub enum Source {
     },
     /// The guarded lambda at `t-1`.
     Lambda,
+    /// The sum of the four commands at `t` ([`command_sum_of`]).
+    CommandSum,
     /// 1 when the engine switched on exactly `k` steps before `t` (see [`phase_age`]).
     Start(usize),
     /// 1 when the engine switched off exactly `k` steps before `t`.
@@ -107,7 +144,7 @@ impl Source {
     pub fn per_engine(&self) -> bool {
         match *self {
             Source::Input { per_engine, .. } | Source::State { per_engine, .. } => per_engine,
-            Source::Lambda => false,
+            Source::Lambda | Source::CommandSum => false,
             Source::Start(_) | Source::Stop(_) => true,
         }
     }
@@ -130,6 +167,7 @@ impl Source {
                 let s = h.state(1);
                 lambda_of(s[STATE_MF], s[STATE_MO])
             }
+            Source::CommandSum => command_sum_of(h.input(0)),
             Source::Start(k) => indicator(phase_age(h, engine, true, k + 1) == Some(k)),
             Source::Stop(k) => indicator(phase_age(h, engine, false, k + 1) == Some(k)),
         }
@@ -179,6 +217,11 @@ impl FeatureSpec {
         self.start_steps + self.stop_steps
     }
 
+    /// Number of per-engine physics features (command sum and phase indicators).
+    fn physics_features(&self) -> usize {
+        usize::from(self.command_sum) + self.phase_features()
+    }
+
     /// Number of features.
     pub fn dim(&self) -> usize {
         let n = self.history;
@@ -188,7 +231,7 @@ impl FeatureSpec {
             Layout::Mimo => 4 + 4 * n + 4 * n + 1 + n + m * 2 * n + 4 + m,
             // T_r 1, T_r-h n, T_o-h n, P 1, P_h n, m_f-h n, m_o-h n, S_e 1, lambda 1.
             // ... then start and stop indicators.
-            Layout::PerEngine => 1 + n + n + 1 + n + m * 2 * n + 1 + m + self.phase_features(),
+            Layout::PerEngine => 1 + n + n + 1 + n + m * 2 * n + 1 + m + self.physics_features(),
         }
     }
 
@@ -238,6 +281,9 @@ impl FeatureSpec {
             v.push(format!("lambda{}", lag(1)));
         }
         if self.layout == Layout::PerEngine {
+            if self.command_sum {
+                v.push(format!("T_rsum{}", lag(0)));
+            }
             for k in 0..self.start_steps {
                 v.push(format!("start{k}{}", lag(0)));
             }
@@ -296,6 +342,9 @@ impl FeatureSpec {
             v.push(Source::Lambda);
         }
         if per {
+            if self.command_sum {
+                v.push(Source::CommandSum);
+            }
             v.extend((0..self.start_steps).map(Source::Start));
             v.extend((0..self.stop_steps).map(Source::Stop));
         }
@@ -303,25 +352,27 @@ impl FeatureSpec {
         v
     }
 
-    /// Binary features (0 or 1 only) and their exclusion groups: 0 = not binary; two
-    /// binary features of the same group never multiply to anything new (the per-engine
-    /// switch and phase indicators: a start indicator implies the switch, start and stop
-    /// indicators exclude each other), so the library leaves such products out, as it
-    /// leaves out powers of binary features.
-    pub fn binary_groups(&self) -> Vec<u8> {
+    /// How each feature may enter library products (see [`Role`]).
+    pub fn roles(&self) -> Vec<Role> {
         self.names()
             .iter()
             .map(|s| {
-                if let Some(rest) = s.strip_prefix("S_e") {
+                let phase = s.starts_with("start") || s.starts_with("stop");
+                let group = if let Some(rest) = s.strip_prefix("S_e") {
                     // MIMO: each engine's switch its own group; per-engine: group 1.
                     rest.chars()
                         .next()
                         .and_then(|c| c.to_digit(10))
                         .map_or(1, |d| d as u8)
-                } else if s.starts_with("start") || s.starts_with("stop") {
+                } else if phase {
                     1
                 } else {
                     0
+                };
+                Role {
+                    group,
+                    phase,
+                    phase_partner: PHASE_PARTNERS.contains(&s.as_str()),
                 }
             })
             .collect()
@@ -373,6 +424,9 @@ impl FeatureSpec {
         if self.mass_features {
             let s = h.state(1);
             put(lambda_of(s[STATE_MF], s[STATE_MO]));
+        }
+        if self.layout == Layout::PerEngine && self.command_sum {
+            put(command_sum_of(h.input(0)));
         }
         if self.layout == Layout::PerEngine && self.phase_features() > 0 {
             let start = phase_age(h, engine, true, self.start_steps);
@@ -427,6 +481,8 @@ mod tests {
                 mass_features: true,
                 start_steps: 0,
                 stop_steps: 0,
+                phase_degree: 0,
+                command_sum: false,
             };
             assert_eq!(s.dim(), 11 * n + 10);
             assert_eq!(s.names().len(), 11 * n + 10);
@@ -446,6 +502,8 @@ mod tests {
             mass_features: true,
             start_steps: 0,
             stop_steps: 0,
+            phase_degree: 0,
+            command_sum: false,
         };
         let mut out = vec![0.0; spec.dim()];
         let h = TrajectoryHistory {
@@ -488,6 +546,8 @@ mod tests {
             mass_features: false,
             start_steps: 0,
             stop_steps: 0,
+            phase_degree: 0,
+            command_sum: false,
         };
         let mut out = vec![0.0; spec.dim()];
         let h = TrajectoryHistory {
@@ -546,6 +606,8 @@ pub(crate) mod source_tests {
                 mass_features: true,
                 start_steps: 0,
                 stop_steps: 0,
+                phase_degree: 0,
+                command_sum: false,
             },
             FeatureSpec {
                 layout: Layout::PerEngine,
@@ -553,6 +615,8 @@ pub(crate) mod source_tests {
                 mass_features: true,
                 start_steps: 7,
                 stop_steps: 4,
+                phase_degree: 0,
+                command_sum: true,
             },
         ] {
             let sources = spec.sources();

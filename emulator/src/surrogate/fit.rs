@@ -50,6 +50,12 @@ pub struct VariantConfig {
     pub engine_start_steps: usize,
     /// Beyond the paper: stop-phase indicators (tail-off); 0 = none.
     pub engine_stop_steps: usize,
+    /// Degree of library terms with a phase indicator (0: `engine_degree`); 3 makes each
+    /// start step a quadratic in the command, as ignition timing depends on it.
+    pub engine_phase_degree: usize,
+    /// Beyond the paper: give the per-engine thrust model the sum of the four commands
+    /// (`T_rsum[t]`, see [`FeatureSpec::command_sum`]).
+    pub engine_command_sum: bool,
 }
 
 impl Default for VariantConfig {
@@ -61,6 +67,8 @@ impl Default for VariantConfig {
             engine_mass_features: false,
             engine_start_steps: 0,
             engine_stop_steps: 0,
+            engine_phase_degree: 0,
+            engine_command_sum: false,
         }
     }
 }
@@ -106,6 +114,8 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                 mass_features: true,
                 start_steps: 0,
                 stop_steps: 0,
+                phase_degree: 0,
+                command_sum: false,
             },
             degree: cfg.paper_degree,
             target: Target::Absolute,
@@ -119,6 +129,8 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                     mass_features: cfg.engine_mass_features,
                     start_steps: cfg.engine_start_steps,
                     stop_steps: cfg.engine_stop_steps,
+                    phase_degree: cfg.engine_phase_degree,
+                    command_sum: cfg.engine_command_sum,
                 },
                 degree: cfg.engine_degree,
                 target: Target::Increment,
@@ -131,6 +143,8 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                     mass_features: true,
                     start_steps: 0,
                     stop_steps: 0,
+                    phase_degree: 0,
+                    command_sum: false,
                 },
                 degree: cfg.system_degree,
                 target: Target::Increment,
@@ -168,7 +182,7 @@ impl Prepared {
     pub fn new(spec: SubSpec, data: &Dataset) -> Self {
         let fs = spec.features;
         let dim = fs.dim();
-        let library = Library::new(dim, spec.degree, &fs.binary_groups());
+        let library = Library::new(dim, spec.degree, &fs.roles(), fs.phase_degree);
         let mut sum = vec![0.0; dim];
         let mut sum2 = vec![0.0; dim];
         let mut lo = vec![f64::INFINITY; dim];
@@ -194,7 +208,7 @@ impl Prepared {
             }
         }
         let mean: Vec<f64> = sum.iter().map(|s| s / rows).collect();
-        let std = (0..dim)
+        let std: Vec<f64> = (0..dim)
             .map(|j| {
                 let v = (sum2[j] / rows - mean[j] * mean[j]).max(0.0).sqrt();
                 if v > 1e-12 * (1.0 + mean[j].abs()) {
@@ -208,6 +222,16 @@ impl Prepared {
             let margin = ENVELOPE_MARGIN * (hi[j] - lo[j]);
             lo[j] -= margin;
             hi[j] += margin;
+        }
+        // Phase indicators stay 0 and 1 (not centred): a term with one is then exactly
+        // zero outside its phase, and the predictor evaluates it only for an engine in
+        // that phase. (The Lasso standardises every term anyway.)
+        let (mut mean, mut std) = (mean, std);
+        for (j, r) in fs.roles().iter().enumerate() {
+            if r.phase {
+                mean[j] = 0.0;
+                std[j] = 1.0;
+            }
         }
         Self {
             spec,

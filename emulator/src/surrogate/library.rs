@@ -5,6 +5,8 @@
 //! that always holds 1.0; lower-degree terms are padded with that slot. Evaluation is then
 //! the same branch-free product for every term, in training and in the runtime.
 
+use super::features::Role;
+
 /// Highest supported polynomial degree.
 pub const MAX_DEGREE: usize = 3;
 
@@ -26,30 +28,52 @@ pub struct Library {
 }
 
 impl Library {
-    /// Enumerates the library. `group[i]` is 0 for a continuous feature and the exclusion
-    /// group of a feature that takes only 0 and 1.
-    pub fn new(dim: usize, degree: usize, group: &[u8]) -> Self {
+    /// Enumerates the library over features with the given roles (binary exclusion
+    /// groups, phase indicators and their partners). Terms with a phase indicator have
+    /// degree up to `phase_degree` instead (0: `degree`), so a start transient can be a
+    /// per-step quadratic in the command while the rest of the library stays degree 2.
+    pub fn new(dim: usize, degree: usize, roles: &[Role], phase_degree: usize) -> Self {
+        let phase_degree = if phase_degree == 0 { degree } else { phase_degree };
         assert!((1..=MAX_DEGREE).contains(&degree) && dim < u16::MAX as usize);
+        assert!(phase_degree <= MAX_DEGREE);
+        let allowed = |d: usize, f: &[usize]| {
+            if f.iter().any(|&i| roles[i].phase) {
+                d <= phase_degree
+            } else {
+                d <= degree
+            }
+        };
         let one = dim as u16;
         let mut terms = Vec::new();
-        let binary_power = |a: usize, b: usize| group[a] != 0 && group[a] == group[b];
+        let left_out = |a: usize, b: usize| {
+            let (ra, rb) = (roles[a], roles[b]);
+            (ra.group != 0 && ra.group == rb.group)
+                // A phase indicator multiplies only its partners (and vice versa).
+                || (ra.phase && !rb.phase_partner)
+                || (rb.phase && !ra.phase_partner)
+        };
         for i in 0..dim {
             terms.push([i as u16, one, one]);
         }
-        if degree >= 2 {
+        let top = degree.max(phase_degree);
+        if top >= 2 {
             for i in 0..dim {
                 for j in i..dim {
-                    if !binary_power(i, j) {
+                    if !left_out(i, j) && allowed(2, &[i, j]) {
                         terms.push([i as u16, j as u16, one]);
                     }
                 }
             }
         }
-        if degree >= 3 {
+        if top >= 3 {
             for i in 0..dim {
                 for j in i..dim {
                     for k in j..dim {
-                        if !binary_power(i, j) && !binary_power(j, k) && !binary_power(i, k) {
+                        if !left_out(i, j)
+                            && !left_out(j, k)
+                            && !left_out(i, k)
+                            && allowed(3, &[i, j, k])
+                        {
                             terms.push([i as u16, j as u16, k as u16]);
                         }
                     }
@@ -127,7 +151,7 @@ mod tests {
     fn counts_match_multiset_formula() {
         for dim in 1..6 {
             for degree in 1..=3 {
-                let lib = Library::new(dim, degree, &vec![0; dim]);
+                let lib = Library::new(dim, degree, &vec![Role::default(); dim], 0);
                 // Monomials of degree 1..=d in dim variables: C(dim+d, d) - 1.
                 assert_eq!(
                     lib.len(),
@@ -144,7 +168,19 @@ mod tests {
             .iter()
             .map(|s| s.to_string())
             .collect();
-        let lib = Library::new(3, 2, &[0, 0, 1]);
+        let lib = Library::new(
+            3,
+            2,
+            &[
+                Role::default(),
+                Role::default(),
+                Role {
+                    group: 1,
+                    ..Role::default()
+                },
+            ],
+            0,
+        );
         let all: Vec<String> = lib.terms.iter().map(|t| lib.term_name(t, &names)).collect();
         assert!(all.contains(&"T_o1[t-2]*P[t-1]".to_string()));
         assert!(all.contains(&"P[t-1]^2".to_string()));

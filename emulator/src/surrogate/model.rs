@@ -3,7 +3,7 @@
 //! model is chosen on exactly the behaviour it has in the loop.
 
 use super::features::{
-    lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_DIM,
+    command_sum_of, lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_DIM,
     STATE_MF, STATE_MO, STATE_NAMES, STATE_P,
 };
 use super::library::{term_name, Term, MAX_DEGREE};
@@ -118,6 +118,9 @@ impl Model {
             }
             if s.features.start_steps > 64 || s.features.stop_steps > 64 {
                 return Err(ctx("start_steps and stop_steps must be 0..=64"));
+            }
+            if s.features.phase_degree > MAX_DEGREE {
+                return Err(ctx("phase_degree must be 0..=3"));
             }
             if s.features.layout == Layout::Mimo && s.features.phase_features() > 0 {
                 return Err(ctx("phase indicators are per-engine features only"));
@@ -263,48 +266,30 @@ pub fn active_terms_of(
         .collect()
 }
 
-/// A row compiled for evaluation: terms split by degree (factor slots into the gathered
+/// Terms compiled for evaluation, split by degree (factor slots into the gathered
 /// features, coefficients) in flat arrays, so a linear term costs one read and one
-/// multiply-add. The library lists terms by degree, so the sum runs in library order;
+/// multiply-add. The library lists terms by degree, so each list runs in library order;
 /// leaving out factors of 1.0 changes no bit.
 #[derive(Debug, Clone, Default)]
-struct CompiledRow {
-    intercept: f64,
+struct Terms {
     lin: Vec<(u16, f64)>,
     quad: Vec<([u16; 2], f64)>,
     cubic: Vec<([u16; 3], f64)>,
 }
 
-impl CompiledRow {
-    fn new(r: &OutputRow, slot: &[u16], dim: usize) -> Self {
-        let one = slot[dim];
-        let mut row = Self {
-            intercept: r.intercept,
-            ..Self::default()
-        };
-        for t in &r.terms {
-            // A checked model never has a factor above dim; clamping makes the
-            // unchecked reads in `eval` sound for any model.
-            let f: Vec<u16> = t
-                .factors
-                .iter()
-                .map(|&f| slot[(f as usize).min(dim)])
-                .filter(|&f| f != one)
-                .collect();
-            match f[..] {
-                [] => row.intercept += t.coef,
-                [a] => row.lin.push((a, t.coef)),
-                [a, b] => row.quad.push(([a, b], t.coef)),
-                _ => row.cubic.push(([f[0], f[1], f[2]], t.coef)),
-            }
+impl Terms {
+    fn push(&mut self, f: &[u16], coef: f64) {
+        match *f {
+            [a] => self.lin.push((a, coef)),
+            [a, b] => self.quad.push(([a, b], coef)),
+            [a, b, d] => self.cubic.push(([a, b, d], coef)),
+            _ => unreachable!("a term has 1 to 3 factors"),
         }
-        row
     }
 
-    /// Evaluates lane `L` of every engine lane at once (`LANES` = 1 or 4).
+    /// Adds the terms of lanes `0..LANES` (`LANES` = 1 or 4) to `y`.
     #[inline(always)]
-    fn eval<const LANES: usize>(&self, x: &[[f64; ENGINE_COUNT]]) -> [f64; LANES] {
-        let mut y = [self.intercept; LANES];
+    fn add<const LANES: usize>(&self, x: &[[f64; ENGINE_COUNT]], y: &mut [f64; LANES]) {
         // SAFETY (all three loops): `CompiledSub::compile` maps every factor to a slot
         // below the number of gathered features and `x` has that many entries plus one.
         for &(a, c) in &self.lin {
@@ -331,7 +316,62 @@ impl CompiledRow {
                 y[e] += c * (a[e] * b[e] * d[e]);
             }
         }
-        y
+    }
+
+    /// Adds the terms of one lane to `y`.
+    #[inline(always)]
+    fn add_lane(&self, x: &[[f64; ENGINE_COUNT]], e: usize, y: &mut f64) {
+        let v = |i: u16| x[i as usize][e];
+        for &(a, c) in &self.lin {
+            *y += c * v(a);
+        }
+        for &([a, b], c) in &self.quad {
+            *y += c * (v(a) * v(b));
+        }
+        for &([a, b, d], c) in &self.cubic {
+            *y += c * (v(a) * v(b) * v(d));
+        }
+    }
+}
+
+/// The coefficients of one output, compiled. Terms with a phase indicator that is
+/// exactly 0 outside its phase (uncentred, see `fit::Prepared`) are kept apart, one group
+/// per indicator, and evaluated only for an engine in that phase: in steady running no
+/// phase term costs anything, and skipping terms that are exactly 0 changes no sum.
+#[derive(Debug, Clone, Default)]
+struct CompiledRow {
+    intercept: f64,
+    terms: Terms,
+    phase: Vec<Terms>,
+}
+
+impl CompiledRow {
+    /// `group[slot]`: the phase group of a gathered feature, if it is a skippable phase
+    /// indicator.
+    fn new(r: &OutputRow, slot: &[u16], dim: usize, group: &[Option<usize>], groups: usize) -> Self {
+        let one = slot[dim];
+        let mut row = Self {
+            intercept: r.intercept,
+            terms: Terms::default(),
+            phase: vec![Terms::default(); groups],
+        };
+        for t in &r.terms {
+            // A checked model never has a factor above dim; clamping makes the
+            // unchecked reads in `eval` sound for any model.
+            let f: Vec<u16> = t
+                .factors
+                .iter()
+                .map(|&f| slot[(f as usize).min(dim)])
+                .filter(|&f| f != one)
+                .collect();
+            let phases: Vec<usize> = f.iter().filter_map(|&s| group[s as usize]).collect();
+            match phases[..] {
+                [] if f.is_empty() => row.intercept += t.coef,
+                [g] => row.phase[g].push(&f, t.coef),
+                _ => row.terms.push(&f, t.coef),
+            }
+        }
+        row
     }
 }
 
@@ -368,6 +408,9 @@ struct CompiledSub {
     lanes: Vec<Gather>,
     /// ... and the phase indicators (per engine).
     phases: Vec<PhaseGather>,
+    /// Phase group of "switched on k steps ago" (`[0][k]`) and "off" (`[1][k]`), for
+    /// the indicators whose terms are kept apart (see [`CompiledRow`]).
+    phase_group: [Vec<Option<usize>>; 2],
     /// Gathered scaled features followed by the constant 1.0, one lane per engine (MIMO
     /// models use lane 0): every term is evaluated for the four engines at once
     /// (vectorised; the same arithmetic per lane as for one).
@@ -407,10 +450,12 @@ struct Phases {
 }
 
 /// Components of a ring record: the step's inputs, then the state at its end, then lambda
-/// of that state (computed once when the state is stored, not per read).
+/// of that state and the step's command sum (each computed once when stored, not per
+/// read).
 const REC_STATE: usize = INPUT_DIM;
 const REC_LAMBDA: usize = INPUT_DIM + STATE_DIM;
-const REC_DIM: usize = INPUT_DIM + STATE_DIM + 1;
+const REC_SUM: usize = REC_LAMBDA + 1;
+const REC_DIM: usize = REC_SUM + 1;
 type Record = [f64; REC_DIM];
 
 impl CompiledSub {
@@ -430,7 +475,7 @@ impl CompiledSub {
         }
         // `slot[j]`: feature j's place among the used ones; `dim` maps to the 1.0 slot.
         let mut slot = vec![0u16; dim + 1];
-        let (mut shared, mut lanes, mut phases) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut shared, mut lanes, mut phases) = (Vec::new(), Vec::new(), Vec::<PhaseGather>::new());
         let mut count = 0;
         for j in (0..dim).filter(|&j| used[j]) {
             slot[j] = count as u16;
@@ -460,6 +505,7 @@ impl CompiledSub {
                 } => (if lane(p) { &mut lanes } else { &mut shared })
                     .push(read(lag, REC_STATE + comp)),
                 Source::Lambda => shared.push(read(1, REC_LAMBDA)),
+                Source::CommandSum => shared.push(read(0, REC_SUM)),
                 Source::Start(k) | Source::Stop(k) => phases.push(PhaseGather {
                     slot: count,
                     on: matches!(sources[j], Source::Start(_)),
@@ -470,18 +516,46 @@ impl CompiledSub {
             count += 1;
         }
         slot[dim] = count as u16;
+        // Phase indicators that are exactly 0 outside their phase get a term group.
+        let mut group = vec![None; count + 1];
+        let mut phase_group = [Vec::new(), Vec::new()];
+        let mut groups = 0;
+        let mut constant = Vec::new();
+        phases.retain(|g| {
+            let sc = g.scaling;
+            // 0 scales to exactly 0 and neither 0 nor 1 is ever clamped: then every term
+            // with the indicator is 0 outside the phase (not evaluated) and sees the
+            // indicator's in-phase value inside it, a constant set here once.
+            let skippable = sc.mean == 0.0 && sc.lo <= 0.0 && sc.hi >= 1.0;
+            if skippable {
+                group[g.slot] = Some(groups);
+                let table = &mut phase_group[usize::from(!g.on)];
+                if table.len() < g.run {
+                    table.resize(g.run, None);
+                }
+                table[g.run - 1] = Some(groups);
+                groups += 1;
+                constant.push((g.slot, sc.apply(1.0).0));
+            }
+            !skippable
+        });
+        let mut x4 = vec![[1.0; ENGINE_COUNT]; count + 1];
+        for (slot, v) in constant {
+            x4[slot] = [v; ENGINE_COUNT];
+        }
         Self {
+            phase_group,
             per_engine,
             target: s.target,
             outputs: s.outputs.clone(),
-            x4: vec![[1.0; ENGINE_COUNT]; count + 1],
+            x4,
             shared,
             lanes,
             phases,
             rows: s
                 .rows
                 .iter()
-                .map(|r| CompiledRow::new(r, &slot, dim))
+                .map(|r| CompiledRow::new(r, &slot, dim, &group, groups))
                 .collect(),
         }
     }
@@ -528,10 +602,11 @@ impl CompiledSub {
     ) -> bool {
         let outside = self.gather(ring, phases);
         for (row, &o) in self.rows.iter().zip(&self.outputs) {
-            let [y] = row.eval::<1>(&self.x4);
+            let mut y = [row.intercept];
+            row.terms.add::<1>(&self.x4, &mut y);
             next[o] = match self.target {
-                Target::Absolute => y,
-                Target::Increment => prev[o] + y,
+                Target::Absolute => y[0],
+                Target::Increment => prev[o] + y[0],
             };
         }
         outside
@@ -545,7 +620,15 @@ impl CompiledSub {
         next: &mut StateVec,
     ) -> bool {
         let outside = self.gather(ring, phases);
-        let y = self.rows[0].eval::<ENGINE_COUNT>(&self.x4);
+        let row = &self.rows[0];
+        let mut y = [row.intercept; ENGINE_COUNT];
+        row.terms.add::<ENGINE_COUNT>(&self.x4, &mut y);
+        for (e, y) in y.iter_mut().enumerate() {
+            let table = &self.phase_group[usize::from(!phases.on[e])];
+            if let Some(&Some(g)) = table.get(phases.run[e] - 1) {
+                row.phase[g].add_lane(&self.x4, e, y);
+            }
+        }
         for e in 0..ENGINE_COUNT {
             let o = self.outputs[e];
             next[o] = match self.target {
@@ -643,6 +726,7 @@ impl Predictor {
     pub fn reset_to(&mut self, state: &StateVec) {
         for i in 0..self.ring.recs.len() {
             self.ring.recs[i][..INPUT_DIM].fill(0.0);
+            self.ring.recs[i][REC_SUM] = 0.0;
             self.ring.set_state(i, state);
         }
         self.ring.head = 0;
@@ -660,6 +744,7 @@ impl Predictor {
         for lag in 1..depth {
             let i = self.ring.at(lag);
             self.ring.recs[i][..INPUT_DIM].copy_from_slice(h.input(lag));
+            self.ring.recs[i][REC_SUM] = command_sum_of(h.input(lag));
             self.ring.set_state(i, h.state(lag));
         }
         // One slot back, so the next step() advances onto slot 0.
@@ -711,6 +796,8 @@ impl Predictor {
             };
             ph.on[e] = on;
         }
+        // Of the commands as the model sees them (after the on-range clamp above).
+        rec[REC_SUM] = command_sum_of(&std::array::from_fn(|k| rec[k]));
         // The slot still holds an old state; it is never read (state lags start at 1).
         let mut next = prev;
         for sub in &mut self.subs {
@@ -769,6 +856,8 @@ mod tests {
                     mass_features: true,
                     start_steps: 5,
                     stop_steps: 3,
+                    phase_degree: 0,
+                    command_sum: true,
                 },
                 3,
                 (0..ENGINE_COUNT).collect::<Vec<_>>(),
@@ -780,6 +869,8 @@ mod tests {
                     mass_features: true,
                     start_steps: 0,
                     stop_steps: 0,
+                    phase_degree: 0,
+                    command_sum: false,
                 },
                 2,
                 (ENGINE_COUNT..STATE_DIM).collect(),
@@ -790,7 +881,7 @@ mod tests {
             .map(|(features, degree, outputs)| {
                 let dim = features.dim();
                 let names = features.names();
-                let lib = Library::new(dim, degree, &features.binary_groups());
+                let lib = Library::new(dim, degree, &features.roles(), features.phase_degree);
                 let rows = match features.layout {
                     Layout::PerEngine => 1,
                     Layout::Mimo => outputs.len(),
@@ -801,7 +892,13 @@ mod tests {
                     library_size: lib.len(),
                     target: Target::Increment,
                     feature_names: names.clone(),
-                    feature_mean: (0..dim).map(|_| rnd()).collect(),
+                    // Start indicators uncentred, as training leaves them (their terms are
+                    // then evaluated only in their phase); the others centred, which the
+                    // predictor must handle too.
+                    feature_mean: names
+                        .iter()
+                        .map(|n| if n.starts_with("start") { 0.0 } else { rnd() })
+                        .collect(),
                     feature_std: (0..dim).map(|_| 1.0 + rnd()).collect(),
                     envelope_lo: vec![-1e9; dim],
                     envelope_hi: vec![1e9; dim],
@@ -815,7 +912,7 @@ mod tests {
                                 .map(|t| ActiveTerm {
                                     name: lib.term_name(t, &names),
                                     factors: *t,
-                                    coef: 1e-12 * rnd(),
+                                    coef: 1e-16 * rnd(),
                                 })
                                 .collect(),
                         })
@@ -833,7 +930,8 @@ mod tests {
     }
 
     /// The straightforward evaluation: every feature by `fill`, every term in library
-    /// order. The compiled predictor must give the same bits.
+    /// order. The compiled predictor must agree to rounding (it sums the phase terms of
+    /// an engine in a phase after the others).
     #[test]
     fn compiled_step_equals_full_evaluation() {
         let model = dense_model();
@@ -865,7 +963,8 @@ mod tests {
                     };
                     s.features.fill(&h, e, &mut x[..dim]);
                     for j in 0..dim {
-                        x[j] = (x[j] - s.feature_mean[j]) * (1.0 / s.feature_std[j]);
+                        let v = x[j].max(s.envelope_lo[j]).min(s.envelope_hi[j]);
+                        x[j] = (v - s.feature_mean[j]) * (1.0 / s.feature_std[j]);
                     }
                     let row = &s.rows[if s.rows.len() == 1 { 0 } else { e }];
                     let mut y = row.intercept;
@@ -882,8 +981,11 @@ mod tests {
             want[STATE_P] = want[STATE_P].max(0.0);
             want[STATE_MF] = want[STATE_MF].max(prev[STATE_MF]);
             want[STATE_MO] = want[STATE_MO].max(prev[STATE_MO]);
-            assert_eq!(got, want, "step {t}");
-            states.push(want);
+            for o in 0..STATE_DIM {
+                let tol = 1e-12 * (1.0 + want[o].abs());
+                assert!((got[o] - want[o]).abs() <= tol, "step {t} output {o}: {got:?} vs {want:?}");
+            }
+            states.push(got);
         }
         // Seeding from the recorded history mid-run continues identically.
         let mut q = Predictor::new(&model);
