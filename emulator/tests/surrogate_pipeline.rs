@@ -73,13 +73,35 @@ fn bad_model_files_are_refused_clearly() {
         2
     );
 
-    let wrong_version = good.replacen("\"version\": 1", "\"version\": 99", 1);
+    let wrong_version = good.replacen("\"version\": 2", "\"version\": 99", 1);
     let e = refusal(&wrong_version, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 99 }),
         "{e}"
     );
     assert!(e.to_string().contains("version 99"));
+    // A version-1 file (before the per-engine physics features) is refused by name.
+    let old = good.replacen("\"version\": 2", "\"version\": 1", 1);
+    let e = refusal(&old, 10_000_000);
+    assert!(
+        matches!(e, ModelFileError::WrongVersion { found: 1 }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("retrain"), "{e}");
+
+    // Phase indicators in a MIMO submodel are refused (they are per-engine features).
+    let mimo = good.find("\"layout\": \"mimo\"").expect("a mimo submodel");
+    let at = mimo
+        + good[mimo..]
+            .find("\"start_steps\": 0")
+            .expect("start_steps");
+    let text = format!(
+        "{}\"start_steps\": 3{}",
+        &good[..at],
+        &good[at + "\"start_steps\": 0".len()..]
+    );
+    let e = refusal(&text, 10_000_000);
+    assert!(e.to_string().contains("per-engine features only"), "{e}");
 
     let e = refusal(good, 15_000_000);
     assert!(matches!(e, ModelFileError::SampleTime { .. }), "{e}");

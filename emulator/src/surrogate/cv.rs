@@ -401,3 +401,30 @@ pub fn time_final_fit(
     }
     (gram_s, fit_s)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(score: f64, active_terms: f64) -> GridPoint {
+        GridPoint {
+            n: 1,
+            mu: 1.0,
+            train_rmse: [0.0; STATE_DIM],
+            test_rmse: [0.0; STATE_DIM],
+            free_rmse: [0.0; STATE_DIM],
+            sparsity_pct: 0.0,
+            active_terms,
+            score,
+            unconverged: 0,
+        }
+    }
+
+    #[test]
+    fn selection_is_lowest_score_or_fewest_terms_within_tolerance() {
+        let pts = [point(1.00, 300.0), point(1.04, 100.0), point(1.01, 200.0)];
+        assert_eq!(select(&pts, 0.0), 0);
+        assert_eq!(select(&pts, 0.02), 2);
+        assert_eq!(select(&pts, 0.05), 1);
+    }
+}

@@ -33,7 +33,11 @@ impl Library {
     /// degree up to `phase_degree` instead (0: `degree`), so a start transient can be a
     /// per-step quadratic in the command while the rest of the library stays degree 2.
     pub fn new(dim: usize, degree: usize, roles: &[Role], phase_degree: usize) -> Self {
-        let phase_degree = if phase_degree == 0 { degree } else { phase_degree };
+        let phase_degree = if phase_degree == 0 {
+            degree
+        } else {
+            phase_degree
+        };
         assert!((1..=MAX_DEGREE).contains(&degree) && dim < u16::MAX as usize);
         assert!(phase_degree <= MAX_DEGREE);
         let allowed = |d: usize, f: &[usize]| {
@@ -193,5 +197,37 @@ mod tests {
         assert_eq!(at("T_o1[t-2]*P[t-1]"), 6.0);
         assert_eq!(at("P[t-1]^2"), 9.0);
         assert_eq!(at("T_o1[t-2]"), 2.0);
+    }
+
+    #[test]
+    fn phase_indicators_multiply_only_their_partners() {
+        use crate::surrogate::features::{FeatureSpec, Layout};
+        let spec = FeatureSpec {
+            layout: Layout::PerEngine,
+            history: 1,
+            mass_features: false,
+            start_steps: 2,
+            stop_steps: 1,
+            phase_degree: 3,
+            command_sum: true,
+        };
+        let names = spec.names();
+        let lib = Library::new(spec.dim(), 2, &spec.roles(), spec.phase_degree);
+        let all: Vec<String> = lib.terms.iter().map(|t| lib.term_name(t, &names)).collect();
+        let has = |n: &str| all.iter().any(|s| s == n);
+        assert!(has("T_r[t]*start0[t]"));
+        assert!(has("T_r[t]*T_rsum[t]*start1[t]"));
+        assert!(has("T_o[t-1]^2*stop0[t]"));
+        // Not with a non-partner, not with the switch or another indicator, no powers.
+        assert!(!has("T_r[t-1]*start0[t]"));
+        assert!(!has("S_e[t]*start0[t]"));
+        assert!(!has("start0[t]*stop0[t]"));
+        assert!(!has("start0[t]^2"));
+        // Degree 3 only for phase terms.
+        assert!(!all.iter().any(|s| s.matches('*').count() == 2
+            && !s.contains("start")
+            && !s.contains("stop")
+            && !s.contains('^')));
+        assert!(!has("T_r[t]^2*T_o[t-1]"));
     }
 }

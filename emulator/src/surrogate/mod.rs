@@ -114,6 +114,17 @@ impl TrainConfig {
                 return Err(e(format!("variants.{name} = {d}: must be 1..=3")));
             }
         }
+        if v.engine_phase_degree > library::MAX_DEGREE {
+            return Err(e(format!(
+                "variants.engine_phase_degree = {}: must be 0..=3",
+                v.engine_phase_degree
+            )));
+        }
+        if v.engine_start_steps > 64 || v.engine_stop_steps > 64 {
+            return Err(e(
+                "variants.engine_start_steps and engine_stop_steps must be 0..=64".into(),
+            ));
+        }
         if !self.train_variants.contains(&Variant::Paper) {
             return Err(e("train_variants must include `paper`".into()));
         }

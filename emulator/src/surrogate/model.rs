@@ -3,8 +3,8 @@
 //! model is chosen on exactly the behaviour it has in the loop.
 
 use super::features::{
-    command_sum_of, lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_DIM,
-    STATE_MF, STATE_MO, STATE_NAMES, STATE_P,
+    command_sum_of, lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec, INPUT_DIM,
+    STATE_DIM, STATE_MF, STATE_MO, STATE_NAMES, STATE_P,
 };
 use super::library::{term_name, Term, MAX_DEGREE};
 use oils_shared::ENGINE_COUNT;
@@ -348,7 +348,13 @@ struct CompiledRow {
 impl CompiledRow {
     /// `group[slot]`: the phase group of a gathered feature, if it is a skippable phase
     /// indicator.
-    fn new(r: &OutputRow, slot: &[u16], dim: usize, group: &[Option<usize>], groups: usize) -> Self {
+    fn new(
+        r: &OutputRow,
+        slot: &[u16],
+        dim: usize,
+        group: &[Option<usize>],
+        groups: usize,
+    ) -> Self {
         let one = slot[dim];
         let mut row = Self {
             intercept: r.intercept,
@@ -475,7 +481,8 @@ impl CompiledSub {
         }
         // `slot[j]`: feature j's place among the used ones; `dim` maps to the 1.0 slot.
         let mut slot = vec![0u16; dim + 1];
-        let (mut shared, mut lanes, mut phases) = (Vec::new(), Vec::new(), Vec::<PhaseGather>::new());
+        let (mut shared, mut lanes, mut phases) =
+            (Vec::new(), Vec::new(), Vec::<PhaseGather>::new());
         let mut count = 0;
         for j in (0..dim).filter(|&j| used[j]) {
             slot[j] = count as u16;
@@ -983,7 +990,10 @@ mod tests {
             want[STATE_MO] = want[STATE_MO].max(prev[STATE_MO]);
             for o in 0..STATE_DIM {
                 let tol = 1e-12 * (1.0 + want[o].abs());
-                assert!((got[o] - want[o]).abs() <= tol, "step {t} output {o}: {got:?} vs {want:?}");
+                assert!(
+                    (got[o] - want[o]).abs() <= tol,
+                    "step {t} output {o}: {got:?} vs {want:?}"
+                );
             }
             states.push(got);
         }

@@ -15,8 +15,11 @@ use std::path::Path;
 
 /// Value of the `format` field.
 pub const FORMAT: &str = "oils-surrogate";
-/// Current file version; bump on any change of meaning.
-pub const VERSION: u32 = 1;
+/// Current file version; bump on any change of meaning. Version 2 added the per-engine
+/// physics features (`start_steps`, `stop_steps`, `phase_degree`, `command_sum` in a
+/// feature spec): a version-1 reader would ignore them and misread the model, so it must
+/// refuse such files, and this reader refuses version-1 files (retrain them).
+pub const VERSION: u32 = 2;
 
 /// Where a model came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
