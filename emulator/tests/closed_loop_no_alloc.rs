@@ -10,29 +10,11 @@ use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
 use oils_onboard_stub::playback::ProfilePlayback;
 use oils_shared::profile::ThrustProfile;
 use oils_shared::{Command, PacketHeader};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct CountingAlloc;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        System.alloc(layout)
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        System.dealloc(ptr, layout)
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        System.realloc(ptr, layout, new_size)
-    }
-}
+mod common;
 
 #[global_allocator]
-static GLOBAL: CountingAlloc = CountingAlloc;
+static GLOBAL: common::CountingAlloc = common::CountingAlloc;
 
 fn actuator(cmd: &Command) -> ActuatorCommand {
     let mut engines = EngineCommand::default();
@@ -50,7 +32,7 @@ fn actuator(cmd: &Command) -> ActuatorCommand {
 /// the loop.
 fn allocations_in_loop(fsw: &mut dyn FlightSoftware, cfg: &ScenarioConfig) -> usize {
     let mut plant = Plant::new(cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 3).unwrap();
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = common::allocations();
     let mut landed = false;
     for k in 0..200_000u64 {
         let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
@@ -61,7 +43,7 @@ fn allocations_in_loop(fsw: &mut dyn FlightSoftware, cfg: &ScenarioConfig) -> us
             break;
         }
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = common::allocations();
     assert!(landed, "the loop should reach touchdown");
     after - before
 }

@@ -4,29 +4,11 @@
 use oils_emulator::config::PropulsionConfig;
 use oils_emulator::propulsion::hifi::{HifiParams, HifiPropulsion};
 use oils_emulator::propulsion::{EngineCommand, Propulsion};
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct Counting;
-
-static ALLOCS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+mod common;
 
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: common::CountingAlloc = common::CountingAlloc;
 
 #[test]
 fn step_does_not_allocate() {
@@ -40,7 +22,7 @@ fn step_does_not_allocate() {
             on,
         });
     }
-    let before = ALLOCS.load(Ordering::Relaxed);
+    let before = common::allocations();
     let mut total = 0.0;
     for (k, cmd) in commands.iter().enumerate() {
         let dt = if k % 3 == 0 { 16_000_000 } else { 10_000_000 };
@@ -49,7 +31,7 @@ fn step_does_not_allocate() {
         let _ = m.detail();
         let _ = m.propellant_balance();
     }
-    let after = ALLOCS.load(Ordering::Relaxed);
+    let after = common::allocations();
     assert!(total > 0.0);
     assert_eq!(after - before, 0, "step allocated {} times", after - before);
 }

@@ -5,29 +5,11 @@ use oils_emulator::config::ScenarioConfig;
 use oils_emulator::plant::{ActuatorCommand, Plant, PlantStatus};
 use oils_emulator::propulsion::{ideal::IdealPropulsion, EngineCommand};
 use oils_shared::PacketHeader;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
 
-struct CountingAlloc;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for CountingAlloc {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        System.alloc(layout)
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        System.dealloc(ptr, layout)
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        System.realloc(ptr, layout, new_size)
-    }
-}
+mod common;
 
 #[global_allocator]
-static GLOBAL: CountingAlloc = CountingAlloc;
+static GLOBAL: common::CountingAlloc = common::CountingAlloc;
 
 #[test]
 fn step_and_telemetry_do_not_allocate_through_flight_and_touchdown() {
@@ -45,7 +27,7 @@ fn step_and_telemetry_do_not_allocate_through_flight_and_touchdown() {
         torque_cmd_body_nm: [3.0, -2.0, 1.0],
     };
 
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = common::allocations();
     let mut touched = false;
     for k in 0..100_000u64 {
         let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
@@ -59,7 +41,7 @@ fn step_and_telemetry_do_not_allocate_through_flight_and_touchdown() {
             break;
         }
     }
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = common::allocations();
     assert!(touched, "the run should reach the contact search path");
     assert_eq!(
         after - before,
