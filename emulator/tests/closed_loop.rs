@@ -4,39 +4,20 @@
 //! +-5 % thrust error; runs are bit-reproducible; profile playback drives the plant.
 
 use oils_emulator::config::ScenarioConfig;
-use oils_emulator::plant::{ActuatorCommand, Plant, PlantStatus, RigidBodyState, TouchdownState};
+use oils_emulator::plant::{Plant, PlantStatus, RigidBodyState, TouchdownState};
 use oils_emulator::propulsion::{
     ideal::IdealPropulsion, EngineCommand, Propulsion, PropulsionOutput,
 };
+use oils_emulator::sanitize::sanitize;
 use oils_onboard_stub::fsw::FlightSoftware;
 use oils_onboard_stub::gnc::allocation::EngineSet;
 use oils_onboard_stub::gnc::guidance::Phase;
 use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
 use oils_onboard_stub::playback::ProfilePlayback;
 use oils_shared::profile::ThrustProfile;
-use oils_shared::{Command, PacketHeader, ENGINE_COUNT};
+use oils_shared::{PacketHeader, ENGINE_COUNT};
 
 const DT_NS: u64 = 10_000_000;
-
-/// What the link does to a command before the plant sees it (sanitising).
-fn to_actuator(cmd: &Command, max_thrust_n: f64) -> ActuatorCommand {
-    let mut engines = EngineCommand::default();
-    for i in 0..ENGINE_COUNT {
-        let t = cmd.thrust_cmd_n[i];
-        engines.thrust_cmd_n[i] = if t.is_finite() {
-            t.clamp(0.0, max_thrust_n)
-        } else {
-            0.0
-        };
-        engines.on[i] = cmd.engine_on[i] == 1;
-    }
-    ActuatorCommand {
-        engines,
-        torque_cmd_body_nm: cmd
-            .torque_cmd_body_nm
-            .map(|t| if t.is_finite() { t } else { 0.0 }),
-    }
-}
 
 struct Outcome {
     touchdown: Option<TouchdownState>,
@@ -70,7 +51,7 @@ fn fly<F: FlightSoftware>(
             }
         }
         if let PlantStatus::Touchdown(td) =
-            plant.step(&to_actuator(&cmd, cfg.propulsion.max_thrust_n), DT_NS)
+            plant.step(&sanitize(&cmd, cfg.propulsion.max_thrust_n).0, DT_NS)
         {
             touchdown = Some(td);
             break;
@@ -258,7 +239,7 @@ fn profile_playback_drives_the_plant() {
             assert!((tlm.propulsion.engines[0].thrust_n - 800.0).abs() < 1e-3);
         }
         if let PlantStatus::Touchdown(td) =
-            plant.step(&to_actuator(&cmd, cfg.propulsion.max_thrust_n), DT_NS)
+            plant.step(&sanitize(&cmd, cfg.propulsion.max_thrust_n).0, DT_NS)
         {
             touchdown = Some(td);
             break;

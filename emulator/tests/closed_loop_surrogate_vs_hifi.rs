@@ -21,37 +21,18 @@
 //!   m g_moon / (Isp g0) ~ 0.46 kg/s for ~860 kg.
 
 use oils_emulator::config::ScenarioConfig;
-use oils_emulator::plant::{ActuatorCommand, Plant, PlantStatus, TouchdownState};
+use oils_emulator::plant::{Plant, PlantStatus, TouchdownState};
 use oils_emulator::propulsion::shadow::ShadowPropulsion;
 use oils_emulator::propulsion::{
-    hifi_for_bench, surrogate_for_bench, EngineCommand, ModelFiles, Propulsion,
-    PropulsionDiagnostics,
+    hifi_for_bench, surrogate_for_bench, ModelFiles, Propulsion, PropulsionDiagnostics,
 };
+use oils_emulator::sanitize::sanitize;
 use oils_onboard_stub::fsw::FlightSoftware;
 use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
-use oils_shared::{Command, PacketHeader, ENGINE_COUNT};
+use oils_shared::PacketHeader;
 
 const DT_NS: u64 = 10_000_000;
 const G0_M_S2: f64 = 9.80665;
-
-fn to_actuator(cmd: &Command, max_thrust_n: f64) -> ActuatorCommand {
-    let mut engines = EngineCommand::default();
-    for i in 0..ENGINE_COUNT {
-        let t = cmd.thrust_cmd_n[i];
-        engines.thrust_cmd_n[i] = if t.is_finite() {
-            t.clamp(0.0, max_thrust_n)
-        } else {
-            0.0
-        };
-        engines.on[i] = cmd.engine_on[i] == 1;
-    }
-    ActuatorCommand {
-        engines,
-        torque_cmd_body_nm: cmd
-            .torque_cmd_body_nm
-            .map(|t| if t.is_finite() { t } else { 0.0 }),
-    }
-}
 
 fn land(
     cfg: &ScenarioConfig,
@@ -63,7 +44,7 @@ fn land(
         let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
         let cmd = gnc.step(&tlm);
         if let PlantStatus::Touchdown(td) =
-            plant.step(&to_actuator(&cmd, cfg.propulsion.max_thrust_n), DT_NS)
+            plant.step(&sanitize(&cmd, cfg.propulsion.max_thrust_n).0, DT_NS)
         {
             return (td, plant.propulsion_diagnostics());
         }
