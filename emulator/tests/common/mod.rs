@@ -30,3 +30,31 @@ unsafe impl GlobalAlloc for CountingAlloc {
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
+
+/// Allocations made by `steps` 10 ms steps of a propulsion model (after one warm-up step
+/// outside the count) under commands that exercise its paths: a throttle sweep on every
+/// engine, engine 4 switching off and on, and a pulse below the throttle range on engine
+/// 3 every 5 s (the surrogate's out-of-envelope clamp).
+// Not every test binary that includes this module drives a propulsion model.
+#[allow(dead_code)]
+pub fn allocations_over_varied_steps(
+    model: &mut dyn oils_emulator::propulsion::Propulsion,
+    steps: usize,
+) -> usize {
+    let mut cmd = oils_emulator::propulsion::EngineCommand {
+        thrust_cmd_n: [600.0; 4],
+        on: [true; 4],
+    };
+    model.step(&cmd, 10_000_000);
+    let before = allocations();
+    let mut sum = 0.0;
+    for k in 0..steps {
+        cmd.thrust_cmd_n[k % 4] = 320.0 + (k % 480) as f64;
+        cmd.on[3] = k % 700 < 600;
+        cmd.thrust_cmd_n[2] = if k % 500 == 0 { 50.0 } else { 600.0 };
+        sum += model.step(&cmd, 10_000_000).thrust_n[0];
+    }
+    let after = allocations();
+    assert!(sum.is_finite(), "the model produced a non-finite thrust");
+    after - before
+}
