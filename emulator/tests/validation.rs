@@ -8,7 +8,7 @@ use oils_emulator::propulsion::hifi::{HifiParams, HifiPropulsion};
 use oils_emulator::propulsion::{BuildError, EngineCommand, Propulsion, PropulsionOutput};
 use oils_emulator::validation::cases::{self, CaseKind, WindowKind, TRANSIENT_WINDOW_S};
 use oils_emulator::validation::compare::run_case;
-use oils_emulator::validation::report::{Bounds, ValidationReport, GOAL_FACTOR};
+use oils_emulator::validation::report::{Bounds, ValidationReport};
 use oils_emulator::validation::run_cases;
 use oils_emulator::validation::uncertainty::ModelUncertainty;
 
@@ -64,20 +64,15 @@ fn validate_with(
     let mass = ScenarioConfig::default().wet_mass_kg();
     let (reports, traces) =
         run_cases(&short_cases(), &truth, &model, DT_NS, mass, &bounds, |_| {}).unwrap();
-    let report = ValidationReport {
-        model: "test".into(),
-        model_reference: "hifi".into(),
-        model_variant: "none".into(),
-        truth: "hifi".into(),
-        hifi_params: "defaults".into(),
-        dt_ms: 10.0,
-        transient_window_s: TRANSIENT_WINDOW_S,
+    let report = ValidationReport::new(
+        "test".into(),
+        "hifi".into(),
+        "none".into(),
+        "defaults".into(),
+        10.0,
         bounds,
-        goal: bounds.scaled(GOAL_FACTOR),
-        pass: reports.iter().all(|r| r.pass),
-        pass_goal: reports.iter().all(|r| r.pass_goal),
-        cases: reports,
-    };
+        reports,
+    );
     (report, traces)
 }
 

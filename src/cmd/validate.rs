@@ -10,8 +10,8 @@ use oils_emulator::propulsion::{
 };
 use oils_emulator::surrogate::model_file::ModelFile;
 use oils_emulator::surrogate::runtime::DEFAULT_MODEL_JSON;
-use oils_emulator::validation::cases::{self, CaseKind, TRANSIENT_WINDOW_S};
-use oils_emulator::validation::report::{Bounds, ValidationReport, GOAL_FACTOR};
+use oils_emulator::validation::cases::{self, CaseKind};
+use oils_emulator::validation::report::{Bounds, ValidationReport};
 use oils_emulator::validation::uncertainty::ModelUncertainty;
 use oils_emulator::validation::{plots, run_cases};
 use oils_shared::profile::ThrustProfile;
@@ -137,23 +137,17 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
             )
         },
     )?;
-    let report = ValidationReport {
-        model: model_name(args),
-        model_reference: model_file.provenance.reference.clone(),
-        model_variant: format!("{:?}", model_file.variant),
-        truth: "hifi".into(),
-        hifi_params: args
-            .hifi_params
+    let report = ValidationReport::new(
+        model_name(args),
+        model_file.provenance.reference.clone(),
+        format!("{:?}", model_file.variant),
+        args.hifi_params
             .as_ref()
             .map_or_else(|| "defaults".into(), |p| p.display().to_string()),
-        dt_ms: dt_ns as f64 * 1e-6,
-        transient_window_s: TRANSIENT_WINDOW_S,
+        dt_ns as f64 * 1e-6,
         bounds,
-        goal: bounds.scaled(GOAL_FACTOR),
-        pass: reports.iter().all(|r| r.pass),
-        pass_goal: reports.iter().all(|r| r.pass_goal),
-        cases: reports,
-    };
+        reports,
+    );
     print!("{}", report.table());
 
     let json_path = args

@@ -129,6 +129,21 @@ pub fn sphere_signal(t: f64) -> [f64; ENGINE_COUNT] {
     ]
 }
 
+/// One hold's commands: a common level, and with probability 1/2 an independent level
+/// per engine instead (the engines' responses then differ). The order of the draws is
+/// part of the committed model's provenance: changing it changes the training data.
+fn draw_levels(rng: &mut ChaCha8Rng, lo: f64, hi: f64) -> [f64; ENGINE_COUNT] {
+    let common = rng.gen_range(lo..=hi);
+    let split = rng.gen_bool(0.5);
+    std::array::from_fn(|_| {
+        if split {
+            rng.gen_range(lo..=hi)
+        } else {
+            common
+        }
+    })
+}
+
 impl ExcitationConfig {
     /// Checks the numbers.
     pub fn validate(&self) -> Result<(), String> {
@@ -214,15 +229,7 @@ impl ExcitationConfig {
             // Step stair: each hold draws a common level, and with probability 1/2 an
             // independent level per engine (the engines' responses then differ).
             for _ in 0..self.steps {
-                let common = rng.gen_range(lo..=hi);
-                let split = rng.gen_bool(0.5);
-                let cmd = std::array::from_fn(|_| {
-                    if split {
-                        rng.gen_range(lo..=hi)
-                    } else {
-                        common
-                    }
-                });
+                let cmd = draw_levels(&mut rng, lo, hi);
                 for _ in 0..steps_of(self.step_hold_s) {
                     push(&mut ex, cmd, all_on, Segment::Steps);
                 }
@@ -267,15 +274,7 @@ impl ExcitationConfig {
             }
             // Cold starts (drawn after the burn, so the earlier segments keep their draws).
             for _ in 0..self.starts {
-                let common = rng.gen_range(lo..=hi);
-                let split = rng.gen_bool(0.5);
-                let cmd = std::array::from_fn(|_| {
-                    if split {
-                        rng.gen_range(lo..=hi)
-                    } else {
-                        common
-                    }
-                });
+                let cmd = draw_levels(&mut rng, lo, hi);
                 for _ in 0..steps_of(self.start_off_s) {
                     push(&mut ex, cmd, [false; ENGINE_COUNT], Segment::Starts);
                 }

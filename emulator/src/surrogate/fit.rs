@@ -326,10 +326,7 @@ impl Prepared {
 fn targets(spec: &SubSpec, data: &Dataset, t: usize, e: usize, y: &mut [f64]) {
     let now = &data.states[t];
     let prev = data.previous_state(t);
-    let value = |o: usize| match spec.target {
-        Target::Absolute => now[o],
-        Target::Increment => now[o] - prev[o],
-    };
+    let value = |o: usize| spec.target.of(prev[o], now[o]);
     match spec.features.layout {
         Layout::Mimo => {
             for (c, &o) in spec.outputs.iter().enumerate() {

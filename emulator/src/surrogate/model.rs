@@ -22,6 +22,26 @@ pub enum Target {
     Increment,
 }
 
+impl Target {
+    /// The fitted quantity for an output that was `prev` and is `now` (training).
+    #[inline]
+    pub fn of(self, prev: f64, now: f64) -> f64 {
+        match self {
+            Target::Absolute => now,
+            Target::Increment => now - prev,
+        }
+    }
+
+    /// The output from its previous value and a prediction `y` of the fitted quantity.
+    #[inline]
+    pub fn apply(self, prev: f64, y: f64) -> f64 {
+        match self {
+            Target::Absolute => y,
+            Target::Increment => prev + y,
+        }
+    }
+}
+
 /// One non-zero coefficient.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ActiveTerm {
@@ -611,10 +631,7 @@ impl CompiledSub {
         for (row, &o) in self.rows.iter().zip(&self.outputs) {
             let mut y = [row.intercept];
             row.terms.add::<1>(&self.x4, &mut y);
-            next[o] = match self.target {
-                Target::Absolute => y[0],
-                Target::Increment => prev[o] + y[0],
-            };
+            next[o] = self.target.apply(prev[o], y[0]);
         }
         outside
     }
@@ -638,10 +655,7 @@ impl CompiledSub {
         }
         for e in 0..ENGINE_COUNT {
             let o = self.outputs[e];
-            next[o] = match self.target {
-                Target::Absolute => y[e],
-                Target::Increment => prev[o] + y[e],
-            };
+            next[o] = self.target.apply(prev[o], y[e]);
         }
         outside
     }

@@ -266,6 +266,33 @@ pub fn evaluate(trace: &Trace, bounds: &Bounds, goal: &Bounds) -> CaseReport {
 }
 
 impl ValidationReport {
+    /// A report of `cases` judged against `bounds` by `hifi`: the goal is the bounds
+    /// times [`GOAL_FACTOR`], and the overall verdicts are every case's.
+    pub fn new(
+        model: String,
+        model_reference: String,
+        model_variant: String,
+        hifi_params: String,
+        dt_ms: f64,
+        bounds: Bounds,
+        cases: Vec<CaseReport>,
+    ) -> Self {
+        Self {
+            model,
+            model_reference,
+            model_variant,
+            truth: "hifi".into(),
+            hifi_params,
+            dt_ms,
+            transient_window_s: super::cases::TRANSIENT_WINDOW_S,
+            bounds,
+            goal: bounds.scaled(GOAL_FACTOR),
+            pass: cases.iter().all(|r| r.pass),
+            pass_goal: cases.iter().all(|r| r.pass_goal),
+            cases,
+        }
+    }
+
     /// Pretty JSON.
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"))
