@@ -4,7 +4,7 @@
 
 use super::features::{
     command_sum_of, lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec, INPUT_DIM,
-    STATE_DIM, STATE_MF, STATE_MO, STATE_NAMES, STATE_P,
+    STATE_DIM, STATE_MF, STATE_MO, STATE_P,
 };
 use super::library::{term_name, Term, MAX_DEGREE};
 use oils_shared::ENGINE_COUNT;
@@ -288,61 +288,80 @@ pub fn active_terms_of(
 
 /// Terms compiled for evaluation, split by degree (factor slots into the gathered
 /// features, coefficients) in flat arrays, so a linear term costs one read and one
-/// multiply-add. The library lists terms by degree, so each list runs in library order;
-/// leaving out factors of 1.0 changes no bit.
+/// multiply-add. Leaving out factors of 1.0 changes no bit.
 #[derive(Debug, Clone, Default)]
 struct Terms {
-    lin: Vec<(u16, f64)>,
+    lin: Vec<([u16; 1], f64)>,
     quad: Vec<([u16; 2], f64)>,
     cubic: Vec<([u16; 3], f64)>,
+}
+
+/// Independent partial sums per lane in [`Terms::add`]. One running sum would make every
+/// term wait for the previous addition (a chain of some 4 cycles per term, most of the
+/// step); four sums overlap them. The order of additions differs from library order,
+/// which moves the result by rounding only.
+const PARTIAL_SUMS: usize = 4;
+
+/// Adds `c * x[f0] * x[f1] ...` of each term, per lane, round robin into the partial sums.
+#[inline(always)]
+fn accumulate<const N: usize, const LANES: usize>(
+    terms: &[([u16; N], f64)],
+    x: &[[f64; LANES]],
+    acc: &mut [[f64; LANES]; PARTIAL_SUMS],
+) {
+    // SAFETY: `CompiledSub::compile` maps every factor to a slot below the number of
+    // gathered features and `x` has that many entries plus one.
+    let at = |i: u16| unsafe { x.get_unchecked(i as usize) };
+    let mut chunks = terms.chunks_exact(PARTIAL_SUMS);
+    for chunk in &mut chunks {
+        for (k, (f, c)) in chunk.iter().enumerate() {
+            for e in 0..LANES {
+                let mut p = at(f[0])[e];
+                for &i in &f[1..] {
+                    p *= at(i)[e];
+                }
+                acc[k][e] += c * p;
+            }
+        }
+    }
+    for (k, (f, c)) in chunks.remainder().iter().enumerate() {
+        for e in 0..LANES {
+            let mut p = at(f[0])[e];
+            for &i in &f[1..] {
+                p *= at(i)[e];
+            }
+            acc[k][e] += c * p;
+        }
+    }
 }
 
 impl Terms {
     fn push(&mut self, f: &[u16], coef: f64) {
         match *f {
-            [a] => self.lin.push((a, coef)),
+            [a] => self.lin.push(([a], coef)),
             [a, b] => self.quad.push(([a, b], coef)),
             [a, b, d] => self.cubic.push(([a, b, d], coef)),
             _ => unreachable!("a term has 1 to 3 factors"),
         }
     }
 
-    /// Adds the terms of lanes `0..LANES` (`LANES` = 1 or 4) to `y`.
+    /// Adds the terms of every lane (`LANES` = 1 or 4) to `y`.
     #[inline(always)]
-    fn add<const LANES: usize>(&self, x: &[[f64; ENGINE_COUNT]], y: &mut [f64; LANES]) {
-        // SAFETY (all three loops): `CompiledSub::compile` maps every factor to a slot
-        // below the number of gathered features and `x` has that many entries plus one.
-        for &(a, c) in &self.lin {
-            let a = unsafe { x.get_unchecked(a as usize) };
-            for e in 0..LANES {
-                y[e] += c * a[e];
-            }
-        }
-        for &([a, b], c) in &self.quad {
-            let (a, b) = unsafe { (x.get_unchecked(a as usize), x.get_unchecked(b as usize)) };
-            for e in 0..LANES {
-                y[e] += c * (a[e] * b[e]);
-            }
-        }
-        for &([a, b, d], c) in &self.cubic {
-            let (a, b, d) = unsafe {
-                (
-                    x.get_unchecked(a as usize),
-                    x.get_unchecked(b as usize),
-                    x.get_unchecked(d as usize),
-                )
-            };
-            for e in 0..LANES {
-                y[e] += c * (a[e] * b[e] * d[e]);
-            }
+    fn add<const LANES: usize>(&self, x: &[[f64; LANES]], y: &mut [f64; LANES]) {
+        let mut acc = [[0.0; LANES]; PARTIAL_SUMS];
+        accumulate(&self.lin, x, &mut acc);
+        accumulate(&self.quad, x, &mut acc);
+        accumulate(&self.cubic, x, &mut acc);
+        for e in 0..LANES {
+            y[e] += (acc[0][e] + acc[1][e]) + (acc[2][e] + acc[3][e]);
         }
     }
 
-    /// Adds the terms of one lane to `y`.
+    /// Adds the terms of one lane to `y` (the few phase terms of one engine).
     #[inline(always)]
-    fn add_lane(&self, x: &[[f64; ENGINE_COUNT]], e: usize, y: &mut f64) {
+    fn add_lane<const LANES: usize>(&self, x: &[[f64; LANES]], e: usize, y: &mut f64) {
         let v = |i: u16| x[i as usize][e];
-        for &(a, c) in &self.lin {
+        for &([a], c) in &self.lin {
             *y += c * v(a);
         }
         for &([a, b], c) in &self.quad {
@@ -401,14 +420,13 @@ impl CompiledRow {
     }
 }
 
-/// One feature an active term uses, compiled to a ring read: the record `lag` steps back,
-/// component `comp` (for a per-engine feature, engine 0's; the four engines' values are
-/// the four components from there), then clamped to the envelope and scaled into `slot`.
+/// One feature an active term uses, compiled to a read of the history window (see
+/// [`Ring`]) at a fixed `offset`: the record `lag` steps back, component `comp` (for a
+/// per-engine feature, engine 0's; the four engines' values follow it), then clamped to
+/// the envelope and scaled.
 #[derive(Debug, Clone, Copy)]
 struct Gather {
-    slot: usize,
-    lag: usize,
-    comp: usize,
+    offset: usize,
     scaling: FeatureScaling,
 }
 
@@ -422,25 +440,29 @@ struct PhaseGather {
     scaling: FeatureScaling,
 }
 
+/// A submodel compiled for `LANES` evaluations per step: 1 for a MIMO submodel, 4 (one
+/// per engine, evaluated together and vectorised, the same arithmetic per lane as for
+/// one) for a per-engine submodel.
 #[derive(Debug, Clone)]
-struct CompiledSub {
-    per_engine: bool,
+struct CompiledSub<const LANES: usize> {
     target: Target,
     outputs: Vec<usize>,
     /// Features the active terms use, and only those (a model of 60 active terms reads
-    /// some 20-40 of its ~100 features): read once per step...
+    /// some 20-40 of its ~100 features): read once per step, into slots `0..shared.len()`
+    /// ...
     shared: Vec<Gather>,
-    /// ... read per engine (per-engine submodels only) ...
+    /// ... read per engine (per-engine submodels only), into the next slots ...
     lanes: Vec<Gather>,
     /// ... and the phase indicators (per engine).
     phases: Vec<PhaseGather>,
     /// Phase group of "switched on k steps ago" (`[0][k]`) and "off" (`[1][k]`), for
     /// the indicators whose terms are kept apart (see [`CompiledRow`]).
     phase_group: [Vec<Option<usize>>; 2],
-    /// Gathered scaled features followed by the constant 1.0, one lane per engine (MIMO
-    /// models use lane 0): every term is evaluated for the four engines at once
-    /// (vectorised; the same arithmetic per lane as for one).
-    x4: Vec<[f64; ENGINE_COUNT]>,
+    /// Gathered scaled features followed by the constant 1.0, one value per lane.
+    x: Vec<[f64; LANES]>,
+    /// Linear terms only, their coefficients scaled: the features are gathered clamped
+    /// but unscaled.
+    folded: bool,
     rows: Vec<CompiledRow>,
 }
 
@@ -453,15 +475,24 @@ struct FeatureScaling {
 }
 
 impl FeatureScaling {
-    /// Clamps to the envelope and scales one raw value; reports whether it was outside.
-    /// (Comparisons rather than `clamp`, which asserts lo <= hi on every call, or
-    /// `max`/`min`, which spend instructions on NaN: a NaN feature stays NaN, makes the
-    /// prediction non-finite, and the step's guard keeps the previous state.)
+    /// Clamps to the envelope and scales one raw value; the second value is non-zero when
+    /// it was outside. (Comparisons rather than `clamp`, which asserts lo <= hi on every
+    /// call, or `max`/`min`, which spend instructions on NaN. A NaN feature stays NaN,
+    /// makes the prediction non-finite, and the step's guard keeps the previous state and
+    /// counts the step. "Outside" is "the clamp changed a bit": an integer OR to collect,
+    /// cheaper than a floating comparison.)
     #[inline(always)]
-    fn apply(&self, raw: f64) -> (f64, bool) {
+    fn apply(&self, raw: f64) -> (f64, u64) {
+        let (v, out) = self.clamp(raw);
+        ((v - self.mean) * self.inv_std, out)
+    }
+
+    /// Clamps only (for a submodel whose coefficients hold the scaling).
+    #[inline(always)]
+    fn clamp(&self, raw: f64) -> (f64, u64) {
         let v = if raw < self.lo { self.lo } else { raw };
         let v = if v > self.hi { self.hi } else { v };
-        ((v - self.mean) * self.inv_std, v != raw)
+        (v, v.to_bits() ^ raw.to_bits())
     }
 }
 
@@ -475,20 +506,24 @@ struct Phases {
     cap: usize,
 }
 
-/// Components of a ring record: the step's inputs, then the state at its end, then lambda
-/// of that state and the step's command sum (each computed once when stored, not per
-/// read).
-const REC_STATE: usize = INPUT_DIM;
-const REC_LAMBDA: usize = INPUT_DIM + STATE_DIM;
-const REC_SUM: usize = REC_LAMBDA + 1;
-const REC_DIM: usize = REC_SUM + 1;
-type Record = [f64; REC_DIM];
+/// Components of a ring record: the step's inputs and its command sum, then the state at
+/// its end and lambda of that state (each computed once when stored, not per read).
+const REC_SUM: usize = INPUT_DIM;
+const REC_STATE: usize = INPUT_DIM + 1;
+const REC_LAMBDA: usize = REC_STATE + STATE_DIM;
+const REC_DIM: usize = REC_LAMBDA + 1;
 
-impl CompiledSub {
-    fn compile(s: &Submodel) -> Self {
+impl<const LANES: usize> CompiledSub<LANES> {
+    /// `depth`: the ring's depth (every lag the submodel reads is below it).
+    fn compile(s: &Submodel, depth: usize) -> Self {
         let dim = s.features.dim();
         let sources = s.features.sources();
         let per_engine = s.features.layout == Layout::PerEngine;
+        assert_eq!(
+            LANES,
+            s.evaluations(),
+            "compiled with the submodel's lane count"
+        );
         let mut used = vec![false; dim + 1];
         for r in &s.rows {
             for t in &r.terms {
@@ -499,50 +534,63 @@ impl CompiledSub {
                 }
             }
         }
-        // `slot[j]`: feature j's place among the used ones; `dim` maps to the 1.0 slot.
-        let mut slot = vec![0u16; dim + 1];
-        let (mut shared, mut lanes, mut phases) =
-            (Vec::new(), Vec::new(), Vec::<PhaseGather>::new());
-        let mut count = 0;
+        let scaling = |j: usize| FeatureScaling {
+            lo: s.envelope_lo[j],
+            hi: s.envelope_hi[j].max(s.envelope_lo[j]),
+            mean: s.feature_mean[j],
+            inv_std: 1.0 / s.feature_std[j],
+        };
+        let read = |j: usize, lag: usize, comp: usize| {
+            assert!(lag < depth, "the ring holds every lag read");
+            Gather {
+                offset: Ring::offset(depth, lag, comp),
+                scaling: scaling(j),
+            }
+        };
+        // Sort the used features into shared reads, lane reads and phase indicators,
+        // remembering which feature each read is.
+        let (mut shared, mut lanes) = (Vec::new(), Vec::new());
+        let mut phase_js = Vec::new();
         for j in (0..dim).filter(|&j| used[j]) {
-            slot[j] = count as u16;
-            let scaling = FeatureScaling {
-                lo: s.envelope_lo[j],
-                hi: s.envelope_hi[j].max(s.envelope_lo[j]),
-                mean: s.feature_mean[j],
-                inv_std: 1.0 / s.feature_std[j],
-            };
-            let read = |lag, comp| Gather {
-                slot: count,
-                lag,
-                comp,
-                scaling,
-            };
             let lane = |p: bool| per_engine && p;
             match sources[j] {
                 Source::Input {
                     lag,
                     comp,
                     per_engine: p,
-                } => (if lane(p) { &mut lanes } else { &mut shared }).push(read(lag, comp)),
+                } => (if lane(p) { &mut lanes } else { &mut shared }).push((j, read(j, lag, comp))),
                 Source::State {
                     lag,
                     comp,
                     per_engine: p,
                 } => (if lane(p) { &mut lanes } else { &mut shared })
-                    .push(read(lag, REC_STATE + comp)),
-                Source::Lambda => shared.push(read(1, REC_LAMBDA)),
-                Source::CommandSum => shared.push(read(0, REC_SUM)),
-                Source::Start(k) | Source::Stop(k) => phases.push(PhaseGather {
-                    slot: count,
-                    on: matches!(sources[j], Source::Start(_)),
-                    run: k + 1,
-                    scaling,
-                }),
+                    .push((j, read(j, lag, REC_STATE + comp))),
+                Source::Lambda => shared.push((j, read(j, 1, REC_LAMBDA))),
+                Source::CommandSum => shared.push((j, read(j, 0, REC_SUM))),
+                Source::Start(_) | Source::Stop(_) => phase_js.push(j),
             }
+        }
+        // `slot[j]`: feature j's place in `x`, in the order gathered; `dim` maps to the
+        // 1.0 slot.
+        let mut slot = vec![0u16; dim + 1];
+        let mut count = 0;
+        for &j in shared.iter().chain(&lanes).map(|(j, _)| j).chain(&phase_js) {
+            slot[j] = count as u16;
             count += 1;
         }
         slot[dim] = count as u16;
+        let mut phases: Vec<PhaseGather> = phase_js
+            .iter()
+            .map(|&j| PhaseGather {
+                slot: slot[j] as usize,
+                on: matches!(sources[j], Source::Start(_)),
+                run: match sources[j] {
+                    Source::Start(k) | Source::Stop(k) => k + 1,
+                    _ => unreachable!("only phase indicators are listed"),
+                },
+                scaling: scaling(j),
+            })
+            .collect();
         // Phase indicators that are exactly 0 outside their phase get a term group.
         let mut group = vec![None; count + 1];
         let mut phase_group = [Vec::new(), Vec::new()];
@@ -566,130 +614,226 @@ impl CompiledSub {
             }
             !skippable
         });
-        let mut x4 = vec![[1.0; ENGINE_COUNT]; count + 1];
+        let mut x = vec![[1.0; LANES]; count + 1];
         for (slot, v) in constant {
-            x4[slot] = [v; ENGINE_COUNT];
+            x[slot] = [v; LANES];
         }
+        // A submodel of linear terms only (the pressure and mass rows) has the scaling
+        // folded into its coefficients: `c * (v - mean) / std` is `(c / std) * v` plus a
+        // constant, so a feature costs a clamp rather than a clamp, a subtraction and a
+        // multiplication. The sum moves by rounding only.
+        let folded = phase_js.is_empty()
+            && s.rows.iter().all(|r| {
+                r.terms
+                    .iter()
+                    .all(|t| t.factors.iter().filter(|&&f| f as usize != dim).count() <= 1)
+            });
+        let rows: Vec<CompiledRow> = s
+            .rows
+            .iter()
+            .map(|r| {
+                if !folded {
+                    return CompiledRow::new(r, &slot, dim, &group, groups);
+                }
+                let mut r = r.clone();
+                for t in &mut r.terms {
+                    if let Some(&j) = t.factors.iter().find(|&&f| (f as usize) < dim) {
+                        let j = j as usize;
+                        t.coef /= s.feature_std[j];
+                        r.intercept -= t.coef * s.feature_mean[j];
+                    }
+                }
+                CompiledRow::new(&r, &slot, dim, &group, groups)
+            })
+            .collect();
+        let unscaled = |(_, g): (usize, Gather)| {
+            if folded {
+                Gather {
+                    scaling: FeatureScaling {
+                        mean: 0.0,
+                        inv_std: 1.0,
+                        ..g.scaling
+                    },
+                    ..g
+                }
+            } else {
+                g
+            }
+        };
         Self {
             phase_group,
-            per_engine,
             target: s.target,
             outputs: s.outputs.clone(),
-            x4,
-            shared,
-            lanes,
+            x,
+            folded,
+            shared: shared.into_iter().map(unscaled).collect(),
+            lanes: lanes.into_iter().map(unscaled).collect(),
             phases,
-            rows: s
-                .rows
-                .iter()
-                .map(|r| CompiledRow::new(r, &slot, dim, &group, groups))
-                .collect(),
+            rows,
         }
     }
 
-    /// Gathers, clamps and scales the used features into `x4`; true when one was outside
-    /// its envelope.
-    #[inline]
-    fn gather(&mut self, ring: &Ring, phases: &Phases) -> bool {
-        let mut outside = false;
-        let x4 = &mut self.x4;
-        for g in &self.shared {
-            let (v, out) = g.scaling.apply(ring.rec(g.lag)[g.comp]);
-            x4[g.slot] = [v; ENGINE_COUNT];
-            outside |= out;
+    /// Gathers, clamps and scales the used features of the history `window` into `x`;
+    /// true when one was outside its envelope.
+    #[inline(always)]
+    fn gather(&mut self, window: &[f64], phases: &Phases) -> bool {
+        let mut outside = 0;
+        // SAFETY: `compile` places every read (and the engines after it) inside a window
+        // of the ring's depth, which is the length of `window`.
+        let at = |i: usize| unsafe { *window.get_unchecked(i) };
+        debug_assert!(self.lanes.iter().all(|g| g.offset + LANES <= window.len()));
+        debug_assert!(self.shared.iter().all(|g| g.offset < window.len()));
+        let (x_shared, x_rest) = self.x.split_at_mut(self.shared.len());
+        if self.folded {
+            for (g, x) in self.shared.iter().zip(x_shared) {
+                let (v, out) = g.scaling.clamp(at(g.offset));
+                *x = [v; LANES];
+                outside |= out;
+            }
+        } else {
+            for (g, x) in self.shared.iter().zip(x_shared) {
+                let (v, out) = g.scaling.apply(at(g.offset));
+                *x = [v; LANES];
+                outside |= out;
+            }
         }
-        for g in &self.lanes {
-            let rec = ring.rec(g.lag);
-            let raw: [f64; ENGINE_COUNT] = std::array::from_fn(|e| rec[g.comp + e]);
-            let x = &mut x4[g.slot];
-            for e in 0..ENGINE_COUNT {
-                let (v, out) = g.scaling.apply(raw[e]);
-                x[e] = v;
+        for (g, x) in self.lanes.iter().zip(x_rest) {
+            for (e, x) in x.iter_mut().enumerate() {
+                let (v, out) = g.scaling.apply(at(g.offset + e));
+                *x = v;
                 outside |= out;
             }
         }
         for g in &self.phases {
-            let x = &mut x4[g.slot];
-            for e in 0..ENGINE_COUNT {
+            let x = &mut self.x[g.slot];
+            for (e, x) in x.iter_mut().enumerate() {
                 let hit = phases.on[e] == g.on && phases.run[e] == g.run;
                 let (v, out) = g.scaling.apply(f64::from(u8::from(hit)));
-                x[e] = v;
+                *x = v;
                 outside |= out;
             }
         }
-        outside
+        outside != 0
     }
 
-    fn eval_mimo(
+    /// Predicts this submodel's outputs into `next`; true when a feature was outside its
+    /// envelope.
+    #[inline(always)]
+    fn eval(
         &mut self,
-        ring: &Ring,
+        window: &[f64],
         phases: &Phases,
         prev: &StateVec,
         next: &mut StateVec,
     ) -> bool {
-        let outside = self.gather(ring, phases);
-        for (row, &o) in self.rows.iter().zip(&self.outputs) {
-            let mut y = [row.intercept];
-            row.terms.add::<1>(&self.x4, &mut y);
-            next[o] = self.target.apply(prev[o], y[0]);
-        }
-        outside
-    }
-
-    fn eval_per_engine(
-        &mut self,
-        ring: &Ring,
-        phases: &Phases,
-        prev: &StateVec,
-        next: &mut StateVec,
-    ) -> bool {
-        let outside = self.gather(ring, phases);
-        let row = &self.rows[0];
-        let mut y = [row.intercept; ENGINE_COUNT];
-        row.terms.add::<ENGINE_COUNT>(&self.x4, &mut y);
-        for (e, y) in y.iter_mut().enumerate() {
-            let table = &self.phase_group[usize::from(!phases.on[e])];
-            if let Some(&Some(g)) = table.get(phases.run[e] - 1) {
-                row.phase[g].add_lane(&self.x4, e, y);
+        let outside = self.gather(window, phases);
+        if LANES == 1 {
+            for (row, &o) in self.rows.iter().zip(&self.outputs) {
+                let mut y = [row.intercept; LANES];
+                row.terms.add(&self.x, &mut y);
+                next[o] = self.target.apply(prev[o], y[0]);
             }
-        }
-        for e in 0..ENGINE_COUNT {
-            let o = self.outputs[e];
-            next[o] = self.target.apply(prev[o], y[e]);
+        } else {
+            // One shared row for the engines, plus each engine's phase terms.
+            let row = &self.rows[0];
+            let mut y = [row.intercept; LANES];
+            row.terms.add(&self.x, &mut y);
+            for (e, y) in y.iter_mut().enumerate() {
+                let table = &self.phase_group[usize::from(!phases.on[e])];
+                if let Some(&Some(g)) = table.get(phases.run[e] - 1) {
+                    row.phase[g].add_lane(&self.x, e, y);
+                }
+            }
+            for (&o, y) in self.outputs.iter().zip(y) {
+                next[o] = self.target.apply(prev[o], y);
+            }
         }
         outside
     }
 }
 
-/// Ring of past records (inputs, state, lambda), seen from the step being predicted
-/// (`head`). The length is a power of two so wrapping is a mask, not a division.
+/// The history: the last `depth` records, each stored twice (at `i` and `i + depth`), so
+/// that the records from `depth - 1` steps back to the latest always lie in one
+/// contiguous window. A feature is then a fixed offset into the window, found when the
+/// model is compiled, instead of a wrap-around computation per read.
 #[derive(Debug, Clone)]
 struct Ring {
-    recs: Vec<Record>,
+    buf: Vec<f64>,
+    depth: usize,
+    /// Record index of the step being predicted, `0..depth`.
     head: usize,
-    mask: usize,
 }
 
 impl Ring {
-    #[inline(always)]
-    fn at(&self, lag: usize) -> usize {
-        self.head.wrapping_sub(lag) & self.mask
+    fn new(depth: usize) -> Self {
+        Self {
+            buf: vec![0.0; 2 * depth * REC_DIM],
+            depth,
+            head: 0,
+        }
     }
 
+    /// Where component `comp` of the record `lag` steps back lies in the window.
+    fn offset(depth: usize, lag: usize, comp: usize) -> usize {
+        (depth - 1 - lag) * REC_DIM + comp
+    }
+
+    /// The window: record `head - depth + 1` (wrapped) first, `head` last.
     #[inline(always)]
-    fn rec(&self, lag: usize) -> &Record {
-        &self.recs[self.at(lag)]
+    fn window(&self) -> &[f64] {
+        let start = (self.head + 1) * REC_DIM;
+        &self.buf[start..start + self.depth * REC_DIM]
+    }
+
+    /// The record `lag` steps back.
+    fn rec(&self, lag: usize) -> &[f64] {
+        let i = self.head + self.depth - lag;
+        &self.buf[i * REC_DIM..(i + 1) * REC_DIM]
+    }
+
+    /// Index of the record `lag` steps back.
+    fn index(&self, lag: usize) -> usize {
+        (self.head + self.depth - lag) % self.depth
+    }
+
+    /// Writes `values` from component `comp` of record `i`, in both copies.
+    #[inline(always)]
+    fn write(&mut self, i: usize, comp: usize, values: &[f64]) {
+        for copy in [i, i + self.depth] {
+            let at = copy * REC_DIM + comp;
+            self.buf[at..at + values.len()].copy_from_slice(values);
+        }
     }
 
     fn set_state(&mut self, i: usize, s: &StateVec) {
-        let r = &mut self.recs[i];
-        r[REC_STATE..REC_LAMBDA].copy_from_slice(s);
-        r[REC_LAMBDA] = lambda_of(s[STATE_MF], s[STATE_MO]);
+        let mut v = [0.0; STATE_DIM + 1];
+        v[..STATE_DIM].copy_from_slice(s);
+        v[STATE_DIM] = lambda_of(s[STATE_MF], s[STATE_MO]);
+        self.write(i, REC_STATE, &v);
     }
 
-    fn state(&self, i: usize) -> StateVec {
-        std::array::from_fn(|k| self.recs[i][REC_STATE + k])
+    fn set_input(&mut self, i: usize, u: &InputVec) {
+        let mut v = [0.0; INPUT_DIM + 1];
+        v[..INPUT_DIM].copy_from_slice(u);
+        v[INPUT_DIM] = command_sum_of(u);
+        self.write(i, 0, &v);
     }
+
+    /// The latest state.
+    fn state(&self) -> StateVec {
+        let r = self.rec(0);
+        std::array::from_fn(|k| r[REC_STATE + k])
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+fn avx2_detected() -> bool {
+    std::is_x86_feature_detected!("avx2")
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+fn avx2_detected() -> bool {
+    false
 }
 
 /// Free-running evaluation of a [`Model`]: its own predictions become its history.
@@ -697,16 +841,18 @@ impl Ring {
 #[derive(Debug, Clone)]
 pub struct Predictor {
     on_command_range_n: [f64; 2],
-    subs: Vec<CompiledSub>,
+    mimo: Vec<CompiledSub<1>>,
+    per_engine: Vec<CompiledSub<ENGINE_COUNT>>,
     ring: Ring,
     phases: Phases,
     out_of_envelope_steps: u64,
+    /// Step with the AVX2 build of the same code (x86-64 CPUs that have it).
+    avx2: bool,
 }
 
 impl Predictor {
     /// Compiles a model (assumed checked) and starts it from its initial state.
     pub fn new(model: &Model) -> Self {
-        let subs: Vec<CompiledSub> = model.submodels.iter().map(CompiledSub::compile).collect();
         // The phase indicators are kept incrementally, so the ring only has to hold the
         // lags the features read directly.
         let depth = model
@@ -715,28 +861,35 @@ impl Predictor {
             .map(|s| s.features.max_state_lag())
             .max()
             .unwrap_or(1)
-            .saturating_add(1)
-            .next_power_of_two();
+            .saturating_add(1);
         let cap = model
             .submodels
             .iter()
             .map(|s| s.features.start_steps.max(s.features.stop_steps))
             .max()
             .unwrap_or(0);
+        let of_layout = |l: Layout| {
+            model
+                .submodels
+                .iter()
+                .filter(move |s| s.features.layout == l)
+        };
         let mut p = Self {
             on_command_range_n: model.on_command_range_n,
-            subs,
-            ring: Ring {
-                recs: vec![[0.0; REC_DIM]; depth],
-                head: 0,
-                mask: depth - 1,
-            },
+            mimo: of_layout(Layout::Mimo)
+                .map(|s| CompiledSub::compile(s, depth))
+                .collect(),
+            per_engine: of_layout(Layout::PerEngine)
+                .map(|s| CompiledSub::compile(s, depth))
+                .collect(),
+            ring: Ring::new(depth),
             phases: Phases {
                 on: [false; ENGINE_COUNT],
                 run: [cap + 1; ENGINE_COUNT],
                 cap,
             },
             out_of_envelope_steps: 0,
+            avx2: cfg!(target_arch = "x86_64") && avx2_detected(),
         };
         p.reset_to(&model.initial_state);
         p
@@ -745,9 +898,8 @@ impl Predictor {
     /// Restarts from a state at rest: engines off for all of the history, every past
     /// state equal to `state` (how the reference model is started).
     pub fn reset_to(&mut self, state: &StateVec) {
-        for i in 0..self.ring.recs.len() {
-            self.ring.recs[i][..INPUT_DIM].fill(0.0);
-            self.ring.recs[i][REC_SUM] = 0.0;
+        for i in 0..self.ring.depth {
+            self.ring.set_input(i, &[0.0; INPUT_DIM]);
             self.ring.set_state(i, state);
         }
         self.ring.head = 0;
@@ -759,17 +911,15 @@ impl Predictor {
     /// Loads a true history (oldest first; the last state is the latest known) so that a
     /// free run can start mid-trajectory, as cross-validation does on a test block.
     pub fn seed_history<H: History>(&mut self, h: &H) {
-        let depth = self.ring.recs.len();
         // Slot `head` is the step about to be predicted; lags 1..depth-1 are the past.
         self.ring.head = 0;
-        for lag in 1..depth {
-            let i = self.ring.at(lag);
-            self.ring.recs[i][..INPUT_DIM].copy_from_slice(h.input(lag));
-            self.ring.recs[i][REC_SUM] = command_sum_of(h.input(lag));
+        for lag in 1..self.ring.depth {
+            let i = self.ring.index(lag);
+            self.ring.set_input(i, h.input(lag));
             self.ring.set_state(i, h.state(lag));
         }
         // One slot back, so the next step() advances onto slot 0.
-        self.ring.head = depth - 1;
+        self.ring.head = self.ring.depth - 1;
         // The switch phase at the latest known step, read from the history (which may
         // reach further back than the ring).
         let cap = self.phases.cap;
@@ -788,26 +938,45 @@ impl Predictor {
 
     /// The latest state.
     pub fn state(&self) -> StateVec {
-        self.ring.state(self.ring.head)
+        self.ring.state()
     }
 
     /// Predicts the state at the end of a step with `input` held, and makes it history.
     #[inline]
     pub fn step(&mut self, input: &InputVec) -> StateVec {
-        let prev = self.ring.state(self.ring.head);
-        self.ring.head = (self.ring.head + 1) & self.ring.mask;
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: the CPU has AVX2 (checked in `new`).
+            return unsafe { self.step_avx2(input) };
+        }
+        self.step_portable(input)
+    }
+
+    /// [`Predictor::step`] compiled for AVX2: the four engines' lanes in one vector
+    /// instead of two. Bit for bit the same results: each lane is the same IEEE operation
+    /// in the same order, and without fused multiply-add (which would round differently,
+    /// and so is not enabled) nothing else changes. Tested against the portable path.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn step_avx2(&mut self, input: &InputVec) -> StateVec {
+        self.step_portable(input)
+    }
+
+    #[inline(always)]
+    fn step_portable(&mut self, input: &InputVec) -> StateVec {
+        let prev = self.ring.state();
+        self.ring.head = (self.ring.head + 1) % self.ring.depth;
         let head = self.ring.head;
-        let rec = &mut self.ring.recs[head];
-        rec[..INPUT_DIM].copy_from_slice(input);
+        let mut u = *input;
         let mut outside = false;
         let [lo, hi] = self.on_command_range_n;
         for e in 0..ENGINE_COUNT {
-            let on = rec[ENGINE_COUNT + e] > 0.5;
+            let on = u[ENGINE_COUNT + e] > 0.5;
             if on {
-                let raw = rec[e];
+                let raw = u[e];
                 let v = raw.clamp(lo, hi);
                 outside |= v != raw;
-                rec[e] = v;
+                u[e] = v;
             }
             let ph = &mut self.phases;
             ph.run[e] = if on == ph.on[e] {
@@ -817,16 +986,16 @@ impl Predictor {
             };
             ph.on[e] = on;
         }
-        // Of the commands as the model sees them (after the on-range clamp above).
-        rec[REC_SUM] = command_sum_of(&std::array::from_fn(|k| rec[k]));
-        // The slot still holds an old state; it is never read (state lags start at 1).
+        // The model sees the commands after the on-range clamp above. The record's state
+        // is still an old one; it is never read (state lags start at 1).
+        self.ring.set_input(head, &u);
         let mut next = prev;
-        for sub in &mut self.subs {
-            outside |= if sub.per_engine {
-                sub.eval_per_engine(&self.ring, &self.phases, &prev, &mut next)
-            } else {
-                sub.eval_mimo(&self.ring, &self.phases, &prev, &mut next)
-            };
+        let window = self.ring.window();
+        for sub in &mut self.per_engine {
+            outside |= sub.eval(window, &self.phases, &prev, &mut next);
+        }
+        for sub in &mut self.mimo {
+            outside |= sub.eval(window, &self.phases, &prev, &mut next);
         }
         // Physical guards: thrust and pressure are not negative, ejected mass never
         // falls. A non-finite prediction keeps the previous state (and counts).
@@ -848,11 +1017,6 @@ impl Predictor {
     }
 }
 
-/// Name of a state output.
-pub fn output_name(o: usize) -> &'static str {
-    STATE_NAMES[o]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -860,8 +1024,9 @@ mod tests {
     use crate::surrogate::library::Library;
 
     /// A model with every library term active (pseudo-random coefficients), so every
-    /// feature, phase indicator and term degree is exercised.
-    fn dense_model() -> Model {
+    /// feature, phase indicator and term degree is exercised. With `mimo_degree` 1 the
+    /// MIMO submodel is linear, and compiled with its scaling folded.
+    fn dense_model(mimo_degree: usize) -> Model {
         let mut seed = 12345u64;
         let mut rnd = move || {
             seed = seed
@@ -893,7 +1058,7 @@ mod tests {
                     phase_degree: 0,
                     command_sum: false,
                 },
-                2,
+                mimo_degree,
                 (ENGINE_COUNT..STATE_DIM).collect(),
             ),
         ];
@@ -955,9 +1120,112 @@ mod tests {
     /// an engine in a phase after the others).
     #[test]
     fn compiled_step_equals_full_evaluation() {
-        let model = dense_model();
+        for mimo_degree in [1, 2] {
+            compiled_step_equals_full_evaluation_of(&dense_model(mimo_degree));
+        }
+    }
+
+    /// The AVX2 build of the step gives the same bits as the portable one (on a CPU
+    /// without AVX2 both runs take the portable path).
+    #[test]
+    fn avx2_and_portable_steps_agree_bit_for_bit() {
+        let committed = crate::surrogate::model_file::ModelFile::parse(
+            crate::surrogate::runtime::DEFAULT_MODEL_JSON,
+        )
+        .unwrap()
+        .model;
+        let (cmds, _) = crate::surrogate::features::source_tests::switching_trajectory(400);
+        for model in [dense_model(1), dense_model(2), committed] {
+            let mut fast = Predictor::new(&model);
+            let mut portable = Predictor::new(&model);
+            portable.avx2 = false;
+            for (t, cmd) in cmds.iter().enumerate() {
+                let (a, b) = (fast.step(cmd), portable.step(cmd));
+                assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits), "step {t}");
+            }
+            assert_eq!(
+                fast.out_of_envelope_steps(),
+                portable.out_of_envelope_steps()
+            );
+        }
+    }
+
+    /// The straightforward prediction of step `t` from the true history: `inputs` up to
+    /// and including step `t` (as the model sees them), `states` up to step `t - 1`.
+    fn full_step(model: &Model, inputs: &[InputVec], states: &[StateVec], t: usize) -> StateVec {
+        let prev = states[..t].last().copied().unwrap_or(model.initial_state);
+        let mut want = prev;
+        for s in &model.submodels {
+            let dim = s.features.dim();
+            let mut x = vec![1.0; dim + 1];
+            for (e, &o) in s.outputs.iter().enumerate() {
+                let h = TrajectoryHistory {
+                    inputs,
+                    states,
+                    initial: &model.initial_state,
+                    t,
+                };
+                s.features.fill(&h, e, &mut x[..dim]);
+                for j in 0..dim {
+                    let v = x[j].max(s.envelope_lo[j]).min(s.envelope_hi[j]);
+                    x[j] = (v - s.feature_mean[j]) * (1.0 / s.feature_std[j]);
+                }
+                let row = &s.rows[if s.rows.len() == 1 { 0 } else { e }];
+                let mut y = row.intercept;
+                for term in &row.terms {
+                    let f = term.factors.map(|f| x[f as usize]);
+                    y += term.coef * (f[0] * f[1] * f[2]);
+                }
+                want[o] = prev[o] + y;
+            }
+        }
+        for v in want.iter_mut().take(ENGINE_COUNT) {
+            *v = v.max(0.0);
+        }
+        want[STATE_P] = want[STATE_P].max(0.0);
+        want[STATE_MF] = want[STATE_MF].max(prev[STATE_MF]);
+        want[STATE_MO] = want[STATE_MO].max(prev[STATE_MO]);
+        want
+    }
+
+    /// One step at a time from a true history, so that coefficients of ordinary size
+    /// stay bounded (a free run of an all-active model needs tiny ones, which would hide
+    /// a wrong intercept or scale in the folded linear submodel).
+    #[test]
+    fn one_step_from_history_equals_full_evaluation() {
+        for mimo_degree in [1, 2] {
+            let mut model = dense_model(mimo_degree);
+            for r in &mut model.submodels[1].rows {
+                for t in &mut r.terms {
+                    t.coef *= 1e16;
+                }
+            }
+            let (inputs, states) =
+                crate::surrogate::features::source_tests::switching_trajectory(60);
+            let mut p = Predictor::new(&model);
+            for t in 4..inputs.len() {
+                p.seed_history(&TrajectoryHistory {
+                    inputs: &inputs,
+                    states: &states,
+                    initial: &model.initial_state,
+                    t,
+                });
+                let got = p.step(&inputs[t]);
+                let want = full_step(&model, &inputs, &states, t);
+                for o in 0..STATE_DIM {
+                    let tol = 1e-12 * (1.0 + want[o].abs());
+                    assert!(
+                        (got[o] - want[o]).abs() <= tol,
+                        "degree {mimo_degree} step {t} output {o}: {got:?} vs {want:?}"
+                    );
+                }
+            }
+        }
+    }
+
+    fn compiled_step_equals_full_evaluation_of(model: &Model) {
         model.check().unwrap();
-        let mut p = Predictor::new(&model);
+        let mut p = Predictor::new(model);
         let (cmds, _) = crate::surrogate::features::source_tests::switching_trajectory(150);
         let mut inputs: Vec<InputVec> = Vec::new();
         let mut states: Vec<StateVec> = Vec::new();
@@ -970,38 +1238,7 @@ mod tests {
                 }
             }
             inputs.push(u);
-            let prev = states.last().copied().unwrap_or(model.initial_state);
-            let mut want = prev;
-            for s in &model.submodels {
-                let dim = s.features.dim();
-                let mut x = vec![1.0; dim + 1];
-                for (e, &o) in s.outputs.iter().enumerate() {
-                    let h = TrajectoryHistory {
-                        inputs: &inputs,
-                        states: &states,
-                        initial: &model.initial_state,
-                        t,
-                    };
-                    s.features.fill(&h, e, &mut x[..dim]);
-                    for j in 0..dim {
-                        let v = x[j].max(s.envelope_lo[j]).min(s.envelope_hi[j]);
-                        x[j] = (v - s.feature_mean[j]) * (1.0 / s.feature_std[j]);
-                    }
-                    let row = &s.rows[if s.rows.len() == 1 { 0 } else { e }];
-                    let mut y = row.intercept;
-                    for term in &row.terms {
-                        let f = term.factors.map(|f| x[f as usize]);
-                        y += term.coef * (f[0] * f[1] * f[2]);
-                    }
-                    want[o] = prev[o] + y;
-                }
-            }
-            for v in want.iter_mut().take(ENGINE_COUNT) {
-                *v = v.max(0.0);
-            }
-            want[STATE_P] = want[STATE_P].max(0.0);
-            want[STATE_MF] = want[STATE_MF].max(prev[STATE_MF]);
-            want[STATE_MO] = want[STATE_MO].max(prev[STATE_MO]);
+            let want = full_step(model, &inputs, &states, t);
             for o in 0..STATE_DIM {
                 let tol = 1e-12 * (1.0 + want[o].abs());
                 assert!(
@@ -1012,7 +1249,7 @@ mod tests {
             states.push(got);
         }
         // Seeding from the recorded history mid-run continues identically.
-        let mut q = Predictor::new(&model);
+        let mut q = Predictor::new(model);
         let t0 = 77;
         q.seed_history(&TrajectoryHistory {
             inputs: &inputs,

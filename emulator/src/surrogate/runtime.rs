@@ -20,8 +20,8 @@ pub const DEFAULT_MODEL_JSON: &str = include_str!("../../models/surrogate-defaul
 pub struct SurrogatePropulsion {
     predictor: Predictor,
     sample_time_ns: u64,
-    max_thrust_n: f64,
-    chamber_pressure_max_pa: f64,
+    /// Chamber pressure per newton of thrust (the model predicts thrust only).
+    chamber_pa_per_n: f64,
     held: super::model_file::ReferenceOutput,
     out: PropulsionOutput,
 }
@@ -38,8 +38,7 @@ impl SurrogatePropulsion {
         let mut s = Self {
             predictor,
             sample_time_ns: file.model.sample_time_ns,
-            max_thrust_n: cfg.max_thrust_n,
-            chamber_pressure_max_pa: cfg.chamber_pressure_max_pa,
+            chamber_pa_per_n: cfg.chamber_pressure_max_pa / cfg.max_thrust_n,
             held: file.reference_output,
             out: PropulsionOutput::default(),
         };
@@ -85,12 +84,12 @@ impl SurrogatePropulsion {
             o.thrust_n[e] = now[e];
             // Trapezoid over the step: the model only knows the end points.
             o.mean_thrust_n[e] = 0.5 * (prev[e] + now[e]);
-            o.chamber_pressure_pa[e] = now[e] / self.max_thrust_n * self.chamber_pressure_max_pa;
+            o.chamber_pressure_pa[e] = now[e] * self.chamber_pa_per_n;
         }
         if dt_ns > 0 {
-            let dt_s = dt_ns as f64 * 1e-9;
-            o.fuel_flow_kg_s = (now[STATE_MF] - prev[STATE_MF]) / dt_s;
-            o.ox_flow_kg_s = (now[STATE_MO] - prev[STATE_MO]) / dt_s;
+            let per_s = 1e9 / dt_ns as f64;
+            o.fuel_flow_kg_s = (now[STATE_MF] - prev[STATE_MF]) * per_s;
+            o.ox_flow_kg_s = (now[STATE_MO] - prev[STATE_MO]) * per_s;
         }
         o
     }
