@@ -2,7 +2,7 @@
 //! windows over which each of the paper's bounds applies.
 //!
 //! * `sine-400`, `sine-550`, `sine-700`: the 4-sphere signal (paper eq. 3) around a
-//!   400 / 550 / 700 N level, after a start-up hold at that level. It differs from the
+//!   400 / 550 / 700 N level, after a start-up hold at the sine's first value. It differs from the
 //!   training excitation (amplitude 80 N instead of 200 N, time scale 0.7 instead of 1,
 //!   another phase, levels that are not training bias levels).
 //! * `rise`: a step stair of varying amplitude, 320 N up to 800 N.
@@ -164,21 +164,28 @@ fn s_to_ns(s: f64) -> i64 {
 }
 
 /// The 4-sphere sine case around `level_n`, `sine_s` long after [`SINE_LEAD_S`].
+///
+/// Each engine is held during the lead at the value its sine starts from, so the sine
+/// window holds the sine's response only. (Until 2026-11-23 the lead held `level_n` and
+/// the sine then began with a jump of up to 70 N, a step response judged against the
+/// sine bound; steps are the `rise` and `fall` cases' business.)
 pub fn sine(level_n: f64, sine_s: f64) -> Case {
     let lead_ns = s_to_ns(SINE_LEAD_S);
     let end_ns = lead_ns + s_to_ns(sine_s);
+    let command_at = |t_ns: i64| {
+        let tau = SINE_PHASE + SINE_TIME_SCALE * (t_ns - lead_ns) as f64 * 1e-9;
+        sphere_signal(tau).map(|x| (level_n + SINE_AMPLITUDE_N * x).clamp(320.0, 800.0))
+    };
     let mut rows = vec![ProfileRow {
         t_ns: 0,
-        thrust_cmd_n: [level_n; ENGINE_COUNT],
+        thrust_cmd_n: command_at(lead_ns),
         on: ALL_ON,
     }];
     let mut t_ns = lead_ns;
     while t_ns < end_ns {
-        let tau = SINE_PHASE + SINE_TIME_SCALE * (t_ns - lead_ns) as f64 * 1e-9;
-        let s = sphere_signal(tau);
         rows.push(ProfileRow {
             t_ns,
-            thrust_cmd_n: s.map(|x| (level_n + SINE_AMPLITUDE_N * x).clamp(320.0, 800.0)),
+            thrust_cmd_n: command_at(t_ns),
             on: ALL_ON,
         });
         t_ns += ROW_NS;
@@ -401,6 +408,9 @@ mod tests {
         }
         assert!(spread > 20.0);
         assert_eq!(c.windows[1].kind, WindowKind::Sine);
+        // The lead holds where the sine starts: no step at the sine's onset.
+        assert_eq!(rows[0].thrust_cmd_n, rows[1].thrust_cmd_n);
+        assert_eq!(rows[1].t_ns, s_to_ns(SINE_LEAD_S));
     }
 
     #[test]
