@@ -56,6 +56,11 @@ pub struct VariantConfig {
     /// Beyond the paper: give the per-engine thrust model the sum of the four commands
     /// (`T_rsum[t]`, see [`FeatureSpec::command_sum`]).
     pub engine_command_sum: bool,
+    /// The shared-engine variant's pressure and mass model is fitted at this multiple of
+    /// the penalty `mu` chosen for the variant (1: one penalty for both submodels). Its
+    /// rows are smooth functions of the thrusts, and a larger penalty drops terms the
+    /// step would otherwise pay for (see docs/surrogate.md, "Cost").
+    pub system_mu_scale: f64,
 }
 
 impl Default for VariantConfig {
@@ -69,6 +74,7 @@ impl Default for VariantConfig {
             engine_stop_steps: 0,
             engine_phase_degree: 0,
             engine_command_sum: false,
+            system_mu_scale: 1.0,
         }
     }
 }
@@ -84,6 +90,8 @@ pub struct SubSpec {
     pub target: Target,
     /// State indices predicted.
     pub outputs: Vec<usize>,
+    /// Multiple of the variant's penalty this submodel is fitted at.
+    pub mu_scale: f64,
 }
 
 impl SubSpec {
@@ -120,6 +128,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
             degree: cfg.paper_degree,
             target: Target::Absolute,
             outputs: (0..STATE_DIM).collect(),
+            mu_scale: 1.0,
         }],
         Variant::SharedEngine => vec![
             SubSpec {
@@ -135,6 +144,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                 degree: cfg.engine_degree,
                 target: Target::Increment,
                 outputs: (0..ENGINE_COUNT).collect(),
+                mu_scale: 1.0,
             },
             SubSpec {
                 features: FeatureSpec {
@@ -149,6 +159,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                 degree: cfg.system_degree,
                 target: Target::Increment,
                 outputs: (ENGINE_COUNT..STATE_DIM).collect(),
+                mu_scale: cfg.system_mu_scale,
             },
         ],
     }
@@ -347,8 +358,9 @@ pub struct PathFit {
     pub unconverged: Vec<usize>,
 }
 
-/// Lasso path over `mus` (descending), warm-started, on the standardised problem of
-/// `stats`. Returned coefficients apply to unscaled library terms.
+/// Lasso path over `mus` (descending; each times the submodel's `mu_scale`),
+/// warm-started, on the standardised problem of `stats`. Returned coefficients apply to
+/// unscaled library terms.
 pub fn fit_path(
     prep: &Prepared,
     stats: &GramStats,
@@ -365,7 +377,7 @@ pub fn fit_path(
         let prob = std.problem(c);
         let mut w = vec![0.0; p];
         for (i, &mu) in mus.iter().enumerate() {
-            let r = lasso_gram(&prob, mu, settings, &mut w, &mut h);
+            let r = lasso_gram(&prob, mu * prep.spec.mu_scale, settings, &mut w, &mut h);
             unconverged[i] += usize::from(!r.converged);
             coefs[i].push(std.unscale(c, &w, &zero_shift, prep.y_shift[c]));
         }

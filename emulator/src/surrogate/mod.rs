@@ -114,6 +114,12 @@ impl TrainConfig {
                 return Err(e(format!("variants.{name} = {d}: must be 1..=3")));
             }
         }
+        if !(v.system_mu_scale.is_finite() && v.system_mu_scale > 0.0) {
+            return Err(e(format!(
+                "variants.system_mu_scale = {}: must be a positive number",
+                v.system_mu_scale
+            )));
+        }
         if v.engine_phase_degree > library::MAX_DEGREE {
             return Err(e(format!(
                 "variants.engine_phase_degree = {}: must be 0..=3",
