@@ -312,19 +312,7 @@ fn accumulate<const N: usize, const LANES: usize>(
     // SAFETY: `CompiledSub::compile` maps every factor to a slot below the number of
     // gathered features and `x` has that many entries plus one.
     let at = |i: u16| unsafe { x.get_unchecked(i as usize) };
-    let mut chunks = terms.chunks_exact(PARTIAL_SUMS);
-    for chunk in &mut chunks {
-        for (k, (f, c)) in chunk.iter().enumerate() {
-            for e in 0..LANES {
-                let mut p = at(f[0])[e];
-                for &i in &f[1..] {
-                    p *= at(i)[e];
-                }
-                acc[k][e] += c * p;
-            }
-        }
-    }
-    for (k, (f, c)) in chunks.remainder().iter().enumerate() {
+    let mut add = |k: usize, (f, c): &([u16; N], f64)| {
         for e in 0..LANES {
             let mut p = at(f[0])[e];
             for &i in &f[1..] {
@@ -332,6 +320,15 @@ fn accumulate<const N: usize, const LANES: usize>(
             }
             acc[k][e] += c * p;
         }
+    };
+    let mut chunks = terms.chunks_exact(PARTIAL_SUMS);
+    for chunk in &mut chunks {
+        for (k, term) in chunk.iter().enumerate() {
+            add(k, term);
+        }
+    }
+    for (k, term) in chunks.remainder().iter().enumerate() {
+        add(k, term);
     }
 }
 
@@ -791,6 +788,17 @@ impl Ring {
         &self.buf[i * REC_DIM..(i + 1) * REC_DIM]
     }
 
+    /// Moves `head` on by one record (a compare, not the division of `%`, on the step
+    /// path) and returns it.
+    #[inline(always)]
+    fn advance(&mut self) -> usize {
+        self.head += 1;
+        if self.head == self.depth {
+            self.head = 0;
+        }
+        self.head
+    }
+
     /// Index of the record `lag` steps back.
     fn index(&self, lag: usize) -> usize {
         (self.head + self.depth - lag) % self.depth
@@ -965,8 +973,7 @@ impl Predictor {
     #[inline(always)]
     fn step_portable(&mut self, input: &InputVec) -> StateVec {
         let prev = self.ring.state();
-        self.ring.head = (self.ring.head + 1) % self.ring.depth;
-        let head = self.ring.head;
+        let head = self.ring.advance();
         let mut u = *input;
         let mut outside = false;
         let [lo, hi] = self.on_command_range_n;
