@@ -73,7 +73,7 @@ fn bad_model_files_are_refused_clearly() {
         2
     );
 
-    let wrong_version = good.replacen("\"version\": 2", "\"version\": 99", 1);
+    let wrong_version = good.replacen("\"version\": 3", "\"version\": 99", 1);
     let e = refusal(&wrong_version, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 99 }),
@@ -81,13 +81,29 @@ fn bad_model_files_are_refused_clearly() {
     );
     assert!(e.to_string().contains("version 99"));
     // A version-1 file (before the per-engine physics features) is refused by name.
-    let old = good.replacen("\"version\": 2", "\"version\": 1", 1);
+    let old = good.replacen("\"version\": 3", "\"version\": 1", 1);
     let e = refusal(&old, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 1 }),
         "{e}"
     );
     assert!(e.to_string().contains("retrain"), "{e}");
+    // Version 2 (before the valve filter) still reads; a version-2 file naming a valve
+    // filter is refused (no version-2 writer made one).
+    let relabelled = good.replacen("\"version\": 3", "\"version\": 2", 1);
+    let e = refusal(&relabelled, 10_000_000);
+    assert!(e.to_string().contains("needs file version 3"), "{e}");
+    let mut v2: serde_json::Value = serde_json::from_str(good).unwrap();
+    v2["version"] = 2.into();
+    for sub in v2["model"]["submodels"].as_array_mut().unwrap() {
+        sub["features"].as_object_mut().unwrap().remove("valve");
+    }
+    let v2 = ModelFile::parse(&v2.to_string()).expect("a version-2 file reads");
+    assert!(v2
+        .model
+        .submodels
+        .iter()
+        .all(|s| s.features.valve.is_none()));
 
     // Phase indicators in a MIMO submodel are refused (they are per-engine features).
     let mimo = good.find("\"layout\": \"mimo\"").expect("a mimo submodel");

@@ -163,6 +163,23 @@ pub fn output_std(data: &Dataset) -> [f64; STATE_DIM] {
     })
 }
 
+/// History lengths searched for a variant: the `[cv]` range, capped for the shared-engine
+/// variant by `engine_history_max` (its step cost grows with `n`; the paper variant
+/// always searches the whole range, as the paper does).
+pub fn history_range(
+    variant: Variant,
+    cv: &CvConfig,
+    vcfg: &VariantConfig,
+) -> std::ops::RangeInclusive<usize> {
+    let hi = match variant {
+        Variant::SharedEngine if vcfg.engine_history_max > 0 => {
+            cv.history_max.min(vcfg.engine_history_max)
+        }
+        _ => cv.history_max,
+    };
+    cv.history_min..=hi
+}
+
 /// Runs the grid for one variant. `tick` is called once per (n, fold) done.
 pub fn cross_validate(
     variant: Variant,
@@ -174,7 +191,7 @@ pub fn cross_validate(
     let mus = cv.mus();
     let bounds = fold_bounds(data.len(), cv.folds);
     let ostd = output_std(data);
-    let per_n: Vec<Vec<GridPoint>> = (cv.history_min..=cv.history_max)
+    let per_n: Vec<Vec<GridPoint>> = history_range(variant, cv, vcfg)
         .into_par_iter()
         .map(|n| grid_for_n(variant, n, data, cv, vcfg, &mus, &bounds, &ostd, tick))
         .collect();

@@ -3,8 +3,8 @@
 
 use super::excitation::Excitation;
 use super::features::{
-    FeatureSpec, InputVec, StateVec, TrajectoryHistory, STATE_DIM, STATE_MF, STATE_MO, STATE_NAMES,
-    STATE_P,
+    FeatureSpec, InputVec, StateVec, TrajectoryHistory, ValveFilter, ValveState, STATE_DIM,
+    STATE_MF, STATE_MO, STATE_NAMES, STATE_P,
 };
 use crate::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
 use oils_shared::ENGINE_COUNT;
@@ -41,6 +41,12 @@ pub struct Dataset {
     pub inputs: Vec<InputVec>,
     /// State at the end of every step.
     pub states: Vec<StateVec>,
+    /// The valve filter tracked over the inputs (`with_valves`), if any.
+    pub valve_filter: Option<ValveFilter>,
+    /// Its state after every step (empty without a filter).
+    pub valves: Vec<ValveState>,
+    /// Its state before the first step.
+    pub valve_rest: ValveState,
 }
 
 impl Dataset {
@@ -58,6 +64,30 @@ impl Dataset {
             initial,
             inputs: ex.inputs.clone(),
             states,
+            valve_filter: None,
+            valves: Vec::new(),
+            valve_rest: ValveState::default(),
+        }
+    }
+
+    /// Tracks `filter` over the inputs, for features that read the valve
+    /// ([`FeatureSpec::valve`]); `None` clears the track.
+    pub fn with_valves(mut self, filter: Option<ValveFilter>) -> Self {
+        let dt_s = self.sample_time_ns as f64 * 1e-9;
+        self.valves = filter.map_or_else(Vec::new, |f| f.track(&self.inputs, dt_s));
+        self.valve_rest = filter.map_or_else(ValveState::default, |f| f.rest());
+        self.valve_filter = filter;
+        self
+    }
+
+    /// Panics unless the tracked valve filter is the one `spec` reads (a programming
+    /// error: training tracks the configured filter, which every spec gets).
+    pub fn assert_valves_for(&self, spec: &FeatureSpec) {
+        if spec.valve_features() > 0 {
+            assert_eq!(
+                spec.valve, self.valve_filter,
+                "the dataset tracks another valve filter than the features read"
+            );
         }
     }
 
@@ -77,6 +107,8 @@ impl Dataset {
             inputs: &self.inputs,
             states: &self.states,
             initial: &self.initial,
+            valves: &self.valves,
+            valve_rest: &self.valve_rest,
             t,
         }
     }
@@ -168,6 +200,7 @@ mod tests {
             stop_steps: 0,
             phase_degree: 0,
             command_sum: false,
+            valve: None,
         };
         d.export_csv(&dir, &spec).unwrap();
         let f = std::fs::read_to_string(dir.join("features_n2.csv")).unwrap();

@@ -9,6 +9,7 @@
 //! The paper's "current" gas pressure `P` is therefore `P[t-1]` and its history `P_h` is
 //! `P[t-2] .. P[t-n-1]`, which keeps the dimension at the paper's `11n+10`.
 
+use crate::propulsion::hifi::engine::{Tfcv, TfcvDynamics};
 use oils_shared::ENGINE_COUNT;
 use serde::{Deserialize, Serialize};
 
@@ -52,7 +53,7 @@ pub enum Layout {
 }
 
 /// Which features, for which history length.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct FeatureSpec {
     /// Layout of the vector.
     pub layout: Layout,
@@ -79,6 +80,112 @@ pub struct FeatureSpec {
     /// others draw; a per-engine model cannot see that otherwise.
     #[serde(default)]
     pub command_sum: bool,
+    /// Beyond the paper, per-engine layout only: the command passed through a model of
+    /// the throttle valve's actuator (lag, rate limit, backlash; [`ValveFilter`]),
+    /// `T_v[t]` and its history `T_v[t-1..t-n]`. hifi's thrust follows its valve, not
+    /// the command: small slow changes with the 15 ms lag, large steps at the rate limit,
+    /// reversals only once the backlash is taken up, and a polynomial of command
+    /// histories cannot be both at once. `None`: no such features (the paper's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub valve: Option<ValveFilter>,
+}
+
+/// A throttle valve actuator in newtons: the valve position, expressed as the thrust it
+/// stands for, follows `max(command, park_n)` through a first-order lag whose rate is
+/// limited, then through backlash. It is computed from the commands alone (the runtime
+/// has nothing else), the same way in training and in the loop. Parameters are the
+/// actuator's data-sheet figures (`emulator/config/train.toml`), not fitted.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ValveFilter {
+    /// Lag time constant, s.
+    pub time_constant_s: f64,
+    /// Rate limit, N/s of equivalent thrust (full stroke over the stroke time).
+    pub rate_n_per_s: f64,
+    /// Backlash width, N of equivalent thrust.
+    pub backlash_n: f64,
+    /// Where the valve parks with the engine off, and the least it is driven to when on
+    /// (the minimum throttle), N.
+    pub park_n: f64,
+}
+
+/// Per-engine state of the [`ValveFilter`]: actuator and valve, N.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ValveState {
+    /// Actuator position, N.
+    pub actuator_n: [f64; ENGINE_COUNT],
+    /// Valve position (what the thrust follows), N.
+    pub valve_n: [f64; ENGINE_COUNT],
+}
+
+impl ValveFilter {
+    /// Describes the first invalid parameter.
+    pub fn validate(&self) -> Result<(), String> {
+        let ok = |v: f64, zero_ok: bool| v.is_finite() && (v > 0.0 || (zero_ok && v == 0.0));
+        if !ok(self.time_constant_s, false) || !ok(self.rate_n_per_s, false) {
+            return Err("valve time_constant_s and rate_n_per_s must be positive".into());
+        }
+        if !ok(self.backlash_n, true) || !ok(self.park_n, true) {
+            return Err("valve backlash_n and park_n must be finite and not negative".into());
+        }
+        Ok(())
+    }
+
+    /// At rest: every valve parked (how the reference model starts).
+    pub fn rest(&self) -> ValveState {
+        ValveState {
+            actuator_n: [self.park_n; ENGINE_COUNT],
+            valve_n: [self.park_n; ENGINE_COUNT],
+        }
+    }
+
+    /// Advances `s` over one step of `dt_s` with `input` held. The actuator solution is
+    /// exact for a held target (the same element as hifi's TFCV, in newtons:
+    /// [`crate::propulsion::hifi::engine::Tfcv::advance`]); no quantisation.
+    #[inline]
+    pub fn advance(&self, s: &mut ValveState, input: &InputVec, dt_s: f64) {
+        self.advance_with(s, input, dt_s, self.decay(dt_s));
+    }
+
+    /// The lag's decay over a step of `dt_s`, `exp(-dt_s / tau)`.
+    pub fn decay(&self, dt_s: f64) -> f64 {
+        (-dt_s / self.time_constant_s).exp()
+    }
+
+    /// [`ValveFilter::advance`] with the step's [`ValveFilter::decay`] computed once by
+    /// the caller (the runtime's step has no `exp` to spare).
+    #[inline]
+    pub fn advance_with(&self, s: &mut ValveState, input: &InputVec, dt_s: f64, decay: f64) {
+        let dynamics = TfcvDynamics {
+            tau_s: self.time_constant_s,
+            rate_per_s: self.rate_n_per_s,
+            half_backlash: 0.5 * self.backlash_n,
+            quantum: 0.0,
+        };
+        for e in 0..ENGINE_COUNT {
+            let mut v = Tfcv {
+                target: input[e].max(self.park_n),
+                actuator: s.actuator_n[e],
+                valve: s.valve_n[e],
+            };
+            v.advance(dt_s, &dynamics, decay);
+            s.actuator_n[e] = v.actuator;
+            s.valve_n[e] = v.valve;
+        }
+    }
+
+    /// The state after every step of `inputs`, from rest.
+    pub fn track(&self, inputs: &[InputVec], dt_s: f64) -> Vec<ValveState> {
+        let mut s = self.rest();
+        let decay = self.decay(dt_s);
+        inputs
+            .iter()
+            .map(|u| {
+                self.advance_with(&mut s, u, dt_s, decay);
+                s
+            })
+            .collect()
+    }
 }
 
 /// Sum of the four commands of one step (off engines are commanded 0), in engine order.
@@ -129,6 +236,11 @@ pub enum Source {
         /// Add the engine index to `comp`.
         per_engine: bool,
     },
+    /// The valve-filtered command of the engine after step `t - lag` ([`ValveFilter`]).
+    Valve {
+        /// Steps back (0: after the step being predicted).
+        lag: usize,
+    },
     /// The guarded lambda at `t-1`.
     Lambda,
     /// The sum of the four commands at `t` ([`command_sum_of`]).
@@ -145,7 +257,7 @@ impl Source {
         match *self {
             Source::Input { per_engine, .. } | Source::State { per_engine, .. } => per_engine,
             Source::Lambda | Source::CommandSum => false,
-            Source::Start(_) | Source::Stop(_) => true,
+            Source::Start(_) | Source::Stop(_) | Source::Valve { .. } => true,
         }
     }
 
@@ -168,6 +280,7 @@ impl Source {
                 lambda_of(s[STATE_MF], s[STATE_MO])
             }
             Source::CommandSum => command_sum_of(h.input(0)),
+            Source::Valve { lag } => h.valve(lag).valve_n[engine],
             Source::Start(k) => indicator(phase_age(h, engine, true, k + 1) == Some(k)),
             Source::Stop(k) => indicator(phase_age(h, engine, false, k + 1) == Some(k)),
         }
@@ -197,6 +310,9 @@ pub trait History {
     fn input(&self, lag: usize) -> &InputVec;
     /// State at the end of step `t - lag` (lag >= 1).
     fn state(&self, lag: usize) -> &StateVec;
+    /// Valve filter state after step `t - lag` (lag 0: after the step being predicted,
+    /// a function of the commands only). Only read by specs with [`FeatureSpec::valve`].
+    fn valve(&self, lag: usize) -> &ValveState;
 }
 
 impl FeatureSpec {
@@ -219,7 +335,16 @@ impl FeatureSpec {
 
     /// Number of per-engine physics features (command sum and phase indicators).
     fn physics_features(&self) -> usize {
-        usize::from(self.command_sum) + self.phase_features()
+        self.valve_features() + usize::from(self.command_sum) + self.phase_features()
+    }
+
+    /// Number of valve features (`T_v[t]` and its history), 0 without a valve filter.
+    pub fn valve_features(&self) -> usize {
+        if self.valve.is_some() && self.layout == Layout::PerEngine {
+            self.history + 1
+        } else {
+            0
+        }
     }
 
     /// Number of features.
@@ -281,6 +406,9 @@ impl FeatureSpec {
             v.push(format!("lambda{}", lag(1)));
         }
         if self.layout == Layout::PerEngine {
+            for k in 0..self.valve_features() {
+                v.push(format!("T_v{}", lag(k)));
+            }
             if self.command_sum {
                 v.push(format!("T_rsum{}", lag(0)));
             }
@@ -342,6 +470,7 @@ impl FeatureSpec {
             v.push(Source::Lambda);
         }
         if per {
+            v.extend((0..self.valve_features()).map(|lag| Source::Valve { lag }));
             if self.command_sum {
                 v.push(Source::CommandSum);
             }
@@ -425,6 +554,9 @@ impl FeatureSpec {
             let s = h.state(1);
             put(lambda_of(s[STATE_MF], s[STATE_MO]));
         }
+        for k in 0..self.valve_features() {
+            put(h.valve(k).valve_n[engine]);
+        }
         if self.layout == Layout::PerEngine && self.command_sum {
             put(command_sum_of(h.input(0)));
         }
@@ -451,6 +583,10 @@ pub struct TrajectoryHistory<'a> {
     pub states: &'a [StateVec],
     /// State before the first step.
     pub initial: &'a StateVec,
+    /// Valve filter state after every step (empty when no feature reads it).
+    pub valves: &'a [ValveState],
+    /// Valve filter state before the first step.
+    pub valve_rest: &'a ValveState,
     /// The step being predicted.
     pub t: usize,
 }
@@ -465,6 +601,11 @@ impl History for TrajectoryHistory<'_> {
         self.t
             .checked_sub(lag)
             .map_or(self.initial, |k| &self.states[k])
+    }
+    fn valve(&self, lag: usize) -> &ValveState {
+        self.t
+            .checked_sub(lag)
+            .map_or(self.valve_rest, |k| &self.valves[k])
     }
 }
 
@@ -483,6 +624,7 @@ mod tests {
                 stop_steps: 0,
                 phase_degree: 0,
                 command_sum: false,
+                valve: None,
             };
             assert_eq!(s.dim(), 11 * n + 10);
             assert_eq!(s.names().len(), 11 * n + 10);
@@ -504,12 +646,15 @@ mod tests {
             stop_steps: 0,
             phase_degree: 0,
             command_sum: false,
+            valve: None,
         };
         let mut out = vec![0.0; spec.dim()];
         let h = TrajectoryHistory {
             inputs: &inputs,
             states: &states,
             initial: &initial,
+            valves: &[],
+            valve_rest: &ValveState::default(),
             t: 5,
         };
         spec.fill(&h, 0, &mut out);
@@ -548,12 +693,15 @@ mod tests {
             stop_steps: 0,
             phase_degree: 0,
             command_sum: false,
+            valve: None,
         };
         let mut out = vec![0.0; spec.dim()];
         let h = TrajectoryHistory {
             inputs: &inputs,
             states: &states,
             initial: &[0.0; STATE_DIM],
+            valves: &[],
+            valve_rest: &ValveState::default(),
             t: 3,
         };
         spec.fill(&h, 2, &mut out);
@@ -608,6 +756,7 @@ pub(crate) mod source_tests {
                 stop_steps: 0,
                 phase_degree: 0,
                 command_sum: false,
+                valve: None,
             },
             FeatureSpec {
                 layout: Layout::PerEngine,
@@ -617,8 +766,11 @@ pub(crate) mod source_tests {
                 stop_steps: 4,
                 phase_degree: 0,
                 command_sum: true,
+                valve: Some(crate::surrogate::model::tests::TEST_VALVE),
             },
         ] {
+            let valve_rest = spec.valve.map_or_else(ValveState::default, |f| f.rest());
+            let valves = spec.valve.map_or_else(Vec::new, |f| f.track(&inputs, 0.01));
             let sources = spec.sources();
             assert_eq!(sources.len(), spec.dim());
             let mut out = vec![0.0; spec.dim()];
@@ -628,6 +780,8 @@ pub(crate) mod source_tests {
                     inputs: &inputs,
                     states: &states,
                     initial: &initial,
+                    valves: &valves,
+                    valve_rest: &valve_rest,
                     t,
                 };
                 for e in 0..ENGINE_COUNT {
@@ -645,6 +799,75 @@ pub(crate) mod source_tests {
         }
     }
 
+    /// The valve filter: parked when off, a large step at the rate limit, a small one
+    /// with the lag, a reversal only after the backlash.
+    #[test]
+    fn valve_filter_rate_limit_lag_and_backlash() {
+        let f = ValveFilter {
+            time_constant_s: 0.015,
+            rate_n_per_s: 6000.0,
+            backlash_n: 4.0,
+            park_n: 320.0,
+        };
+        let cmd = |c: f64, on: bool| {
+            let mut u = [0.0; INPUT_DIM];
+            u[0] = c;
+            u[ENGINE_COUNT] = f64::from(u8::from(on));
+            u
+        };
+        let mut s = f.rest();
+        f.advance(&mut s, &cmd(0.0, false), 0.01);
+        assert_eq!(s.valve_n[0], 320.0, "off: parked at the minimum");
+        // 320 -> 800 N: 480 N at 6000 N/s is rate-limited for the first 10 ms step.
+        f.advance(&mut s, &cmd(800.0, true), 0.01);
+        assert!((s.actuator_n[0] - 380.0).abs() < 1e-9, "{s:?}");
+        assert!(
+            (s.valve_n[0] - 378.0).abs() < 1e-9,
+            "the valve trails by half the backlash"
+        );
+        for _ in 0..40 {
+            f.advance(&mut s, &cmd(800.0, true), 0.01);
+        }
+        assert!((s.actuator_n[0] - 800.0).abs() < 1e-6);
+        // A small step (10 N, inside rate x lag = 90 N): first order, 1 - e^(-10/15).
+        let a0 = s.actuator_n[0];
+        f.advance(&mut s, &cmd(790.0, true), 0.01);
+        let want = 790.0 + (a0 - 790.0) * (-0.01f64 / 0.015).exp();
+        assert!((s.actuator_n[0] - want).abs() < 1e-9);
+        // Moving up, the valve trails the actuator by half the backlash; a reversal by
+        // less than the backlash moves the actuator, not the valve.
+        let mut r = f.rest();
+        r.actuator_n[0] = 600.0;
+        r.valve_n[0] = 598.0;
+        f.advance(&mut r, &cmd(597.0, true), 0.01);
+        assert!(r.actuator_n[0] > 597.0 && r.actuator_n[0] < 599.0);
+        assert_eq!(r.valve_n[0], 598.0);
+        // Continuing up instead pushes the valve along.
+        let mut r = ValveState {
+            actuator_n: [600.0; 4],
+            valve_n: [598.0; 4],
+        };
+        f.advance(&mut r, &cmd(603.0, true), 0.01);
+        assert!((r.valve_n[0] - (r.actuator_n[0] - 2.0)).abs() < 1e-12);
+        // Commands below the park value are raised to it.
+        let mut q = f.rest();
+        f.advance(&mut q, &cmd(100.0, true), 0.01);
+        assert_eq!(q.actuator_n[0], 320.0);
+        assert!(f.validate().is_ok());
+        assert!(ValveFilter {
+            time_constant_s: 0.0,
+            ..f
+        }
+        .validate()
+        .is_err());
+        assert!(ValveFilter {
+            backlash_n: f64::NAN,
+            ..f
+        }
+        .validate()
+        .is_err());
+    }
+
     #[test]
     fn phase_age_counts_steps_since_the_switch() {
         // Engine 0: off for 2 steps, on for 5, off again.
@@ -656,10 +879,13 @@ pub(crate) mod source_tests {
             })
             .collect();
         let states = vec![[0.0; STATE_DIM]; 9];
+        let rest = ValveState::default();
         let h = |t| TrajectoryHistory {
             inputs: &inputs,
             states: &states,
             initial: &[0.0; STATE_DIM],
+            valves: &[],
+            valve_rest: &rest,
             t,
         };
         assert_eq!(phase_age(&h(2), 0, true, 10), Some(0));

@@ -3,7 +3,7 @@
 //! into [`Submodel`]s.
 
 use super::dataset::Dataset;
-use super::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
+use super::features::{FeatureSpec, Layout, ValveFilter, STATE_DIM, STATE_NAMES};
 use super::lasso::{lasso_gram, GramStats, LassoSettings, Standardised};
 use super::library::Library;
 use super::model::{active_terms_of, Model, OutputRow, Submodel, Target};
@@ -61,6 +61,14 @@ pub struct VariantConfig {
     /// rows are smooth functions of the thrusts, and a larger penalty drops terms the
     /// step would otherwise pay for (see docs/surrogate.md, "Cost").
     pub system_mu_scale: f64,
+    /// Beyond the paper: give the per-engine thrust model the command passed through a
+    /// model of the throttle valve's actuator (`T_v`, see [`FeatureSpec::valve`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub engine_valve: Option<ValveFilter>,
+    /// Largest history length the shared-engine variant's cross-validation tries (0: the
+    /// `[cv]` range). The step's cost grows with `n`, while the score barely moves past
+    /// 2 (docs/surrogate.md, "Cost").
+    pub engine_history_max: usize,
 }
 
 impl Default for VariantConfig {
@@ -75,6 +83,8 @@ impl Default for VariantConfig {
             engine_phase_degree: 0,
             engine_command_sum: false,
             system_mu_scale: 1.0,
+            engine_valve: None,
+            engine_history_max: 0,
         }
     }
 }
@@ -124,6 +134,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                 stop_steps: 0,
                 phase_degree: 0,
                 command_sum: false,
+                valve: None,
             },
             degree: cfg.paper_degree,
             target: Target::Absolute,
@@ -140,6 +151,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                     stop_steps: cfg.engine_stop_steps,
                     phase_degree: cfg.engine_phase_degree,
                     command_sum: cfg.engine_command_sum,
+                    valve: cfg.engine_valve,
                 },
                 degree: cfg.engine_degree,
                 target: Target::Increment,
@@ -155,6 +167,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                     stop_steps: 0,
                     phase_degree: 0,
                     command_sum: false,
+                    valve: None,
                 },
                 degree: cfg.system_degree,
                 target: Target::Increment,
@@ -192,6 +205,7 @@ impl Prepared {
     /// Scans the dataset once for scaling and envelope.
     pub fn new(spec: SubSpec, data: &Dataset) -> Self {
         let fs = spec.features;
+        data.assert_valves_for(&fs);
         let dim = fs.dim();
         let library = Library::new(dim, spec.degree, &fs.roles(), fs.phase_degree);
         let mut sum = vec![0.0; dim];

@@ -210,6 +210,7 @@ mod tests {
             stop_steps: 1,
             phase_degree: 3,
             command_sum: true,
+            valve: None,
         };
         let names = spec.names();
         let lib = Library::new(spec.dim(), 2, &spec.roles(), spec.phase_degree);

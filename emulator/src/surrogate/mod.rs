@@ -120,6 +120,16 @@ impl TrainConfig {
                 v.system_mu_scale
             )));
         }
+        if v.engine_history_max != 0 && v.engine_history_max < self.cv.history_min {
+            return Err(e(format!(
+                "variants.engine_history_max = {}: must be 0 (the [cv] range) or at least cv.history_min",
+                v.engine_history_max
+            )));
+        }
+        if let Some(f) = &v.engine_valve {
+            f.validate()
+                .map_err(|m| e(format!("variants.engine_valve: {m}")))?;
+        }
         if v.engine_phase_degree > library::MAX_DEGREE {
             return Err(e(format!(
                 "variants.engine_phase_degree = {}: must be 0..=3",
@@ -280,13 +290,14 @@ pub fn train(
     let excitation = cfg.excitation.generate(cfg.sample_time_ns);
     let mut model = reference();
     progress.begin("data", excitation.inputs.len() as u64);
-    let dataset = Dataset::record(model.as_mut(), &excitation, || progress.tick());
+    let dataset = Dataset::record(model.as_mut(), &excitation, || progress.tick())
+        .with_valves(cfg.variants.engine_valve);
     progress.finish();
     let initial_output = model_file::ReferenceOutput::of(&reference().output());
     let mut results = Vec::new();
     let mut models = Vec::new();
     for &variant in &cfg.train_variants {
-        let span = (cfg.cv.history_max - cfg.cv.history_min + 1) * cfg.cv.folds;
+        let span = cv::history_range(variant, &cfg.cv, &cfg.variants).count() * cfg.cv.folds;
         progress.begin(&format!("cv {}", variant.as_str()), span as u64);
         let res = cross_validate(variant, &dataset, &cfg.cv, &cfg.variants, &|| {
             progress.tick()

@@ -3,8 +3,8 @@
 //! model is chosen on exactly the behaviour it has in the loop.
 
 use super::features::{
-    command_sum_of, lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec, INPUT_DIM,
-    STATE_DIM, STATE_MF, STATE_MO, STATE_P,
+    command_sum_of, lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec,
+    ValveFilter, ValveState, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO, STATE_P,
 };
 use super::library::{term_name, Term, MAX_DEGREE};
 use oils_shared::ENGINE_COUNT;
@@ -144,6 +144,13 @@ impl Model {
             }
             if s.features.layout == Layout::Mimo && s.features.phase_features() > 0 {
                 return Err(ctx("phase indicators are per-engine features only"));
+            }
+            if let Some(f) = &s.features.valve {
+                f.validate().map_err(|m| ctx(&m))?;
+                let other = self.submodels.iter().filter_map(|o| o.features.valve);
+                if other.into_iter().any(|o| o != *f) {
+                    return Err(ctx("every submodel must read the same valve filter"));
+                }
             }
             for (name, v) in [
                 ("feature_names", s.feature_names.len()),
@@ -503,10 +510,12 @@ struct Phases {
     cap: usize,
 }
 
-/// Components of a ring record: the step's inputs and its command sum, then the state at
-/// its end and lambda of that state (each computed once when stored, not per read).
+/// Components of a ring record: the step's inputs, its command sum and the four
+/// valve-filtered commands after it, then the state at its end and lambda of that state
+/// (each computed once when stored, not per read).
 const REC_SUM: usize = INPUT_DIM;
-const REC_STATE: usize = INPUT_DIM + 1;
+const REC_VALVE: usize = INPUT_DIM + 1;
+const REC_STATE: usize = REC_VALVE + ENGINE_COUNT;
 const REC_LAMBDA: usize = REC_STATE + STATE_DIM;
 const REC_DIM: usize = REC_LAMBDA + 1;
 
@@ -564,6 +573,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
                     .push((j, read(j, lag, REC_STATE + comp))),
                 Source::Lambda => shared.push((j, read(j, 1, REC_LAMBDA))),
                 Source::CommandSum => shared.push((j, read(j, 0, REC_SUM))),
+                Source::Valve { lag } => lanes.push((j, read(j, lag, REC_VALVE))),
                 Source::Start(_) | Source::Stop(_) => phase_js.push(j),
             }
         }
@@ -820,6 +830,10 @@ impl Ring {
         self.write(i, REC_STATE, &v);
     }
 
+    fn set_valve(&mut self, i: usize, valve_n: &[f64; ENGINE_COUNT]) {
+        self.write(i, REC_VALVE, valve_n);
+    }
+
     fn set_input(&mut self, i: usize, u: &InputVec) {
         let mut v = [0.0; INPUT_DIM + 1];
         v[..INPUT_DIM].copy_from_slice(u);
@@ -853,6 +867,11 @@ pub struct Predictor {
     per_engine: Vec<CompiledSub<ENGINE_COUNT>>,
     ring: Ring,
     phases: Phases,
+    /// The valve filter some submodel reads and its state after the latest step.
+    valve: Option<(ValveFilter, ValveState)>,
+    /// Sample time, s, and the valve lag's decay over it.
+    valve_dt_s: f64,
+    valve_decay: f64,
     out_of_envelope_steps: u64,
     /// Step with the AVX2 build of the same code (x86-64 CPUs that have it).
     avx2: bool,
@@ -896,9 +915,20 @@ impl Predictor {
                 run: [cap + 1; ENGINE_COUNT],
                 cap,
             },
+            valve: model
+                .submodels
+                .iter()
+                .filter(|s| s.features.valve_features() > 0)
+                .find_map(|s| s.features.valve)
+                .map(|f| (f, f.rest())),
+            valve_dt_s: model.sample_time_ns as f64 * 1e-9,
+            valve_decay: 0.0,
             out_of_envelope_steps: 0,
             avx2: cfg!(target_arch = "x86_64") && avx2_detected(),
         };
+        if let Some((f, _)) = &p.valve {
+            p.valve_decay = f.decay(p.valve_dt_s);
+        }
         p.reset_to(&model.initial_state);
         p
     }
@@ -906,8 +936,13 @@ impl Predictor {
     /// Restarts from a state at rest: engines off for all of the history, every past
     /// state equal to `state` (how the reference model is started).
     pub fn reset_to(&mut self, state: &StateVec) {
+        let rest = self.valve.as_mut().map_or(ValveState::default(), |(f, v)| {
+            *v = f.rest();
+            *v
+        });
         for i in 0..self.ring.depth {
             self.ring.set_input(i, &[0.0; INPUT_DIM]);
+            self.ring.set_valve(i, &rest.valve_n);
             self.ring.set_state(i, state);
         }
         self.ring.head = 0;
@@ -924,7 +959,13 @@ impl Predictor {
         for lag in 1..self.ring.depth {
             let i = self.ring.index(lag);
             self.ring.set_input(i, h.input(lag));
+            if self.valve.is_some() {
+                self.ring.set_valve(i, &h.valve(lag).valve_n);
+            }
             self.ring.set_state(i, h.state(lag));
+        }
+        if let Some((_, v)) = &mut self.valve {
+            *v = *h.valve(1);
         }
         // One slot back, so the next step() advances onto slot 0.
         self.ring.head = self.ring.depth - 1;
@@ -996,6 +1037,10 @@ impl Predictor {
         // The model sees the commands after the on-range clamp above. The record's state
         // is still an old one; it is never read (state lags start at 1).
         self.ring.set_input(head, &u);
+        if let Some((f, v)) = &mut self.valve {
+            f.advance_with(v, &u, self.valve_dt_s, self.valve_decay);
+            self.ring.set_valve(head, &v.valve_n);
+        }
         let mut next = prev;
         let window = self.ring.window();
         for sub in &mut self.per_engine {
@@ -1025,10 +1070,27 @@ impl Predictor {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::surrogate::features::TrajectoryHistory;
     use crate::surrogate::library::Library;
+
+    /// A valve filter for the test models (hifi's TFCV figures in newtons).
+    pub(crate) const TEST_VALVE: ValveFilter = ValveFilter {
+        time_constant_s: 0.015,
+        rate_n_per_s: 6000.0,
+        backlash_n: 4.7,
+        park_n: 320.0,
+    };
+
+    /// The valve track of `inputs` for `model` (empty when no submodel reads it).
+    fn valves_of(model: &Model, inputs: &[InputVec]) -> (Vec<ValveState>, ValveState) {
+        let dt_s = model.sample_time_ns as f64 * 1e-9;
+        match model.submodels.iter().find_map(|s| s.features.valve) {
+            Some(f) => (f.track(inputs, dt_s), f.rest()),
+            None => (Vec::new(), ValveState::default()),
+        }
+    }
 
     /// A model with every library term active (pseudo-random coefficients), so every
     /// feature, phase indicator and term degree is exercised. With `mimo_degree` 1 the
@@ -1051,6 +1113,7 @@ mod tests {
                     stop_steps: 3,
                     phase_degree: 0,
                     command_sum: true,
+                    valve: Some(TEST_VALVE),
                 },
                 3,
                 (0..ENGINE_COUNT).collect::<Vec<_>>(),
@@ -1064,6 +1127,7 @@ mod tests {
                     stop_steps: 0,
                     phase_degree: 0,
                     command_sum: false,
+                    valve: None,
                 },
                 mimo_degree,
                 (ENGINE_COUNT..STATE_DIM).collect(),
@@ -1161,6 +1225,7 @@ mod tests {
     /// and including step `t` (as the model sees them), `states` up to step `t - 1`.
     fn full_step(model: &Model, inputs: &[InputVec], states: &[StateVec], t: usize) -> StateVec {
         let prev = states[..t].last().copied().unwrap_or(model.initial_state);
+        let (valves, valve_rest) = valves_of(model, &inputs[..=t]);
         let mut want = prev;
         for s in &model.submodels {
             let dim = s.features.dim();
@@ -1170,6 +1235,8 @@ mod tests {
                     inputs,
                     states,
                     initial: &model.initial_state,
+                    valves: &valves,
+                    valve_rest: &valve_rest,
                     t,
                 };
                 s.features.fill(&h, e, &mut x[..dim]);
@@ -1209,12 +1276,15 @@ mod tests {
             }
             let (inputs, states) =
                 crate::surrogate::features::source_tests::switching_trajectory(60);
+            let (valves, valve_rest) = valves_of(&model, &inputs);
             let mut p = Predictor::new(&model);
             for t in 4..inputs.len() {
                 p.seed_history(&TrajectoryHistory {
                     inputs: &inputs,
                     states: &states,
                     initial: &model.initial_state,
+                    valves: &valves,
+                    valve_rest: &valve_rest,
                     t,
                 });
                 let got = p.step(&inputs[t]);
@@ -1258,10 +1328,13 @@ mod tests {
         // Seeding from the recorded history mid-run continues identically.
         let mut q = Predictor::new(model);
         let t0 = 77;
+        let (valves, valve_rest) = valves_of(model, &inputs);
         q.seed_history(&TrajectoryHistory {
             inputs: &inputs,
             states: &states,
             initial: &model.initial_state,
+            valves: &valves,
+            valve_rest: &valve_rest,
             t: t0,
         });
         for t in t0..cmds.len() {

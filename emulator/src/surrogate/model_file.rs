@@ -18,8 +18,13 @@ pub const FORMAT: &str = "oils-surrogate";
 /// Current file version; bump on any change of meaning. Version 2 added the per-engine
 /// physics features (`start_steps`, `stop_steps`, `phase_degree`, `command_sum` in a
 /// feature spec): a version-1 reader would ignore them and misread the model, so it must
-/// refuse such files, and this reader refuses version-1 files (retrain them).
-pub const VERSION: u32 = 2;
+/// refuse such files, and this reader refuses version-1 files (retrain them). Version 3
+/// added the valve-filtered command (`valve` in a feature spec); a version-2 file has none
+/// and reads unchanged, so both are read, and a version-2 file that names a valve filter
+/// is refused (no version-2 writer made one).
+pub const VERSION: u32 = 3;
+/// Oldest version this build reads.
+pub const OLDEST_VERSION: u32 = 2;
 
 /// Where a model came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -119,7 +124,7 @@ pub enum ModelFileError {
     #[error("not a surrogate model file (format `{0}`, expected `{FORMAT}`)")]
     WrongFormat(String),
     /// A version this build cannot read.
-    #[error("surrogate model file version {found} is not supported (this build reads {VERSION}); retrain with `oils train`")]
+    #[error("surrogate model file version {found} is not supported (this build reads {OLDEST_VERSION} to {VERSION}); retrain with `oils train`")]
     WrongVersion {
         /// Version in the file.
         found: u32,
@@ -185,13 +190,24 @@ impl ModelFile {
             return Err(ModelFileError::WrongFormat(format.to_string()));
         }
         let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
-        if version != u64::from(VERSION) {
+        if !(u64::from(OLDEST_VERSION)..=u64::from(VERSION)).contains(&version) {
             return Err(ModelFileError::WrongVersion {
                 found: u32::try_from(version).unwrap_or(u32::MAX),
             });
         }
         let file: Self = serde_json::from_value(value).map_err(|e| json_error(e, text))?;
         file.model.check().map_err(ModelFileError::Invalid)?;
+        if version < 3
+            && file
+                .model
+                .submodels
+                .iter()
+                .any(|s| s.features.valve.is_some())
+        {
+            return Err(ModelFileError::Invalid(
+                "a valve filter needs file version 3".into(),
+            ));
+        }
         if file.model.sample_time_ns == 0 {
             return Err(ModelFileError::Invalid("sample_time_ns is 0".into()));
         }
