@@ -93,17 +93,21 @@ fn bad_model_files_are_refused_clearly() {
     let relabelled = good.replacen("\"version\": 3", "\"version\": 2", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 3"), "{e}");
-    let mut v2: serde_json::Value = serde_json::from_str(good).unwrap();
-    v2["version"] = 2.into();
-    for sub in v2["model"]["submodels"].as_array_mut().unwrap() {
-        sub["features"].as_object_mut().unwrap().remove("valve");
-    }
-    let v2 = ModelFile::parse(&v2.to_string()).expect("a version-2 file reads");
+    // The default model before the valve filter, as committed then.
+    let v2 = ModelFile::parse(include_str!("data/surrogate-v2.json")).expect("version 2 reads");
     assert!(v2
         .model
         .submodels
         .iter()
         .all(|s| s.features.valve.is_none()));
+    // Taking the valve filter out of a model that reads it leaves features it cannot
+    // have: refused, not misread.
+    let mut stripped: serde_json::Value = serde_json::from_str(good).unwrap();
+    for sub in stripped["model"]["submodels"].as_array_mut().unwrap() {
+        sub["features"].as_object_mut().unwrap().remove("valve");
+    }
+    let e = refusal(&stripped.to_string(), 10_000_000);
+    assert!(e.to_string().contains("feature_names has"), "{e}");
 
     // Phase indicators in a MIMO submodel are refused (they are per-engine features).
     let mimo = good.find("\"layout\": \"mimo\"").expect("a mimo submodel");
