@@ -45,8 +45,6 @@ pub struct Dataset {
     pub valve_filter: Option<ValveFilter>,
     /// Its state after every step (empty without a filter).
     pub valves: Vec<ValveState>,
-    /// Its state before the first step.
-    pub valve_rest: ValveState,
 }
 
 impl Dataset {
@@ -66,7 +64,6 @@ impl Dataset {
             states,
             valve_filter: None,
             valves: Vec::new(),
-            valve_rest: ValveState::default(),
         }
     }
 
@@ -75,7 +72,6 @@ impl Dataset {
     pub fn with_valves(mut self, filter: Option<ValveFilter>) -> Self {
         let dt_s = self.sample_time_ns as f64 * 1e-9;
         self.valves = filter.map_or_else(Vec::new, |f| f.track(&self.inputs, dt_s));
-        self.valve_rest = filter.map_or_else(ValveState::default, |f| f.rest());
         self.valve_filter = filter;
         self
     }
@@ -108,7 +104,9 @@ impl Dataset {
             states: &self.states,
             initial: &self.initial,
             valves: &self.valves,
-            valve_rest: &self.valve_rest,
+            valve_rest: self
+                .valve_filter
+                .map_or_else(ValveState::default, |f| f.rest()),
             t,
         }
     }

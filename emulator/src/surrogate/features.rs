@@ -139,52 +139,65 @@ impl ValveFilter {
         }
     }
 
-    /// Advances `s` over one step of `dt_s` with `input` held. The actuator solution is
-    /// exact for a held target (the same element as hifi's TFCV, in newtons:
-    /// [`crate::propulsion::hifi::engine::Tfcv::advance`]); no quantisation.
-    #[inline]
-    pub fn advance(&self, s: &mut ValveState, input: &InputVec, dt_s: f64) {
-        self.advance_with(s, input, dt_s, self.decay(dt_s));
+    /// The state after every step of `inputs`, from rest.
+    pub fn track(&self, inputs: &[InputVec], dt_s: f64) -> Vec<ValveState> {
+        let mut v = ValveTrack::new(*self, dt_s);
+        inputs.iter().map(|u| *v.advance(u)).collect()
     }
+}
 
-    /// The lag's decay over a step of `dt_s`, `exp(-dt_s / tau)`.
-    pub fn decay(&self, dt_s: f64) -> f64 {
-        (-dt_s / self.time_constant_s).exp()
-    }
+/// A [`ValveFilter`] stepping at a fixed sample time, and its state: what training's
+/// [`ValveFilter::track`] and the runtime's step both advance, so the two compute the
+/// same bits. The lag's decay is computed once, not per step.
+#[derive(Debug, Clone, Copy)]
+pub struct ValveTrack {
+    filter: ValveFilter,
+    dynamics: TfcvDynamics,
+    dt_s: f64,
+    decay: f64,
+    /// State after the latest step.
+    pub state: ValveState,
+}
 
-    /// [`ValveFilter::advance`] with the step's [`ValveFilter::decay`] computed once by
-    /// the caller (the runtime's step has no `exp` to spare).
-    #[inline]
-    pub fn advance_with(&self, s: &mut ValveState, input: &InputVec, dt_s: f64, decay: f64) {
-        let dynamics = TfcvDynamics {
-            tau_s: self.time_constant_s,
-            rate_per_s: self.rate_n_per_s,
-            half_backlash: 0.5 * self.backlash_n,
-            quantum: 0.0,
-        };
-        for e in 0..ENGINE_COUNT {
-            let mut v = Tfcv {
-                target: input[e].max(self.park_n),
-                actuator: s.actuator_n[e],
-                valve: s.valve_n[e],
-            };
-            v.advance(dt_s, &dynamics, decay);
-            s.actuator_n[e] = v.actuator;
-            s.valve_n[e] = v.valve;
+impl ValveTrack {
+    /// At rest, stepping by `dt_s`.
+    pub fn new(filter: ValveFilter, dt_s: f64) -> Self {
+        Self {
+            filter,
+            dynamics: TfcvDynamics {
+                tau_s: filter.time_constant_s,
+                rate_per_s: filter.rate_n_per_s,
+                half_backlash: 0.5 * filter.backlash_n,
+                quantum: 0.0,
+            },
+            dt_s,
+            decay: (-dt_s / filter.time_constant_s).exp(),
+            state: filter.rest(),
         }
     }
 
-    /// The state after every step of `inputs`, from rest.
-    pub fn track(&self, inputs: &[InputVec], dt_s: f64) -> Vec<ValveState> {
-        let mut s = self.rest();
-        let decay = self.decay(dt_s);
-        inputs
-            .iter()
-            .map(|u| {
-                self.advance_with(&mut s, u, dt_s, decay);
-                s
-            })
-            .collect()
+    /// Back to rest.
+    pub fn reset(&mut self) {
+        self.state = self.filter.rest();
+    }
+
+    /// Advances one step with `input` held. The actuator solution is exact for a held
+    /// target: the same element as hifi's TFCV ([`Tfcv::advance`]), in newtons, without
+    /// quantisation.
+    #[inline]
+    pub fn advance(&mut self, input: &InputVec) -> &ValveState {
+        let s = &mut self.state;
+        for e in 0..ENGINE_COUNT {
+            let mut v = Tfcv {
+                target: input[e].max(self.filter.park_n),
+                actuator: s.actuator_n[e],
+                valve: s.valve_n[e],
+            };
+            v.advance(self.dt_s, &self.dynamics, self.decay);
+            s.actuator_n[e] = v.actuator;
+            s.valve_n[e] = v.valve;
+        }
+        s
     }
 }
 
@@ -333,7 +346,7 @@ impl FeatureSpec {
         self.start_steps + self.stop_steps
     }
 
-    /// Number of per-engine physics features (command sum and phase indicators).
+    /// Number of per-engine physics features (valve, command sum, phase indicators).
     fn physics_features(&self) -> usize {
         self.valve_features() + usize::from(self.command_sum) + self.phase_features()
     }
@@ -586,7 +599,7 @@ pub struct TrajectoryHistory<'a> {
     /// Valve filter state after every step (empty when no feature reads it).
     pub valves: &'a [ValveState],
     /// Valve filter state before the first step.
-    pub valve_rest: &'a ValveState,
+    pub valve_rest: ValveState,
     /// The step being predicted.
     pub t: usize,
 }
@@ -605,7 +618,7 @@ impl History for TrajectoryHistory<'_> {
     fn valve(&self, lag: usize) -> &ValveState {
         self.t
             .checked_sub(lag)
-            .map_or(self.valve_rest, |k| &self.valves[k])
+            .map_or(&self.valve_rest, |k| &self.valves[k])
     }
 }
 
@@ -654,7 +667,7 @@ mod tests {
             states: &states,
             initial: &initial,
             valves: &[],
-            valve_rest: &ValveState::default(),
+            valve_rest: ValveState::default(),
             t: 5,
         };
         spec.fill(&h, 0, &mut out);
@@ -701,7 +714,7 @@ mod tests {
             states: &states,
             initial: &[0.0; STATE_DIM],
             valves: &[],
-            valve_rest: &ValveState::default(),
+            valve_rest: ValveState::default(),
             t: 3,
         };
         spec.fill(&h, 2, &mut out);
@@ -781,7 +794,7 @@ pub(crate) mod source_tests {
                     states: &states,
                     initial: &initial,
                     valves: &valves,
-                    valve_rest: &valve_rest,
+                    valve_rest,
                     t,
                 };
                 for e in 0..ENGINE_COUNT {
@@ -815,44 +828,49 @@ pub(crate) mod source_tests {
             u[ENGINE_COUNT] = f64::from(u8::from(on));
             u
         };
-        let mut s = f.rest();
-        f.advance(&mut s, &cmd(0.0, false), 0.01);
+        let mut v = ValveTrack::new(f, 0.01);
+        let s = *v.advance(&cmd(0.0, false));
         assert_eq!(s.valve_n[0], 320.0, "off: parked at the minimum");
         // 320 -> 800 N: 480 N at 6000 N/s is rate-limited for the first 10 ms step.
-        f.advance(&mut s, &cmd(800.0, true), 0.01);
+        let s = *v.advance(&cmd(800.0, true));
         assert!((s.actuator_n[0] - 380.0).abs() < 1e-9, "{s:?}");
         assert!(
             (s.valve_n[0] - 378.0).abs() < 1e-9,
             "the valve trails by half the backlash"
         );
         for _ in 0..40 {
-            f.advance(&mut s, &cmd(800.0, true), 0.01);
+            v.advance(&cmd(800.0, true));
         }
-        assert!((s.actuator_n[0] - 800.0).abs() < 1e-6);
+        assert!((v.state.actuator_n[0] - 800.0).abs() < 1e-6);
         // A small step (10 N, inside rate x lag = 90 N): first order, 1 - e^(-10/15).
-        let a0 = s.actuator_n[0];
-        f.advance(&mut s, &cmd(790.0, true), 0.01);
+        let a0 = v.state.actuator_n[0];
+        let s = *v.advance(&cmd(790.0, true));
         let want = 790.0 + (a0 - 790.0) * (-0.01f64 / 0.015).exp();
         assert!((s.actuator_n[0] - want).abs() < 1e-9);
         // Moving up, the valve trails the actuator by half the backlash; a reversal by
         // less than the backlash moves the actuator, not the valve.
-        let mut r = f.rest();
-        r.actuator_n[0] = 600.0;
-        r.valve_n[0] = 598.0;
-        f.advance(&mut r, &cmd(597.0, true), 0.01);
-        assert!(r.actuator_n[0] > 597.0 && r.actuator_n[0] < 599.0);
-        assert_eq!(r.valve_n[0], 598.0);
-        // Continuing up instead pushes the valve along.
-        let mut r = ValveState {
+        v.state = ValveState {
             actuator_n: [600.0; 4],
             valve_n: [598.0; 4],
         };
-        f.advance(&mut r, &cmd(603.0, true), 0.01);
+        let r = *v.advance(&cmd(597.0, true));
+        assert!(r.actuator_n[0] > 597.0 && r.actuator_n[0] < 599.0);
+        assert_eq!(r.valve_n[0], 598.0);
+        // Continuing up instead pushes the valve along.
+        v.state = ValveState {
+            actuator_n: [600.0; 4],
+            valve_n: [598.0; 4],
+        };
+        let r = *v.advance(&cmd(603.0, true));
         assert!((r.valve_n[0] - (r.actuator_n[0] - 2.0)).abs() < 1e-12);
         // Commands below the park value are raised to it.
-        let mut q = f.rest();
-        f.advance(&mut q, &cmd(100.0, true), 0.01);
-        assert_eq!(q.actuator_n[0], 320.0);
+        v.reset();
+        assert_eq!(v.advance(&cmd(100.0, true)).actuator_n[0], 320.0);
+        // Training's track is the same stepping.
+        let inputs = [cmd(0.0, false), cmd(800.0, true), cmd(790.0, true)];
+        let mut w = ValveTrack::new(f, 0.01);
+        let stepped: Vec<ValveState> = inputs.iter().map(|u| *w.advance(u)).collect();
+        assert_eq!(f.track(&inputs, 0.01), stepped);
         assert!(f.validate().is_ok());
         assert!(ValveFilter {
             time_constant_s: 0.0,
@@ -879,13 +897,12 @@ pub(crate) mod source_tests {
             })
             .collect();
         let states = vec![[0.0; STATE_DIM]; 9];
-        let rest = ValveState::default();
         let h = |t| TrajectoryHistory {
             inputs: &inputs,
             states: &states,
             initial: &[0.0; STATE_DIM],
             valves: &[],
-            valve_rest: &rest,
+            valve_rest: ValveState::default(),
             t,
         };
         assert_eq!(phase_age(&h(2), 0, true, 10), Some(0));

@@ -4,7 +4,7 @@
 
 use super::features::{
     command_sum_of, lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec,
-    ValveFilter, ValveState, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO, STATE_P,
+    ValveState, ValveTrack, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO, STATE_P,
 };
 use super::library::{term_name, Term, MAX_DEGREE};
 use oils_shared::ENGINE_COUNT;
@@ -867,11 +867,8 @@ pub struct Predictor {
     per_engine: Vec<CompiledSub<ENGINE_COUNT>>,
     ring: Ring,
     phases: Phases,
-    /// The valve filter some submodel reads and its state after the latest step.
-    valve: Option<(ValveFilter, ValveState)>,
-    /// Sample time, s, and the valve lag's decay over it.
-    valve_dt_s: f64,
-    valve_decay: f64,
+    /// The valve filter some submodel reads, and its state after the latest step.
+    valve: Option<ValveTrack>,
     out_of_envelope_steps: u64,
     /// Step with the AVX2 build of the same code (x86-64 CPUs that have it).
     avx2: bool,
@@ -920,15 +917,10 @@ impl Predictor {
                 .iter()
                 .filter(|s| s.features.valve_features() > 0)
                 .find_map(|s| s.features.valve)
-                .map(|f| (f, f.rest())),
-            valve_dt_s: model.sample_time_ns as f64 * 1e-9,
-            valve_decay: 0.0,
+                .map(|f| ValveTrack::new(f, model.sample_time_ns as f64 * 1e-9)),
             out_of_envelope_steps: 0,
             avx2: cfg!(target_arch = "x86_64") && avx2_detected(),
         };
-        if let Some((f, _)) = &p.valve {
-            p.valve_decay = f.decay(p.valve_dt_s);
-        }
         p.reset_to(&model.initial_state);
         p
     }
@@ -936,9 +928,9 @@ impl Predictor {
     /// Restarts from a state at rest: engines off for all of the history, every past
     /// state equal to `state` (how the reference model is started).
     pub fn reset_to(&mut self, state: &StateVec) {
-        let rest = self.valve.as_mut().map_or(ValveState::default(), |(f, v)| {
-            *v = f.rest();
-            *v
+        let rest = self.valve.as_mut().map_or(ValveState::default(), |v| {
+            v.reset();
+            v.state
         });
         for i in 0..self.ring.depth {
             self.ring.set_input(i, &[0.0; INPUT_DIM]);
@@ -964,8 +956,8 @@ impl Predictor {
             }
             self.ring.set_state(i, h.state(lag));
         }
-        if let Some((_, v)) = &mut self.valve {
-            *v = *h.valve(1);
+        if let Some(v) = &mut self.valve {
+            v.state = *h.valve(1);
         }
         // One slot back, so the next step() advances onto slot 0.
         self.ring.head = self.ring.depth - 1;
@@ -1037,9 +1029,8 @@ impl Predictor {
         // The model sees the commands after the on-range clamp above. The record's state
         // is still an old one; it is never read (state lags start at 1).
         self.ring.set_input(head, &u);
-        if let Some((f, v)) = &mut self.valve {
-            f.advance_with(v, &u, self.valve_dt_s, self.valve_decay);
-            self.ring.set_valve(head, &v.valve_n);
+        if let Some(v) = &mut self.valve {
+            self.ring.set_valve(head, &v.advance(&u).valve_n);
         }
         let mut next = prev;
         let window = self.ring.window();
@@ -1072,7 +1063,7 @@ impl Predictor {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::surrogate::features::TrajectoryHistory;
+    use crate::surrogate::features::{TrajectoryHistory, ValveFilter};
     use crate::surrogate::library::Library;
 
     /// A valve filter for the test models (hifi's TFCV figures in newtons).
@@ -1236,7 +1227,7 @@ pub(crate) mod tests {
                     states,
                     initial: &model.initial_state,
                     valves: &valves,
-                    valve_rest: &valve_rest,
+                    valve_rest,
                     t,
                 };
                 s.features.fill(&h, e, &mut x[..dim]);
@@ -1284,7 +1275,7 @@ pub(crate) mod tests {
                     states: &states,
                     initial: &model.initial_state,
                     valves: &valves,
-                    valve_rest: &valve_rest,
+                    valve_rest,
                     t,
                 });
                 let got = p.step(&inputs[t]);
@@ -1334,7 +1325,7 @@ pub(crate) mod tests {
             states: &states,
             initial: &model.initial_state,
             valves: &valves,
-            valve_rest: &valve_rest,
+            valve_rest,
             t: t0,
         });
         for t in t0..cmds.len() {
