@@ -73,7 +73,7 @@ fn bad_model_files_are_refused_clearly() {
         2
     );
 
-    let wrong_version = good.replacen("\"version\": 3", "\"version\": 99", 1);
+    let wrong_version = good.replacen("\"version\": 4", "\"version\": 99", 1);
     let e = refusal(&wrong_version, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 99 }),
@@ -81,16 +81,20 @@ fn bad_model_files_are_refused_clearly() {
     );
     assert!(e.to_string().contains("version 99"));
     // A version-1 file (before the per-engine physics features) is refused by name.
-    let old = good.replacen("\"version\": 3", "\"version\": 1", 1);
+    let old = good.replacen("\"version\": 4", "\"version\": 1", 1);
     let e = refusal(&old, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 1 }),
         "{e}"
     );
     assert!(e.to_string().contains("retrain"), "{e}");
+    // A version-3 file naming an ignition clock is refused (version 3 had none).
+    let relabelled = good.replacen("\"version\": 4", "\"version\": 3", 1);
+    let e = refusal(&relabelled, 10_000_000);
+    assert!(e.to_string().contains("needs file version 4"), "{e}");
     // Version 2 (before the valve filter) still reads; a version-2 file naming a valve
     // filter is refused (no version-2 writer made one).
-    let relabelled = good.replacen("\"version\": 3", "\"version\": 2", 1);
+    let relabelled = good.replacen("\"version\": 4", "\"version\": 2", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 3"), "{e}");
     // The default model before the valve filter, as committed then.

@@ -107,6 +107,124 @@ pub struct ValveFilter {
     /// Where the valve parks with the engine off, and the least it is driven to when on
     /// (the minimum throttle), N.
     pub park_n: f64,
+    /// Beyond the valve: when the dome the valve feeds is primed and the engine ignites
+    /// ([`IgnitionClock`]). `None`: no ignition features.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ignition: Option<IgnitionClock>,
+}
+
+/// An estimate of when each engine ignites, driven by its valve-filtered command.
+///
+/// Why: at a start hifi's thrust stays 0 while the dome between valve and injector
+/// fills, then rises by some 460 N within 20 ms. When that edge comes depends on how far
+/// the valve is open while the dome fills (60-120 ms) and on what is left in the dome
+/// from the last burn. A per-step lookup ("switched on k steps ago") cannot place an edge
+/// that moves by milliseconds with the command; a clock that says how long ago the
+/// engine ignited can, and the thrust is then a function of that time
+/// (hat functions of it, [`IgnitionClock::hat`]).
+///
+/// The dome model, relative to the fill at which the engine ignites: while the engine is
+/// on it fills at a rate proportional to the valve position (the flow into an empty dome
+/// is set by the valve's area), `d(fill)/dt = T_v / fill_n_s`, up to `full`; while off
+/// it drains by Torricelli's law, `sqrt(fill)` falling linearly to 0 in `drain_time_s`
+/// from full. The time of ignition is where the fill crosses 1, interpolated within the
+/// step; up to `lead_s` before it, the clock reads minus the time still to go at the
+/// current valve position, so that hats before the estimate can take up its scatter.
+/// Parameters: `drain_time_s` and `full` are hifi's dome figures, `fill_n_s` is fitted
+/// to hifi's ignition times (`cargo run --release -p oils-emulator --example
+/// ignition_times`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IgnitionClock {
+    /// Integral of the valve-filtered command that fills a dry dome to ignition, N s.
+    pub fill_n_s: f64,
+    /// Time for a full dome to drain, s.
+    pub drain_time_s: f64,
+    /// A full dome relative to the fill at ignition (>= 1).
+    pub full: f64,
+    /// How long before the estimated ignition the clock starts, s.
+    pub lead_s: f64,
+    /// Spacing of the hat functions' knots, s.
+    pub knot_spacing_s: f64,
+    /// Number of hat functions, at `-lead_s`, `-lead_s + spacing`, ... from ignition.
+    pub knots: usize,
+}
+
+/// `since_ignition_s` of an engine that has not ignited.
+pub const NOT_IGNITED: f64 = f64::NEG_INFINITY;
+
+impl IgnitionClock {
+    /// Describes the first invalid parameter.
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        if !pos(self.fill_n_s) || !pos(self.drain_time_s) || !pos(self.knot_spacing_s) {
+            return Err(
+                "ignition fill_n_s, drain_time_s and knot_spacing_s must be positive".into(),
+            );
+        }
+        if !(self.lead_s.is_finite() && self.lead_s >= 0.0) {
+            return Err("ignition lead_s must be finite and not negative".into());
+        }
+        if !(self.full.is_finite() && self.full >= 1.0) {
+            return Err("ignition full must be finite and at least 1".into());
+        }
+        if !(1..=64).contains(&self.knots) {
+            return Err("ignition knots must be 1..=64".into());
+        }
+        Ok(())
+    }
+
+    /// Hat function `j` of the time since ignition: 1 at its knot, `j` spacings after
+    /// `-lead_s`, falling linearly to 0 one spacing either side; 0 before the clock runs.
+    #[inline(always)]
+    pub fn hat(&self, since_ignition_s: f64, j: usize) -> f64 {
+        let at = (since_ignition_s + self.lead_s) / self.knot_spacing_s;
+        (1.0 - (at - j as f64).abs()).max(0.0)
+    }
+
+    /// Time after ignition beyond which every hat is 0, s.
+    pub fn window_s(&self) -> f64 {
+        self.knots as f64 * self.knot_spacing_s - self.lead_s
+    }
+
+    /// Advances one engine's dome by a step of `dt_s` with the switch `on` and the valve
+    /// moving from `valve0_n` to `valve1_n`: `fill` and the time since ignition at the
+    /// end of the step.
+    #[inline(always)]
+    fn advance(
+        &self,
+        on: bool,
+        valve0_n: f64,
+        valve1_n: f64,
+        dt_s: f64,
+        fill: &mut f64,
+        since_s: &mut f64,
+    ) {
+        if on {
+            let f0 = *fill;
+            let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / self.fill_n_s;
+            if f0 >= 1.0 && *since_s != NOT_IGNITED {
+                *since_s += dt_s;
+            } else if f1 >= 1.0 {
+                // Ignition within the step (at its start when the dome was primed).
+                let at = ((1.0 - f0) / (f1 - f0)).max(0.0);
+                *since_s = (1.0 - at) * dt_s;
+            } else {
+                // Still filling: within the lead, minus the time to go at this valve.
+                let to_go_s = (1.0 - f1) * self.fill_n_s / valve1_n;
+                *since_s = if to_go_s <= self.lead_s {
+                    -to_go_s
+                } else {
+                    NOT_IGNITED
+                };
+            }
+            *fill = f1.min(self.full);
+        } else {
+            *since_s = NOT_IGNITED;
+            let root = fill.sqrt() - self.full.sqrt() * dt_s / self.drain_time_s;
+            *fill = if root > 0.0 { root * root } else { 0.0 };
+        }
+    }
 }
 
 /// Per-engine state of the [`ValveFilter`]: actuator and valve, N.
@@ -116,6 +234,11 @@ pub struct ValveState {
     pub actuator_n: [f64; ENGINE_COUNT],
     /// Valve position (what the thrust follows), N.
     pub valve_n: [f64; ENGINE_COUNT],
+    /// Dome fill relative to the fill at ignition ([`IgnitionClock`]; 0 without one).
+    pub fill: [f64; ENGINE_COUNT],
+    /// Time from the estimated ignition to the end of the step, s; [`NOT_IGNITED`]
+    /// while the engine is off or its dome is filling.
+    pub since_ignition_s: [f64; ENGINE_COUNT],
 }
 
 impl ValveFilter {
@@ -128,7 +251,9 @@ impl ValveFilter {
         if !ok(self.backlash_n, true) || !ok(self.park_n, true) {
             return Err("valve backlash_n and park_n must be finite and not negative".into());
         }
-        Ok(())
+        self.ignition
+            .as_ref()
+            .map_or(Ok(()), IgnitionClock::validate)
     }
 
     /// At rest: every valve parked (how the reference model starts).
@@ -136,6 +261,8 @@ impl ValveFilter {
         ValveState {
             actuator_n: [self.park_n; ENGINE_COUNT],
             valve_n: [self.park_n; ENGINE_COUNT],
+            fill: [0.0; ENGINE_COUNT],
+            since_ignition_s: [NOT_IGNITED; ENGINE_COUNT],
         }
     }
 
@@ -183,7 +310,7 @@ impl ValveTrack {
 
     /// Advances one step with `input` held. The actuator solution is exact for a held
     /// target: the same element as hifi's TFCV ([`Tfcv::advance`]), in newtons, without
-    /// quantisation.
+    /// quantisation. The ignition clock, if any, follows the valve.
     #[inline]
     pub fn advance(&mut self, input: &InputVec) -> &ValveState {
         let s = &mut self.state;
@@ -194,6 +321,17 @@ impl ValveTrack {
                 valve: s.valve_n[e],
             };
             v.advance(self.dt_s, &self.dynamics, self.decay);
+            if let Some(c) = &self.filter.ignition {
+                let on = input[ENGINE_COUNT + e] > 0.5;
+                c.advance(
+                    on,
+                    s.valve_n[e],
+                    v.valve,
+                    self.dt_s,
+                    &mut s.fill[e],
+                    &mut s.since_ignition_s[e],
+                );
+            }
             s.actuator_n[e] = v.actuator;
             s.valve_n[e] = v.valve;
         }
@@ -229,7 +367,7 @@ pub struct Role {
 
 /// Where one feature is read from: the runtime gathers only the features its active terms
 /// use, and a test checks that reading every source equals [`FeatureSpec::fill`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Source {
     /// Input component at a lag; for a per-engine feature the engine index is added.
     Input {
@@ -262,6 +400,11 @@ pub enum Source {
     Start(usize),
     /// 1 when the engine switched off exactly `k` steps before `t`.
     Stop(usize),
+    /// 1 when the engine is on and has not ignited by the end of step `t`
+    /// ([`IgnitionClock`]).
+    Priming,
+    /// Hat function `j` of the engine's time since ignition at the end of step `t`.
+    Ignition(usize, IgnitionClock),
 }
 
 impl Source {
@@ -270,7 +413,11 @@ impl Source {
         match *self {
             Source::Input { per_engine, .. } | Source::State { per_engine, .. } => per_engine,
             Source::Lambda | Source::CommandSum => false,
-            Source::Start(_) | Source::Stop(_) | Source::Valve { .. } => true,
+            Source::Start(_)
+            | Source::Stop(_)
+            | Source::Valve { .. }
+            | Source::Priming
+            | Source::Ignition(..) => true,
         }
     }
 
@@ -296,8 +443,16 @@ impl Source {
             Source::Valve { lag } => h.valve(lag).valve_n[engine],
             Source::Start(k) => indicator(phase_age(h, engine, true, k + 1) == Some(k)),
             Source::Stop(k) => indicator(phase_age(h, engine, false, k + 1) == Some(k)),
+            Source::Priming => priming(h, engine),
+            Source::Ignition(j, clock) => clock.hat(h.valve(0).since_ignition_s[engine], j),
         }
     }
+}
+
+/// The priming indicator of `engine` at step `t` (see [`Source::Priming`]).
+fn priming<H: History + ?Sized>(h: &H, engine: usize) -> f64 {
+    let on = h.input(0)[ENGINE_COUNT + engine] > 0.5;
+    indicator(on && h.valve(0).since_ignition_s[engine] == NOT_IGNITED)
 }
 
 fn indicator(b: bool) -> f64 {
@@ -346,9 +501,27 @@ impl FeatureSpec {
         self.start_steps + self.stop_steps
     }
 
-    /// Number of per-engine physics features (valve, command sum, phase indicators).
+    /// Number of per-engine physics features (valve, command sum, phase indicators,
+    /// ignition clock).
     fn physics_features(&self) -> usize {
-        self.valve_features() + usize::from(self.command_sum) + self.phase_features()
+        self.valve_features()
+            + usize::from(self.command_sum)
+            + self.phase_features()
+            + self.ignition_features()
+    }
+
+    /// The ignition clock the features read (per-engine layout with a valve filter that
+    /// has one).
+    pub fn ignition(&self) -> Option<IgnitionClock> {
+        match self.layout {
+            Layout::PerEngine => self.valve.and_then(|v| v.ignition),
+            Layout::Mimo => None,
+        }
+    }
+
+    /// Number of ignition features: the priming indicator and the hats.
+    pub fn ignition_features(&self) -> usize {
+        self.ignition().map_or(0, |c| c.knots + 1)
     }
 
     /// Number of valve features (`T_v[t]` and its history), 0 without a valve filter.
@@ -431,6 +604,12 @@ impl FeatureSpec {
             for k in 0..self.stop_steps {
                 v.push(format!("stop{k}{}", lag(0)));
             }
+            if let Some(c) = self.ignition() {
+                v.push(format!("priming{}", lag(0)));
+                for j in 0..c.knots {
+                    v.push(format!("ign{j}{}", lag(0)));
+                }
+            }
         }
         debug_assert_eq!(v.len(), self.dim());
         v
@@ -489,6 +668,10 @@ impl FeatureSpec {
             }
             v.extend((0..self.start_steps).map(Source::Start));
             v.extend((0..self.stop_steps).map(Source::Stop));
+            if let Some(c) = self.ignition() {
+                v.push(Source::Priming);
+                v.extend((0..c.knots).map(|j| Source::Ignition(j, c)));
+            }
         }
         debug_assert_eq!(v.len(), self.dim());
         v
@@ -499,7 +682,11 @@ impl FeatureSpec {
         self.names()
             .iter()
             .map(|s| {
-                let phase = s.starts_with("start") || s.starts_with("stop");
+                // The ignition features are 0 outside a start like the phase
+                // indicators, and enter products the same way.
+                let phase = ["start", "stop", "priming", "ign"]
+                    .iter()
+                    .any(|p| s.starts_with(p));
                 let group = if let Some(rest) = s.strip_prefix("S_e") {
                     // MIMO: each engine's switch its own group; per-engine: group 1.
                     rest.chars()
@@ -581,6 +768,13 @@ impl FeatureSpec {
             }
             for k in 0..self.stop_steps {
                 put(indicator(stop == Some(k)));
+            }
+        }
+        if let Some(c) = self.ignition() {
+            put(priming(h, engine));
+            let since = h.valve(0).since_ignition_s[engine];
+            for j in 0..c.knots {
+                put(c.hat(since, j));
             }
         }
         debug_assert_eq!(i, self.dim());
@@ -788,6 +982,7 @@ pub(crate) mod source_tests {
             assert_eq!(sources.len(), spec.dim());
             let mut out = vec![0.0; spec.dim()];
             let mut starts = 0.0;
+            let mut ignitions = 0.0;
             for t in 0..inputs.len() {
                 let h = TrajectoryHistory {
                     inputs: &inputs,
@@ -802,13 +997,16 @@ pub(crate) mod source_tests {
                     for (j, s) in sources.iter().enumerate() {
                         assert_eq!(s.read(&h, e), out[j], "t {t} engine {e} {s:?}");
                     }
-                    starts += out[spec.dim() - spec.phase_features()..]
+                    let clock_at = spec.dim() - spec.ignition_features();
+                    starts += out[clock_at - spec.phase_features()..clock_at]
                         .iter()
                         .sum::<f64>();
+                    ignitions += out[clock_at..].iter().skip(1).sum::<f64>();
                 }
             }
-            // The trajectory does exercise the phase indicators.
+            // The trajectory does exercise the phase indicators and the hats.
             assert!(spec.phase_features() == 0 || starts > 20.0);
+            assert!(spec.ignition_features() == 0 || ignitions > 20.0);
         }
     }
 
@@ -821,6 +1019,7 @@ pub(crate) mod source_tests {
             rate_n_per_s: 6000.0,
             backlash_n: 4.0,
             park_n: 320.0,
+            ignition: None,
         };
         let cmd = |c: f64, on: bool| {
             let mut u = [0.0; INPUT_DIM];
@@ -852,6 +1051,7 @@ pub(crate) mod source_tests {
         v.state = ValveState {
             actuator_n: [600.0; 4],
             valve_n: [598.0; 4],
+            ..v.state
         };
         let r = *v.advance(&cmd(597.0, true));
         assert!(r.actuator_n[0] > 597.0 && r.actuator_n[0] < 599.0);
@@ -860,6 +1060,7 @@ pub(crate) mod source_tests {
         v.state = ValveState {
             actuator_n: [600.0; 4],
             valve_n: [598.0; 4],
+            ..v.state
         };
         let r = *v.advance(&cmd(603.0, true));
         assert!((r.valve_n[0] - (r.actuator_n[0] - 2.0)).abs() < 1e-12);
@@ -880,6 +1081,110 @@ pub(crate) mod source_tests {
         .is_err());
         assert!(ValveFilter {
             backlash_n: f64::NAN,
+            ..f
+        }
+        .validate()
+        .is_err());
+    }
+
+    /// The ignition clock: a dry dome fills in `fill_n_s / valve`, the crossing is
+    /// interpolated within the step, a full dome drains in `drain_time_s`, and a part-full
+    /// one refills sooner.
+    #[test]
+    fn ignition_clock_fills_interpolates_and_drains() {
+        let clock = IgnitionClock {
+            fill_n_s: 25.0,
+            drain_time_s: 0.6,
+            full: 1.25,
+            lead_s: 0.0,
+            knot_spacing_s: 0.005,
+            knots: 4,
+        };
+        let f = ValveFilter {
+            time_constant_s: 0.015,
+            rate_n_per_s: 6000.0,
+            backlash_n: 0.0,
+            park_n: 500.0,
+            ignition: Some(clock),
+        };
+        let cmd = |on: bool| {
+            let mut u = [0.0; INPUT_DIM];
+            u[0] = 500.0;
+            u[ENGINE_COUNT] = f64::from(u8::from(on));
+            u
+        };
+        let mut v = ValveTrack::new(f, 0.01);
+        // Off: nothing fills. On at a steady 500 N valve: 25 N s fill in 50 ms, so the
+        // dome reaches the ignition fill at the end of the 5th step, exactly.
+        assert_eq!(v.advance(&cmd(false)).since_ignition_s[0], NOT_IGNITED);
+        for k in 1..=4 {
+            let s = *v.advance(&cmd(true));
+            assert!((s.fill[0] - 0.2 * k as f64).abs() < 1e-12);
+            assert_eq!(s.since_ignition_s[0], NOT_IGNITED);
+        }
+        let s = *v.advance(&cmd(true));
+        assert!(s.since_ignition_s[0].abs() < 1e-12, "{s:?}");
+        // Then the clock runs, and the dome stops at full.
+        for _ in 0..3 {
+            v.advance(&cmd(true));
+        }
+        assert!((v.state.since_ignition_s[0] - 0.03).abs() < 1e-12);
+        assert_eq!(v.state.fill[0], 1.25);
+        // Hats: 1 at their knot, linear between, 0 before ignition and past the window.
+        assert_eq!(clock.hat(0.0, 0), 1.0);
+        assert!((clock.hat(0.0075, 1) - 0.5).abs() < 1e-12);
+        assert!((clock.hat(0.0075, 2) - 0.5).abs() < 1e-12);
+        assert_eq!(clock.hat(0.0075, 0), 0.0);
+        assert_eq!(clock.hat(NOT_IGNITED, 0), 0.0);
+        assert_eq!(clock.hat(clock.window_s(), clock.knots - 1), 0.0);
+        // Off for 0.3 s: sqrt(fill) falls by half of sqrt(full), so a quarter is left.
+        for _ in 0..30 {
+            v.advance(&cmd(false));
+        }
+        assert!((v.state.fill[0] - 1.25 / 4.0).abs() < 1e-9, "{:?}", v.state);
+        assert_eq!(v.state.since_ignition_s[0], NOT_IGNITED);
+        // ... so it refills to ignition in 0.6875 of a dry fill: 34.4 ms, crossing
+        // within the 4th step, 5.6 ms before its end.
+        for _ in 0..3 {
+            assert_eq!(v.advance(&cmd(true)).since_ignition_s[0], NOT_IGNITED);
+        }
+        let s = *v.advance(&cmd(true));
+        assert!((s.since_ignition_s[0] - 0.005_625).abs() < 1e-9, "{s:?}");
+        // A full drain empties it: 0.6 s.
+        for _ in 0..60 {
+            v.advance(&cmd(false));
+        }
+        assert_eq!(v.state.fill[0], 0.0);
+        // With a lead of 20 ms the clock starts 20 ms before the estimate, counting the
+        // time to go at the current valve; the hats move with it.
+        let led = IgnitionClock {
+            lead_s: 0.02,
+            ..clock
+        };
+        let mut w = ValveTrack::new(
+            ValveFilter {
+                ignition: Some(led),
+                ..f
+            },
+            0.01,
+        );
+        let since: Vec<f64> = (0..7)
+            .map(|_| w.advance(&cmd(true)).since_ignition_s[0])
+            .collect();
+        assert_eq!(since[..2], [NOT_IGNITED; 2]);
+        for (k, want) in [(2, -0.02), (3, -0.01), (4, 0.0), (5, 0.01), (6, 0.02)] {
+            assert!((since[k] - want).abs() < 1e-12, "{since:?}");
+        }
+        assert_eq!(led.hat(-0.02, 0), 1.0);
+        assert!((led.window_s() - 0.0).abs() < 1e-15);
+        // Validation names the bad parameter.
+        assert!(IgnitionClock { full: 0.9, ..clock }.validate().is_err());
+        assert!(IgnitionClock { knots: 0, ..clock }.validate().is_err());
+        assert!(ValveFilter {
+            ignition: Some(IgnitionClock {
+                fill_n_s: -1.0,
+                ..clock
+            }),
             ..f
         }
         .validate()

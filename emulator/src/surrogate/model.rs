@@ -3,8 +3,9 @@
 //! model is chosen on exactly the behaviour it has in the loop.
 
 use super::features::{
-    command_sum_of, lambda_of, FeatureSpec, History, InputVec, Layout, Source, StateVec,
-    ValveState, ValveTrack, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO, STATE_P,
+    command_sum_of, lambda_of, FeatureSpec, History, IgnitionClock, InputVec, Layout, Source,
+    StateVec, ValveState, ValveTrack, INPUT_DIM, NOT_IGNITED, STATE_DIM, STATE_MF, STATE_MO,
+    STATE_P,
 };
 use super::library::{term_name, Term, MAX_DEGREE};
 use oils_shared::ENGINE_COUNT;
@@ -191,6 +192,7 @@ impl Model {
                     "scaling or envelope has a non-finite or non-positive value",
                 ));
             }
+            let roles = s.features.roles();
             for r in &s.rows {
                 if !r.intercept.is_finite() {
                     return Err(ctx(&format!("{}: intercept is not finite", r.output)));
@@ -204,6 +206,20 @@ impl Model {
                     }
                     if t.factors.iter().any(|&f| f as usize > dim) {
                         return Err(ctx(&format!("{}: term {} out of range", r.output, t.name)));
+                    }
+                    // The predictor evaluates a phase or ignition term only in its phase
+                    // or window, which needs one such feature per term (the library
+                    // never makes two).
+                    let phased = t
+                        .factors
+                        .iter()
+                        .filter(|&&f| (f as usize) < dim && roles[f as usize].phase)
+                        .count();
+                    if phased > 1 {
+                        return Err(ctx(&format!(
+                            "{}: term {} has more than one phase or ignition feature",
+                            r.output, t.name
+                        )));
                     }
                 }
             }
@@ -381,28 +397,35 @@ impl Terms {
 /// exactly 0 outside its phase (uncentred, see `fit::Prepared`) are kept apart, one group
 /// per indicator, and evaluated only for an engine in that phase: in steady running no
 /// phase term costs anything, and skipping terms that are exactly 0 changes no sum.
+///
+/// Terms with an ignition feature are kept apart the same way, in one group evaluated
+/// for an engine whose ignition clock is in its window (see [`Clock`]).
 #[derive(Debug, Clone, Default)]
 struct CompiledRow {
     intercept: f64,
     terms: Terms,
     phase: Vec<Terms>,
+    clock: Terms,
 }
 
 impl CompiledRow {
     /// `group[slot]`: the phase group of a gathered feature, if it is a skippable phase
-    /// indicator.
+    /// indicator; `clocked[slot]`: whether it is a skippable ignition feature. (A checked
+    /// model has at most one phase or ignition feature per term.)
     fn new(
         r: &OutputRow,
         slot: &[u16],
         dim: usize,
         group: &[Option<usize>],
         groups: usize,
+        clocked: &[bool],
     ) -> Self {
         let one = slot[dim];
         let mut row = Self {
             intercept: r.intercept,
             terms: Terms::default(),
             phase: vec![Terms::default(); groups],
+            clock: Terms::default(),
         };
         for t in &r.terms {
             // A checked model never has a factor above dim; clamping makes the
@@ -417,6 +440,7 @@ impl CompiledRow {
             match phases[..] {
                 [] if f.is_empty() => row.intercept += t.coef,
                 [g] => row.phase[g].push(&f, t.coef),
+                _ if f.iter().any(|&s| clocked[s as usize]) => row.clock.push(&f, t.coef),
                 _ => row.terms.push(&f, t.coef),
             }
         }
@@ -444,6 +468,36 @@ struct PhaseGather {
     scaling: FeatureScaling,
 }
 
+/// An ignition feature an active term uses: the priming indicator (`hat` None) or hat
+/// function `hat` of the time since ignition.
+#[derive(Debug, Clone, Copy)]
+struct ClockGather {
+    slot: usize,
+    hat: Option<usize>,
+    scaling: FeatureScaling,
+}
+
+/// The engines' ignition clocks after the step being predicted (see
+/// [`crate::surrogate::features::IgnitionClock`]).
+#[derive(Debug, Clone, Copy)]
+struct Clock {
+    on: [bool; ENGINE_COUNT],
+    since_ignition_s: [f64; ENGINE_COUNT],
+    /// Engines whose ignition features may be non-zero: on, and not past the last hat.
+    active: [bool; ENGINE_COUNT],
+    /// Some engine is active.
+    any: bool,
+}
+
+impl Clock {
+    const IDLE: Self = Self {
+        on: [false; ENGINE_COUNT],
+        since_ignition_s: [NOT_IGNITED; ENGINE_COUNT],
+        active: [false; ENGINE_COUNT],
+        any: false,
+    };
+}
+
 /// A submodel compiled for `LANES` evaluations per step: 1 for a MIMO submodel, 4 (one
 /// per engine, evaluated together and vectorised, the same arithmetic per lane as for
 /// one) for a per-engine submodel.
@@ -457,8 +511,15 @@ struct CompiledSub<const LANES: usize> {
     shared: Vec<Gather>,
     /// ... read per engine (per-engine submodels only), into the next slots ...
     lanes: Vec<Gather>,
-    /// ... and the phase indicators (per engine).
+    /// ... and the phase indicators (per engine) ...
     phases: Vec<PhaseGather>,
+    /// ... and the ignition features (per engine), computed from the clock.
+    clock: Vec<ClockGather>,
+    /// The ignition clock the features read.
+    ignition: Option<IgnitionClock>,
+    /// The ignition features are exactly 0 outside an engine's window, so their terms
+    /// are kept apart and they are gathered only while some engine is in it.
+    clock_grouped: bool,
     /// Phase group of "switched on k steps ago" (`[0][k]`) and "off" (`[1][k]`), for
     /// the indicators whose terms are kept apart (see [`CompiledRow`]).
     phase_group: [Vec<Option<usize>>; 2],
@@ -557,6 +618,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
         // remembering which feature each read is.
         let (mut shared, mut lanes) = (Vec::new(), Vec::new());
         let mut phase_js = Vec::new();
+        let mut clock_js = Vec::new();
         for j in (0..dim).filter(|&j| used[j]) {
             let lane = |p: bool| per_engine && p;
             match sources[j] {
@@ -575,13 +637,20 @@ impl<const LANES: usize> CompiledSub<LANES> {
                 Source::CommandSum => shared.push((j, read(j, 0, REC_SUM))),
                 Source::Valve { lag } => lanes.push((j, read(j, lag, REC_VALVE))),
                 Source::Start(_) | Source::Stop(_) => phase_js.push(j),
+                Source::Priming | Source::Ignition(..) => clock_js.push(j),
             }
         }
         // `slot[j]`: feature j's place in `x`, in the order gathered; `dim` maps to the
         // 1.0 slot.
         let mut slot = vec![0u16; dim + 1];
         let mut count = 0;
-        for &j in shared.iter().chain(&lanes).map(|(j, _)| j).chain(&phase_js) {
+        for &j in shared
+            .iter()
+            .chain(&lanes)
+            .map(|(j, _)| j)
+            .chain(&phase_js)
+            .chain(&clock_js)
+        {
             slot[j] = count as u16;
             count += 1;
         }
@@ -621,6 +690,27 @@ impl<const LANES: usize> CompiledSub<LANES> {
             }
             !skippable
         });
+        let clock: Vec<ClockGather> = clock_js
+            .iter()
+            .map(|&j| ClockGather {
+                slot: slot[j] as usize,
+                hat: match sources[j] {
+                    Source::Ignition(k, _) => Some(k),
+                    _ => None,
+                },
+                scaling: scaling(j),
+            })
+            .collect();
+        // As for the phase indicators: 0 must scale to exactly 0, unclamped.
+        let clock_grouped = clock
+            .iter()
+            .all(|g| g.scaling.mean == 0.0 && g.scaling.lo <= 0.0 && g.scaling.hi >= 0.0);
+        let mut clocked = vec![false; count + 1];
+        if clock_grouped {
+            for g in &clock {
+                clocked[g.slot] = true;
+            }
+        }
         let mut x = vec![[1.0; LANES]; count + 1];
         for (slot, v) in constant {
             x[slot] = [v; LANES];
@@ -630,6 +720,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
         // constant, so a feature costs a clamp rather than a clamp, a subtraction and a
         // multiplication. The sum moves by rounding only.
         let folded = phase_js.is_empty()
+            && clock_js.is_empty()
             && s.rows.iter().all(|r| {
                 r.terms
                     .iter()
@@ -640,7 +731,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
             .iter()
             .map(|r| {
                 if !folded {
-                    return CompiledRow::new(r, &slot, dim, &group, groups);
+                    return CompiledRow::new(r, &slot, dim, &group, groups, &clocked);
                 }
                 let mut r = r.clone();
                 for t in &mut r.terms {
@@ -650,7 +741,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
                         r.intercept -= t.coef * s.feature_mean[j];
                     }
                 }
-                CompiledRow::new(&r, &slot, dim, &group, groups)
+                CompiledRow::new(&r, &slot, dim, &group, groups, &clocked)
             })
             .collect();
         let unscaled = |(_, g): (usize, Gather)| {
@@ -676,6 +767,9 @@ impl<const LANES: usize> CompiledSub<LANES> {
             shared: shared.into_iter().map(unscaled).collect(),
             lanes: lanes.into_iter().map(unscaled).collect(),
             phases,
+            clock,
+            ignition: s.features.ignition(),
+            clock_grouped,
             rows,
         }
     }
@@ -683,7 +777,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
     /// Gathers, clamps and scales the used features of the history `window` into `x`;
     /// true when one was outside its envelope.
     #[inline(always)]
-    fn gather(&mut self, window: &[f64], phases: &Phases) -> bool {
+    fn gather(&mut self, window: &[f64], phases: &Phases, clock: &Clock) -> bool {
         let mut outside = 0;
         // SAFETY: `compile` places every read (and the engines after it) inside a window
         // of the ring's depth, which is the length of `window`.
@@ -720,6 +814,23 @@ impl<const LANES: usize> CompiledSub<LANES> {
                 outside |= out;
             }
         }
+        if let Some(c) = &self.ignition {
+            if clock.any || !self.clock_grouped {
+                for g in &self.clock {
+                    let x = &mut self.x[g.slot];
+                    for (e, x) in x.iter_mut().enumerate() {
+                        let since = clock.since_ignition_s[e];
+                        let raw = match g.hat {
+                            None => f64::from(u8::from(clock.on[e] && since == NOT_IGNITED)),
+                            Some(j) => c.hat(since, j),
+                        };
+                        let (v, out) = g.scaling.apply(raw);
+                        *x = v;
+                        outside |= out;
+                    }
+                }
+            }
+        }
         outside != 0
     }
 
@@ -730,10 +841,11 @@ impl<const LANES: usize> CompiledSub<LANES> {
         &mut self,
         window: &[f64],
         phases: &Phases,
+        clock: &Clock,
         prev: &StateVec,
         next: &mut StateVec,
     ) -> bool {
-        let outside = self.gather(window, phases);
+        let outside = self.gather(window, phases, clock);
         if LANES == 1 {
             for (row, &o) in self.rows.iter().zip(&self.outputs) {
                 let mut y = [row.intercept; LANES];
@@ -749,6 +861,9 @@ impl<const LANES: usize> CompiledSub<LANES> {
                 let table = &self.phase_group[usize::from(!phases.on[e])];
                 if let Some(&Some(g)) = table.get(phases.run[e] - 1) {
                     row.phase[g].add_lane(&self.x, e, y);
+                }
+                if self.clock_grouped && clock.active[e] {
+                    row.clock.add_lane(&self.x, e, y);
                 }
             }
             for (&o, y) in self.outputs.iter().zip(y) {
@@ -869,6 +984,9 @@ pub struct Predictor {
     phases: Phases,
     /// The valve filter some submodel reads, and its state after the latest step.
     valve: Option<ValveTrack>,
+    /// Its ignition clock, if a submodel reads one, and the clocks after the step.
+    ignition: Option<IgnitionClock>,
+    clock: Clock,
     out_of_envelope_steps: u64,
     /// Step with the AVX2 build of the same code (x86-64 CPUs that have it).
     avx2: bool,
@@ -918,6 +1036,8 @@ impl Predictor {
                 .filter(|s| s.features.valve_features() > 0)
                 .find_map(|s| s.features.valve)
                 .map(|f| ValveTrack::new(f, model.sample_time_ns as f64 * 1e-9)),
+            ignition: model.submodels.iter().find_map(|s| s.features.ignition()),
+            clock: Clock::IDLE,
             out_of_envelope_steps: 0,
             avx2: cfg!(target_arch = "x86_64") && avx2_detected(),
         };
@@ -940,6 +1060,7 @@ impl Predictor {
         self.ring.head = 0;
         self.phases.on = [false; ENGINE_COUNT];
         self.phases.run = [self.phases.cap + 1; ENGINE_COUNT];
+        self.clock = Clock::IDLE;
         self.out_of_envelope_steps = 0;
     }
 
@@ -1030,15 +1151,28 @@ impl Predictor {
         // is still an old one; it is never read (state lags start at 1).
         self.ring.set_input(head, &u);
         if let Some(v) = &mut self.valve {
-            self.ring.set_valve(head, &v.advance(&u).valve_n);
+            let s = v.advance(&u);
+            self.ring.set_valve(head, &s.valve_n);
+            if let Some(c) = &self.ignition {
+                let window_s = c.window_s();
+                let k = &mut self.clock;
+                k.any = false;
+                for e in 0..ENGINE_COUNT {
+                    let since = s.since_ignition_s[e];
+                    k.on[e] = u[ENGINE_COUNT + e] > 0.5;
+                    k.since_ignition_s[e] = since;
+                    k.active[e] = k.on[e] && since < window_s;
+                    k.any |= k.active[e];
+                }
+            }
         }
         let mut next = prev;
         let window = self.ring.window();
         for sub in &mut self.per_engine {
-            outside |= sub.eval(window, &self.phases, &prev, &mut next);
+            outside |= sub.eval(window, &self.phases, &self.clock, &prev, &mut next);
         }
         for sub in &mut self.mimo {
-            outside |= sub.eval(window, &self.phases, &prev, &mut next);
+            outside |= sub.eval(window, &self.phases, &self.clock, &prev, &mut next);
         }
         // Physical guards: thrust and pressure are not negative, ejected mass never
         // falls. A non-finite prediction keeps the previous state (and counts).
@@ -1072,6 +1206,17 @@ pub(crate) mod tests {
         rate_n_per_s: 6000.0,
         backlash_n: 4.7,
         park_n: 320.0,
+        ignition: Some(TEST_IGNITION),
+    };
+
+    /// An ignition clock for the test models.
+    pub(crate) const TEST_IGNITION: IgnitionClock = IgnitionClock {
+        fill_n_s: 20.0,
+        drain_time_s: 0.6,
+        full: 1.1,
+        lead_s: 0.01,
+        knot_spacing_s: 0.005,
+        knots: 6,
     };
 
     /// The valve track of `inputs` for `model` (empty when no submodel reads it).
@@ -1297,8 +1442,10 @@ pub(crate) mod tests {
         let (cmds, _) = crate::surrogate::features::source_tests::switching_trajectory(150);
         let mut inputs: Vec<InputVec> = Vec::new();
         let mut states: Vec<StateVec> = Vec::new();
+        let mut clocked_steps = 0;
         for (t, cmd) in cmds.iter().enumerate() {
             let got = p.step(cmd);
+            clocked_steps += usize::from(p.clock.any);
             let mut u = *cmd;
             for e in 0..ENGINE_COUNT {
                 if u[ENGINE_COUNT + e] > 0.5 {
@@ -1316,6 +1463,15 @@ pub(crate) mod tests {
             }
             states.push(got);
         }
+        // The run does go through ignition windows (their terms are evaluated apart).
+        let clocked = model
+            .submodels
+            .iter()
+            .any(|s| s.features.ignition().is_some());
+        assert!(
+            !clocked || clocked_steps > 20,
+            "{clocked_steps} steps in a window"
+        );
         // Seeding from the recorded history mid-run continues identically.
         let mut q = Predictor::new(model);
         let t0 = 77;

@@ -21,8 +21,10 @@ pub const FORMAT: &str = "oils-surrogate";
 /// refuse such files, and this reader refuses version-1 files (retrain them). Version 3
 /// added the valve-filtered command (`valve` in a feature spec); a version-2 file has none
 /// and reads unchanged, so both are read, and a version-2 file that names a valve filter
-/// is refused (no version-2 writer made one).
-pub const VERSION: u32 = 3;
+/// is refused (no version-2 writer made one). Version 4 added the ignition clock
+/// (`ignition` in a valve filter), which a version-3 reader would refuse as an unknown
+/// field; a version-3 file that names one is refused here too.
+pub const VERSION: u32 = 4;
 /// Oldest version this build reads.
 pub const OLDEST_VERSION: u32 = 2;
 
@@ -206,6 +208,17 @@ impl ModelFile {
         {
             return Err(ModelFileError::Invalid(
                 "a valve filter needs file version 3".into(),
+            ));
+        }
+        if version < 4
+            && file
+                .model
+                .submodels
+                .iter()
+                .any(|s| s.features.valve.is_some_and(|v| v.ignition.is_some()))
+        {
+            return Err(ModelFileError::Invalid(
+                "an ignition clock needs file version 4".into(),
             ));
         }
         if file.model.sample_time_ns == 0 {

@@ -1,0 +1,202 @@
+//! Measures hifi's ignition times and fits the ignition clock's fill constant to them
+//! (`fill_n_s` in `[variants.engine_valve.ignition]` of `emulator/config/train.toml`).
+//!
+//! `cargo run --release --example ignition_times [TRAIN_TOML]`
+//!
+//! hifi runs 240 s of random starts (each engine off 0.1-2.6 s, then on 0.5-2 s at a
+//! random command in 320-800 N; the command stays put while off, as hifi's valves do)
+//! in 0.1 ms steps, and each start's ignition is where the engine's thrust crosses
+//! 100 N, interpolated. The clock runs on the same commands at the surrogate's 10 ms
+//! step, with the training configuration's valve filter and hifi's dome drain time and
+//! knee. A constant offset between clock and hifi is absorbed by the hat functions, so
+//! the fit minimises the spread of the difference, and prints the offset and the spread
+//! (with `IGNITION_TABLE=1` also for each fill constant from 25 to 45 N s).
+
+use anyhow::{bail, Context, Result};
+use oils_emulator::propulsion::hifi::HifiPropulsion;
+use oils_emulator::propulsion::{EngineCommand, Propulsion};
+use oils_emulator::surrogate::features::{
+    IgnitionClock, InputVec, ValveFilter, ValveTrack, INPUT_DIM, NOT_IGNITED,
+};
+use oils_emulator::surrogate::{hifi_params_of, TrainConfig};
+use oils_shared::ENGINE_COUNT;
+
+const STEP_NS: u64 = 10_000_000;
+const FINE_STEPS: u64 = 100;
+const STEPS: usize = 24_000;
+/// Thrust that marks ignition, N.
+const IGNITION_THRUST_N: f64 = 100.0;
+
+/// A small deterministic generator (xorshift64), so the run needs no extra crate.
+struct Xorshift(u64);
+
+impl Xorshift {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// A start: the 10 ms step it switched on at, and hifi's ignition time after it, s.
+struct Start {
+    engine: usize,
+    step: usize,
+    ignition_s: Option<f64>,
+}
+
+fn main() -> Result<()> {
+    let path = std::env::args()
+        .nth(1)
+        .unwrap_or_else(|| concat!(env!("CARGO_MANIFEST_DIR"), "/config/train.toml").to_string());
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {path}"))?;
+    let cfg = TrainConfig::from_toml(&text).with_context(|| format!("parsing {path}"))?;
+    let Some(valve) = cfg.variants.engine_valve else {
+        bail!("{path} has no [variants.engine_valve]");
+    };
+    let hifi_params = hifi_params_of(&cfg)?;
+    let mut hifi = HifiPropulsion::new(&hifi_params, &cfg.propulsion)?;
+
+    // The schedule and hifi's response.
+    let mut rng = Xorshift(0x9e37_79b9_7f4a_7c15);
+    let mut cmd = EngineCommand {
+        thrust_cmd_n: [320.0; ENGINE_COUNT],
+        on: [false; ENGINE_COUNT],
+    };
+    let mut next: [usize; ENGINE_COUNT] =
+        std::array::from_fn(|_| 10 + (rng.uniform() * 100.0) as usize);
+    let mut inputs: Vec<InputVec> = Vec::with_capacity(STEPS);
+    let mut starts: Vec<Start> = Vec::new();
+    let mut prev_thrust = [0.0; ENGINE_COUNT];
+    for k in 0..STEPS {
+        for (e, due) in next.iter_mut().enumerate() {
+            if k != *due {
+                continue;
+            }
+            cmd.on[e] = !cmd.on[e];
+            if cmd.on[e] {
+                cmd.thrust_cmd_n[e] = 320.0 + rng.uniform() * 480.0;
+                *due = k + 50 + (rng.uniform() * 150.0) as usize;
+                starts.push(Start {
+                    engine: e,
+                    step: k,
+                    ignition_s: None,
+                });
+            } else {
+                *due = k + 10 + (rng.uniform() * 250.0) as usize;
+            }
+        }
+        let mut u = [0.0; INPUT_DIM];
+        for e in 0..ENGINE_COUNT {
+            u[e] = cmd.thrust_cmd_n[e];
+            u[ENGINE_COUNT + e] = f64::from(u8::from(cmd.on[e]));
+        }
+        inputs.push(u);
+        for fine in 0..FINE_STEPS {
+            let out = hifi.step(&cmd, STEP_NS / FINE_STEPS);
+            let t_s = (k as f64 + (fine + 1) as f64 / FINE_STEPS as f64) * 1e-2;
+            for s in starts.iter_mut().filter(|s| s.ignition_s.is_none()) {
+                let (a, b) = (prev_thrust[s.engine], out.thrust_n[s.engine]);
+                if b >= IGNITION_THRUST_N {
+                    let within = (IGNITION_THRUST_N - a) / (b - a);
+                    let fine_s = 1e-2 / FINE_STEPS as f64;
+                    s.ignition_s = Some(t_s - fine_s * (1.0 - within) - s.step as f64 * 1e-2);
+                }
+            }
+            prev_thrust = out.thrust_n;
+        }
+    }
+    // Starts where the thrust had not yet decayed below the mark are not ignitions.
+    let starts: Vec<(usize, usize, f64)> = starts
+        .iter()
+        .filter_map(|s| s.ignition_s.map(|t| (s.engine, s.step, t)))
+        .filter(|&(_, _, t)| t > 0.005)
+        .collect();
+
+    // The clock's ignition time for each start (end of the step minus the time since).
+    let clock_times = |fill_n_s: f64| -> Vec<Option<f64>> {
+        let clock = IgnitionClock {
+            fill_n_s,
+            drain_time_s: hifi_params.engine.dome_drain_time_s,
+            full: 1.0 / hifi_params.engine.dome_fill_knee_frac,
+            lead_s: 0.0,
+            knot_spacing_s: 0.005,
+            knots: 1,
+        };
+        let mut track = ValveTrack::new(
+            ValveFilter {
+                ignition: Some(clock),
+                ..valve
+            },
+            STEP_NS as f64 * 1e-9,
+        );
+        let mut ignited_at: Vec<Vec<(usize, f64)>> = vec![Vec::new(); ENGINE_COUNT];
+        let mut before = [NOT_IGNITED; ENGINE_COUNT];
+        for (k, u) in inputs.iter().enumerate() {
+            let s = track.advance(u);
+            for e in 0..ENGINE_COUNT {
+                let since = s.since_ignition_s[e];
+                if since != NOT_IGNITED && before[e] == NOT_IGNITED {
+                    ignited_at[e].push((k, (k + 1) as f64 * 1e-2 - since));
+                }
+                before[e] = since;
+            }
+        }
+        starts
+            .iter()
+            .map(|&(e, step, _)| {
+                ignited_at[e]
+                    .iter()
+                    .find(|&&(k, _)| k >= step)
+                    .map(|&(_, t)| t - step as f64 * 1e-2)
+            })
+            .collect()
+    };
+    let spread = |fill_n_s: f64| -> Option<(f64, f64, f64)> {
+        let est = clock_times(fill_n_s);
+        let d: Vec<f64> = starts
+            .iter()
+            .zip(&est)
+            .map(|(&(_, _, t), c)| c.map(|c| t - c))
+            .collect::<Option<_>>()?;
+        let mean = d.iter().sum::<f64>() / d.len() as f64;
+        let rms = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
+        let max = d.iter().map(|x| (x - mean).abs()).fold(0.0, f64::max);
+        Some((mean, rms, max))
+    };
+    let mut best: Option<(f64, (f64, f64, f64))> = None;
+    for i in 0..=400 {
+        let fill_n_s = 20.0 + 0.1 * f64::from(i);
+        if let Some(s) = spread(fill_n_s) {
+            if best.is_none_or(|(_, b)| s.1 < b.1) {
+                best = Some((fill_n_s, s));
+            }
+        }
+    }
+    if std::env::var_os("IGNITION_TABLE").is_some() {
+        for i in 0..=20 {
+            let f = 25.0 + f64::from(i);
+            if let Some((m, r, x)) = spread(f) {
+                println!("{f:.1} {:.2} {:.2} {:.2}", m * 1e3, r * 1e3, x * 1e3);
+            }
+        }
+    }
+    let Some((fill_n_s, (mean, rms, max))) = best else {
+        bail!("no fill constant in 20-60 N s ignites every start");
+    };
+    println!(
+        "{} starts; hifi ignition {:.1}-{:.1} ms after the switch",
+        starts.len(),
+        starts.iter().map(|s| s.2).fold(f64::INFINITY, f64::min) * 1e3,
+        starts.iter().map(|s| s.2).fold(0.0, f64::max) * 1e3
+    );
+    println!(
+        "fill_n_s = {fill_n_s:.1}: hifi ignites {:.2} ms after the clock on average; \
+         spread RMS {:.2} ms, max {:.2} ms",
+        mean * 1e3,
+        rms * 1e3,
+        max * 1e3
+    );
+    Ok(())
+}
