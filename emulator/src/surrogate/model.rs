@@ -1332,6 +1332,25 @@ pub(crate) mod tests {
         }
     }
 
+    /// A term with two phase or ignition features would be evaluated in one's window
+    /// with the other's in-phase constant: refused.
+    #[test]
+    fn a_term_with_two_phase_features_is_refused() {
+        let mut m = dense_model(1);
+        m.check().unwrap();
+        let s = &mut m.submodels[0];
+        let names = s.features.names();
+        let at = |n: &str| names.iter().position(|x| x == n).unwrap() as u16;
+        let one = s.features.dim() as u16;
+        s.rows[0].terms.push(ActiveTerm {
+            name: "priming[t]*stop0[t]".into(),
+            factors: [at("priming[t]"), at("stop0[t]"), one],
+            coef: 1.0,
+        });
+        let e = m.check().unwrap_err();
+        assert!(e.contains("more than one phase or ignition feature"), "{e}");
+    }
+
     /// The AVX2 build of the step gives the same bits as the portable one (on a CPU
     /// without AVX2 both runs take the portable path).
     #[test]
