@@ -182,6 +182,12 @@ impl IgnitionClock {
         (1.0 - (at - j as f64).abs()).max(0.0)
     }
 
+    /// The priming indicator: the engine is on and the clock has not started.
+    #[inline(always)]
+    pub fn priming(on: bool, since_ignition_s: f64) -> f64 {
+        f64::from(u8::from(on && since_ignition_s == NOT_IGNITED))
+    }
+
     /// Time after ignition beyond which every hat is 0, s.
     pub fn window_s(&self) -> f64 {
         self.knots as f64 * self.knot_spacing_s - self.lead_s
@@ -301,6 +307,11 @@ impl ValveTrack {
             decay: (-dt_s / filter.time_constant_s).exp(),
             state: filter.rest(),
         }
+    }
+
+    /// The ignition clock the filter runs, if any.
+    pub fn ignition(&self) -> Option<IgnitionClock> {
+        self.filter.ignition
     }
 
     /// Back to rest.
@@ -452,7 +463,7 @@ impl Source {
 /// The priming indicator of `engine` at step `t` (see [`Source::Priming`]).
 fn priming<H: History + ?Sized>(h: &H, engine: usize) -> f64 {
     let on = h.input(0)[ENGINE_COUNT + engine] > 0.5;
-    indicator(on && h.valve(0).since_ignition_s[engine] == NOT_IGNITED)
+    IgnitionClock::priming(on, h.valve(0).since_ignition_s[engine])
 }
 
 fn indicator(b: bool) -> f64 {

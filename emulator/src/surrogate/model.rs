@@ -481,7 +481,6 @@ struct ClockGather {
 /// [`crate::surrogate::features::IgnitionClock`]).
 #[derive(Debug, Clone, Copy)]
 struct Clock {
-    on: [bool; ENGINE_COUNT],
     since_ignition_s: [f64; ENGINE_COUNT],
     /// Engines whose ignition features may be non-zero: on, and not past the last hat.
     active: [bool; ENGINE_COUNT],
@@ -491,7 +490,6 @@ struct Clock {
 
 impl Clock {
     const IDLE: Self = Self {
-        on: [false; ENGINE_COUNT],
         since_ignition_s: [NOT_IGNITED; ENGINE_COUNT],
         active: [false; ENGINE_COUNT],
         any: false,
@@ -821,7 +819,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
                     for (e, x) in x.iter_mut().enumerate() {
                         let since = clock.since_ignition_s[e];
                         let raw = match g.hat {
-                            None => f64::from(u8::from(clock.on[e] && since == NOT_IGNITED)),
+                            None => IgnitionClock::priming(phases.on[e], since),
                             Some(j) => c.hat(since, j),
                         };
                         let (v, out) = g.scaling.apply(raw);
@@ -984,8 +982,7 @@ pub struct Predictor {
     phases: Phases,
     /// The valve filter some submodel reads, and its state after the latest step.
     valve: Option<ValveTrack>,
-    /// Its ignition clock, if a submodel reads one, and the clocks after the step.
-    ignition: Option<IgnitionClock>,
+    /// The ignition clocks after the step (idle without one).
     clock: Clock,
     out_of_envelope_steps: u64,
     /// Step with the AVX2 build of the same code (x86-64 CPUs that have it).
@@ -1036,7 +1033,6 @@ impl Predictor {
                 .filter(|s| s.features.valve_features() > 0)
                 .find_map(|s| s.features.valve)
                 .map(|f| ValveTrack::new(f, model.sample_time_ns as f64 * 1e-9)),
-            ignition: model.submodels.iter().find_map(|s| s.features.ignition()),
             clock: Clock::IDLE,
             out_of_envelope_steps: 0,
             avx2: cfg!(target_arch = "x86_64") && avx2_detected(),
@@ -1151,17 +1147,18 @@ impl Predictor {
         // is still an old one; it is never read (state lags start at 1).
         self.ring.set_input(head, &u);
         if let Some(v) = &mut self.valve {
+            let ignition = v.ignition();
             let s = v.advance(&u);
             self.ring.set_valve(head, &s.valve_n);
-            if let Some(c) = &self.ignition {
+            if let Some(c) = ignition {
+                // The switches are the phases' (already updated for this step).
                 let window_s = c.window_s();
                 let k = &mut self.clock;
                 k.any = false;
                 for e in 0..ENGINE_COUNT {
                     let since = s.since_ignition_s[e];
-                    k.on[e] = u[ENGINE_COUNT + e] > 0.5;
                     k.since_ignition_s[e] = since;
-                    k.active[e] = k.on[e] && since < window_s;
+                    k.active[e] = self.phases.on[e] && since < window_s;
                     k.any |= k.active[e];
                 }
             }
