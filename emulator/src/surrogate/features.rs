@@ -208,10 +208,18 @@ impl IgnitionClock {
     ) {
         if on {
             let f0 = *fill;
-            let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / self.fill_n_s;
             if f0 >= 1.0 && *since_s != NOT_IGNITED {
                 *since_s += dt_s;
-            } else if f1 >= 1.0 {
+                // Running with a full dome (the common case) costs no division: the
+                // fill would only be clamped back to `full`.
+                if f0 < self.full {
+                    let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / self.fill_n_s;
+                    *fill = f1.min(self.full);
+                }
+                return;
+            }
+            let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / self.fill_n_s;
+            if f1 >= 1.0 {
                 // Ignition within the step (at its start when the dome was primed).
                 let at = ((1.0 - f0) / (f1 - f0)).max(0.0);
                 *since_s = (1.0 - at) * dt_s;
@@ -322,30 +330,60 @@ impl ValveTrack {
     /// Advances one step with `input` held. The actuator solution is exact for a held
     /// target: the same element as hifi's TFCV ([`Tfcv::advance`]), in newtons, without
     /// quantisation. The ignition clock, if any, follows the valve.
+    ///
+    /// Written engine-parallel for the step path: an actuator within the lag's band of
+    /// its target (steady running) takes the exponential step, computed for the four
+    /// engines at once; one outside it (a large command step) takes [`Tfcv::advance`].
+    /// Each engine sees the same operations as in [`Tfcv::advance`], so the bits are
+    /// the same (tested against it).
     #[inline]
     pub fn advance(&mut self, input: &InputVec) -> &ValveState {
         let s = &mut self.state;
+        let d = &self.dynamics;
+        let band = d.rate_per_s * d.tau_s;
+        let mut target = [0.0; ENGINE_COUNT];
+        let mut actuator = [0.0; ENGINE_COUNT];
+        let mut lagging = 0u8;
         for e in 0..ENGINE_COUNT {
-            let mut v = Tfcv {
-                target: input[e].max(self.filter.park_n),
-                actuator: s.actuator_n[e],
-                valve: s.valve_n[e],
-            };
-            v.advance(self.dt_s, &self.dynamics, self.decay);
-            if let Some(c) = &self.filter.ignition {
-                let on = input[ENGINE_COUNT + e] > 0.5;
+            target[e] = input[e].max(self.filter.park_n);
+            let err = target[e] - s.actuator_n[e];
+            lagging |= u8::from(err.abs() > band) << e;
+            actuator[e] = target[e] - err * self.decay;
+        }
+        if lagging != 0 {
+            for e in (0..ENGINE_COUNT).filter(|e| lagging & (1 << e) != 0) {
+                let mut v = Tfcv {
+                    target: target[e],
+                    actuator: s.actuator_n[e],
+                    valve: s.valve_n[e],
+                };
+                v.advance(self.dt_s, d, self.decay);
+                actuator[e] = v.actuator;
+            }
+        }
+        let mut valve = [0.0; ENGINE_COUNT];
+        for e in 0..ENGINE_COUNT {
+            // `f64::clamp`'s two comparisons, without its check that lo <= hi (always
+            // true here: the half backlash is not negative).
+            let (lo, hi) = (actuator[e] - d.half_backlash, actuator[e] + d.half_backlash);
+            let v = s.valve_n[e];
+            let v = if v < lo { lo } else { v };
+            valve[e] = if v > hi { hi } else { v };
+        }
+        if let Some(c) = &self.filter.ignition {
+            for e in 0..ENGINE_COUNT {
                 c.advance(
-                    on,
+                    input[ENGINE_COUNT + e] > 0.5,
                     s.valve_n[e],
-                    v.valve,
+                    valve[e],
                     self.dt_s,
                     &mut s.fill[e],
                     &mut s.since_ignition_s[e],
                 );
             }
-            s.actuator_n[e] = v.actuator;
-            s.valve_n[e] = v.valve;
         }
+        s.actuator_n = actuator;
+        s.valve_n = valve;
         s
     }
 }
@@ -1078,6 +1116,48 @@ pub(crate) mod source_tests {
         // Commands below the park value are raised to it.
         v.reset();
         assert_eq!(v.advance(&cmd(100.0, true)).actuator_n[0], 320.0);
+        // Engine-parallel stepping is hifi's element, bit for bit: a random walk of
+        // commands with large steps (rate-limited, then exponential) and small ones
+        // (within the band), engines switching on and off.
+        let dyn_ = TfcvDynamics {
+            tau_s: f.time_constant_s,
+            rate_per_s: f.rate_n_per_s,
+            half_backlash: 0.5 * f.backlash_n,
+            quantum: 0.0,
+        };
+        let decay = (-0.01f64 / f.time_constant_s).exp();
+        let mut w = ValveTrack::new(f, 0.01);
+        let mut hifi = [Tfcv {
+            target: 0.0,
+            actuator: 320.0,
+            valve: 320.0,
+        }; ENGINE_COUNT];
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut lagging_steps = 0;
+        for k in 0..2000 {
+            let mut u = [0.0; INPUT_DIM];
+            for (e, h) in hifi.iter_mut().enumerate() {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                let r = (seed >> 11) as f64 / (1u64 << 53) as f64;
+                let on = (k / 37 + e) % 5 != 0;
+                u[e] = if on { 300.0 + 500.0 * r * r } else { 0.0 };
+                u[ENGINE_COUNT + e] = f64::from(u8::from(on));
+                h.target = u[e].max(f.park_n);
+                lagging_steps += usize::from((h.target - h.actuator).abs() > 90.0);
+                h.advance(0.01, &dyn_, decay);
+            }
+            let s = w.advance(&u);
+            for (e, h) in hifi.iter().enumerate() {
+                assert_eq!(s.actuator_n[e].to_bits(), h.actuator.to_bits(), "step {k}");
+                assert_eq!(s.valve_n[e].to_bits(), h.valve.to_bits(), "step {k}");
+            }
+        }
+        assert!(
+            lagging_steps > 500,
+            "{lagging_steps} rate-limited engine steps"
+        );
         // Training's track is the same stepping.
         let inputs = [cmd(0.0, false), cmd(800.0, true), cmd(790.0, true)];
         let mut w = ValveTrack::new(f, 0.01);

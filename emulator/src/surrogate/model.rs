@@ -319,9 +319,9 @@ struct Terms {
     cubic: Vec<([u16; 3], f64)>,
 }
 
-/// Independent partial sums per lane in [`Terms::add`]. One running sum would make every
-/// term wait for the previous addition (a chain of some 4 cycles per term, most of the
-/// step); four sums overlap them. The order of additions differs from library order,
+/// Independent partial sums per lane in [`Factored::add`] and [`Dense::eval`]. One
+/// running sum would make every term wait for the previous addition (a chain of some 4
+/// cycles per term, most of the step); four sums overlap them. The order of additions differs from library order,
 /// which moves the result by rounding only.
 const PARTIAL_SUMS: usize = 4;
 
@@ -365,18 +365,6 @@ impl Terms {
         }
     }
 
-    /// Adds the terms of every lane (`LANES` = 1 or 4) to `y`.
-    #[inline(always)]
-    fn add<const LANES: usize>(&self, x: &[[f64; LANES]], y: &mut [f64; LANES]) {
-        let mut acc = [[0.0; LANES]; PARTIAL_SUMS];
-        accumulate(&self.lin, x, &mut acc);
-        accumulate(&self.quad, x, &mut acc);
-        accumulate(&self.cubic, x, &mut acc);
-        for e in 0..LANES {
-            y[e] += (acc[0][e] + acc[1][e]) + (acc[2][e] + acc[3][e]);
-        }
-    }
-
     /// Adds the terms of one lane to `y` (the few phase terms of one engine).
     #[inline(always)]
     fn add_lane<const LANES: usize>(&self, x: &[[f64; LANES]], e: usize, y: &mut f64) {
@@ -393,6 +381,149 @@ impl Terms {
     }
 }
 
+/// Every-step terms factored by a shared first factor: `sum_a x_a * (k_a + sum c x_b +
+/// sum c x_b x_d)`. A product term then costs one multiplication fewer and one read
+/// fewer than as a flat term (the shared factor is read and multiplied once per group),
+/// which is most of the step for the thrust row's ~70 quadratic terms. The sum moves by
+/// rounding only (tested against the full evaluation).
+#[derive(Debug, Clone, Default)]
+struct Factored {
+    /// Linear terms that share no factor with a product term: flat, `c * x_a`.
+    single: Vec<([u16; 1], f64)>,
+    groups: Vec<FactorGroup>,
+    /// Inner linear terms `c * x_b`, group after group.
+    lin: Vec<(u16, f64)>,
+    /// Inner quadratic terms `c * x_b * x_d` (from cubic terms), group after group.
+    quad: Vec<([u16; 2], f64)>,
+}
+
+/// One group of [`Factored`]: the shared factor, the inner constant and the group's
+/// inner terms in `lin` and `quad` (start, end).
+#[derive(Debug, Clone, Copy)]
+struct FactorGroup {
+    outer: u16,
+    constant: f64,
+    lin: [u32; 2],
+    quad: [u32; 2],
+}
+
+impl Factored {
+    /// Groups `terms` greedily: the factor shared by most of the remaining terms first,
+    /// so few groups carry many terms.
+    fn new(terms: &Terms) -> Self {
+        let mut rest: Vec<(Vec<u16>, f64)> = terms
+            .lin
+            .iter()
+            .map(|(f, c)| (f.to_vec(), *c))
+            .chain(terms.quad.iter().map(|(f, c)| (f.to_vec(), *c)))
+            .chain(terms.cubic.iter().map(|(f, c)| (f.to_vec(), *c)))
+            .collect();
+        let mut out = Self::default();
+        while !rest.is_empty() {
+            let mut count: std::collections::BTreeMap<u16, usize> = Default::default();
+            for (f, _) in &rest {
+                let mut seen = f.clone();
+                seen.sort_unstable();
+                seen.dedup();
+                for a in seen {
+                    *count.entry(a).or_default() += 1;
+                }
+            }
+            // Most terms first; ties to the lowest slot (deterministic).
+            let (&outer, _) = count
+                .iter()
+                .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(a.0)))
+                .expect("rest is not empty");
+            let mut constant = 0.0;
+            let (lin_start, quad_start) = (out.lin.len(), out.quad.len());
+            let (mine, others): (Vec<_>, Vec<_>) =
+                rest.into_iter().partition(|(f, _)| f.contains(&outer));
+            rest = others;
+            for (mut f, c) in mine {
+                let at = f.iter().position(|&a| a == outer).expect("partitioned");
+                f.remove(at);
+                match f[..] {
+                    [] => constant += c,
+                    [b] => out.lin.push((b, c)),
+                    [b, d] => out.quad.push(([b, d], c)),
+                    _ => unreachable!("a term has 1 to 3 factors"),
+                }
+            }
+            let group = FactorGroup {
+                outer,
+                constant,
+                lin: [lin_start as u32, out.lin.len() as u32],
+                quad: [quad_start as u32, out.quad.len() as u32],
+            };
+            if group.lin[0] == group.lin[1] && group.quad[0] == group.quad[1] {
+                out.single.push(([outer], constant));
+            } else {
+                out.groups.push(group);
+            }
+        }
+        out
+    }
+
+    /// Adds the terms of every lane (`LANES` = 1 or 4) to `y`.
+    #[inline(always)]
+    fn add<const LANES: usize>(&self, x: &[[f64; LANES]], y: &mut [f64; LANES]) {
+        // SAFETY: as in `accumulate`, every slot is below the number of gathered
+        // features, and the group ranges lie within `lin` and `quad` (built together).
+        let at = |i: u16| unsafe { x.get_unchecked(i as usize) };
+        // One group's `x_a * inner`, the inner sum in two halves: the chain of additions
+        // is the group's latency.
+        let group = |g: &FactorGroup| -> [f64; LANES] {
+            let (mut i0, mut i1) = ([g.constant; LANES], [0.0; LANES]);
+            let lin = unsafe { self.lin.get_unchecked(g.lin[0] as usize..g.lin[1] as usize) };
+            let mut pairs = lin.chunks_exact(2);
+            for p in &mut pairs {
+                let (&(b0, c0), &(b1, c1)) = (&p[0], &p[1]);
+                let (x0, x1) = (at(b0), at(b1));
+                for e in 0..LANES {
+                    i0[e] += c0 * x0[e];
+                    i1[e] += c1 * x1[e];
+                }
+            }
+            for &(b, c) in pairs.remainder() {
+                let xb = at(b);
+                for e in 0..LANES {
+                    i0[e] += c * xb[e];
+                }
+            }
+            let quad = unsafe {
+                self.quad
+                    .get_unchecked(g.quad[0] as usize..g.quad[1] as usize)
+            };
+            for &([b, d], c) in quad {
+                let (xb, xd) = (at(b), at(d));
+                for e in 0..LANES {
+                    i1[e] += c * (xb[e] * xd[e]);
+                }
+            }
+            let xa = at(g.outer);
+            let mut v = [0.0; LANES];
+            for e in 0..LANES {
+                v[e] = xa[e] * (i0[e] + i1[e]);
+            }
+            v
+        };
+        let mut acc = [[0.0; LANES]; PARTIAL_SUMS];
+        accumulate(&self.single, x, &mut acc);
+        // The groups are few (about ten): one running sum, kept in a register, is no
+        // longer a chain than the groups' own.
+        let mut groups = [0.0; LANES];
+        for g in &self.groups {
+            let v = group(g);
+            for e in 0..LANES {
+                groups[e] += v[e];
+            }
+        }
+        for e in 0..LANES {
+            y[e] += ((acc[0][e] + acc[1][e]) + (acc[2][e] + acc[3][e])) + groups[e];
+        }
+    }
+}
+
 /// The coefficients of one output, compiled. Terms with a phase indicator that is
 /// exactly 0 outside its phase (uncentred, see `fit::Prepared`) are kept apart, one group
 /// per indicator, and evaluated only for an engine in that phase: in steady running no
@@ -403,7 +534,7 @@ impl Terms {
 #[derive(Debug, Clone, Default)]
 struct CompiledRow {
     intercept: f64,
-    terms: Terms,
+    terms: Factored,
     phase: Vec<Terms>,
     clock: Terms,
 }
@@ -421,9 +552,10 @@ impl CompiledRow {
         clocked: &[bool],
     ) -> Self {
         let one = slot[dim];
+        let mut every = Terms::default();
         let mut row = Self {
             intercept: r.intercept,
-            terms: Terms::default(),
+            terms: Factored::default(),
             phase: vec![Terms::default(); groups],
             clock: Terms::default(),
         };
@@ -441,9 +573,10 @@ impl CompiledRow {
                 [] if f.is_empty() => row.intercept += t.coef,
                 [g] => row.phase[g].push(&f, t.coef),
                 _ if f.iter().any(|&s| clocked[s as usize]) => row.clock.push(&f, t.coef),
-                _ => row.terms.push(&f, t.coef),
+                _ => every.push(&f, t.coef),
             }
         }
+        row.terms = Factored::new(&every);
         row
     }
 }
@@ -526,7 +659,57 @@ struct CompiledSub<const LANES: usize> {
     /// Linear terms only, their coefficients scaled: the features are gathered clamped
     /// but unscaled.
     folded: bool,
+    /// A folded submodel of up to four rows, as one vector of the rows' coefficients
+    /// per gathered feature: a feature then costs one vector multiply-add for every row
+    /// at once instead of one scalar multiply-add per row that uses it.
+    dense: Option<Dense>,
     rows: Vec<CompiledRow>,
+}
+
+/// See [`CompiledSub::dense`]: `intercept[r]` and `coef[slot][r]` of row `r` (0 where
+/// the row does not use the feature, and for rows past the last).
+#[derive(Debug, Clone)]
+struct Dense {
+    intercept: [f64; 4],
+    coef: Vec<[f64; 4]>,
+}
+
+impl Dense {
+    /// Gathers and clamps the features (`gather[k]` is slot k) and returns the rows'
+    /// sums, in four partial sums, and whether a feature was outside its envelope. One
+    /// pass: a feature is read, clamped and multiplied into every row while in a
+    /// register, rather than stored to `x` and read back.
+    #[inline(always)]
+    fn eval(&self, gather: &[Gather], window: &[f64]) -> ([f64; 4], bool) {
+        let mut acc = [[0.0; 4]; PARTIAL_SUMS];
+        let mut outside = 0;
+        let mut add = |a: &mut [f64; 4], g: &Gather, c: &[f64; 4]| {
+            // SAFETY: as in `gather`, every offset lies inside the window.
+            let (v, out) = g.scaling.clamp(unsafe { *window.get_unchecked(g.offset) });
+            outside |= out;
+            for r in 0..4 {
+                a[r] += c[r] * v;
+            }
+        };
+        // Four features at a time, one partial sum each (constant indices keep the sums
+        // in registers).
+        let mut chunks = gather
+            .chunks_exact(PARTIAL_SUMS)
+            .zip(self.coef.chunks_exact(PARTIAL_SUMS));
+        for (g, c) in &mut chunks {
+            for k in 0..PARTIAL_SUMS {
+                add(&mut acc[k], &g[k], &c[k]);
+            }
+        }
+        let done = gather.len() / PARTIAL_SUMS * PARTIAL_SUMS;
+        for (k, (g, c)) in gather[done..].iter().zip(&self.coef[done..]).enumerate() {
+            add(&mut acc[k], g, c);
+        }
+        let y = std::array::from_fn(|r| {
+            self.intercept[r] + ((acc[0][r] + acc[1][r]) + (acc[2][r] + acc[3][r]))
+        });
+        (y, outside != 0)
+    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -756,7 +939,23 @@ impl<const LANES: usize> CompiledSub<LANES> {
                 g
             }
         };
+        let dense = (folded && LANES == 1 && rows.len() <= 4).then(|| {
+            let mut d = Dense {
+                intercept: [0.0; 4],
+                coef: vec![[0.0; 4]; count],
+            };
+            for (r, row) in rows.iter().enumerate() {
+                d.intercept[r] = row.intercept;
+                // Folded rows are linear: every term is a single factor.
+                debug_assert!(row.terms.groups.is_empty());
+                for &([a], c) in &row.terms.single {
+                    d.coef[a as usize][r] += c;
+                }
+            }
+            d
+        });
         Self {
+            dense,
             phase_group,
             target: s.target,
             outputs: s.outputs.clone(),
@@ -843,6 +1042,14 @@ impl<const LANES: usize> CompiledSub<LANES> {
         prev: &StateVec,
         next: &mut StateVec,
     ) -> bool {
+        if let Some(d) = &self.dense {
+            debug_assert!(self.lanes.is_empty() && self.phases.is_empty() && self.clock.is_empty());
+            let (y, outside) = d.eval(&self.shared, window);
+            for (&o, y) in self.outputs.iter().zip(y) {
+                next[o] = self.target.apply(prev[o], y);
+            }
+            return outside;
+        }
         let outside = self.gather(window, phases, clock);
         if LANES == 1 {
             for (row, &o) in self.rows.iter().zip(&self.outputs) {
@@ -927,31 +1134,36 @@ impl Ring {
         (self.head + self.depth - lag) % self.depth
     }
 
-    /// Writes `values` from component `comp` of record `i`, in both copies.
+    /// Writes `values` from component `comp` of record `i`, in both copies, then
+    /// `last` after them. Value by value rather than through an assembled array: the
+    /// values were just computed one by one, and a wide read of them would wait for
+    /// the narrow writes (a store-forwarding stall: in a profile of the step, those
+    /// wide reads were among its hottest instructions).
     #[inline(always)]
-    fn write(&mut self, i: usize, comp: usize, values: &[f64]) {
+    fn write(&mut self, i: usize, comp: usize, values: &[f64], last: Option<f64>) {
         for copy in [i, i + self.depth] {
             let at = copy * REC_DIM + comp;
-            self.buf[at..at + values.len()].copy_from_slice(values);
+            let r = &mut self.buf[at..at + values.len() + usize::from(last.is_some())];
+            for (r, &v) in r.iter_mut().zip(values) {
+                *r = v;
+            }
+            if let Some(v) = last {
+                r[values.len()] = v;
+            }
         }
     }
 
     fn set_state(&mut self, i: usize, s: &StateVec) {
-        let mut v = [0.0; STATE_DIM + 1];
-        v[..STATE_DIM].copy_from_slice(s);
-        v[STATE_DIM] = lambda_of(s[STATE_MF], s[STATE_MO]);
-        self.write(i, REC_STATE, &v);
+        let lambda = lambda_of(s[STATE_MF], s[STATE_MO]);
+        self.write(i, REC_STATE, s, Some(lambda));
     }
 
     fn set_valve(&mut self, i: usize, valve_n: &[f64; ENGINE_COUNT]) {
-        self.write(i, REC_VALVE, valve_n);
+        self.write(i, REC_VALVE, valve_n, None);
     }
 
     fn set_input(&mut self, i: usize, u: &InputVec) {
-        let mut v = [0.0; INPUT_DIM + 1];
-        v[..INPUT_DIM].copy_from_slice(u);
-        v[INPUT_DIM] = command_sum_of(u);
-        self.write(i, 0, &v);
+        self.write(i, 0, u, Some(command_sum_of(u)));
     }
 
     /// The latest state.
