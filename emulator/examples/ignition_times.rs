@@ -1,16 +1,21 @@
-//! Measures hifi's ignition times and fits the ignition clock's fill constant to them
-//! (`fill_n_s` in `[variants.engine_valve.ignition]` of `emulator/config/train.toml`).
+//! Measures hifi's ignition times and fits the ignition clock's fill constant and sag to
+//! them (`fill_n_s` and `sag_per_n` in `[variants.engine_valve.ignition]` of
+//! `emulator/config/train.toml`).
 //!
 //! `cargo run --release --example ignition_times [TRAIN_TOML]`
 //!
-//! hifi runs 240 s of random starts (each engine off 0.1-2.6 s, then on 0.5-2 s at a
-//! random command in 320-800 N; the command stays put while off, as hifi's valves do)
-//! in 0.1 ms steps, and each start's ignition is where the engine's thrust crosses
+//! hifi runs 240 s of starts in 0.1 ms steps. The first half is random and independent
+//! (each engine off 0.1-2.6 s, then on 0.5-2 s at a random command in 320-800 N); the
+//! second half is group starts (every 3 s, two to four engines switch on together at
+//! random commands from 1.5 s off), where the engines draw on the shared feed at once.
+//! An off engine is commanded 0 N, as training, validation and the runtime command it,
+//! so its valve parks. Each start's ignition is where the engine's thrust crosses
 //! 100 N, interpolated. The clock runs on the same commands at the surrogate's 10 ms
 //! step, with the training configuration's valve filter and hifi's dome drain time and
 //! knee. A constant offset between clock and hifi is absorbed by the hat functions, so
-//! the fit minimises the spread of the difference, and prints the offset and the spread
-//! (with `IGNITION_TABLE=1` also for each fill constant from 25 to 45 N s).
+//! the fit minimises the spread of the difference over a grid of fill constants and
+//! sags, and prints the offset and the spread, for all starts and for group starts
+//! (with `IGNITION_TABLE=1` also the best spread for each sag).
 
 use anyhow::{bail, Context, Result};
 use oils_emulator::propulsion::hifi::HifiPropulsion;
@@ -24,6 +29,8 @@ use oils_shared::ENGINE_COUNT;
 const STEP_NS: u64 = 10_000_000;
 const FINE_STEPS: u64 = 100;
 const STEPS: usize = 24_000;
+/// Steps of one group-start cycle (off half the time).
+const GROUP_CYCLE_STEPS: usize = 300;
 /// Thrust that marks ignition, N.
 const IGNITION_THRUST_N: f64 = 100.0;
 
@@ -39,10 +46,12 @@ impl Xorshift {
     }
 }
 
-/// A start: the 10 ms step it switched on at, and hifi's ignition time after it, s.
+/// A start: the 10 ms step it switched on at, whether it is one of a group start, and
+/// hifi's ignition time after it, s.
 struct Start {
     engine: usize,
     step: usize,
+    group: bool,
     ignition_s: Option<f64>,
 }
 
@@ -61,7 +70,7 @@ fn main() -> Result<()> {
     // The schedule and hifi's response.
     let mut rng = Xorshift(0x9e37_79b9_7f4a_7c15);
     let mut cmd = EngineCommand {
-        thrust_cmd_n: [320.0; ENGINE_COUNT],
+        thrust_cmd_n: [0.0; ENGINE_COUNT],
         on: [false; ENGINE_COUNT],
     };
     let mut next: [usize; ENGINE_COUNT] =
@@ -70,26 +79,46 @@ fn main() -> Result<()> {
     let mut starts: Vec<Start> = Vec::new();
     let mut prev_thrust = [0.0; ENGINE_COUNT];
     for k in 0..STEPS {
-        for (e, due) in next.iter_mut().enumerate() {
-            if k != *due {
-                continue;
+        let mut switch_on = |e: usize, cmd: &mut EngineCommand, rng: &mut Xorshift| {
+            cmd.on[e] = true;
+            cmd.thrust_cmd_n[e] = 320.0 + rng.uniform() * 480.0;
+            starts.push(Start {
+                engine: e,
+                step: k,
+                group: k >= STEPS / 2,
+                ignition_s: None,
+            });
+        };
+        if k < STEPS / 2 {
+            for (e, due) in next.iter_mut().enumerate() {
+                if k != *due {
+                    continue;
+                }
+                if cmd.on[e] {
+                    cmd.on[e] = false;
+                    cmd.thrust_cmd_n[e] = 0.0;
+                    *due = k + 10 + (rng.uniform() * 250.0) as usize;
+                } else {
+                    switch_on(e, &mut cmd, &mut rng);
+                    *due = k + 50 + (rng.uniform() * 150.0) as usize;
+                }
             }
-            cmd.on[e] = !cmd.on[e];
-            if cmd.on[e] {
-                cmd.thrust_cmd_n[e] = 320.0 + rng.uniform() * 480.0;
-                *due = k + 50 + (rng.uniform() * 150.0) as usize;
-                starts.push(Start {
-                    engine: e,
-                    step: k,
-                    ignition_s: None,
-                });
-            } else {
-                *due = k + 10 + (rng.uniform() * 250.0) as usize;
+        } else {
+            // Group starts: all off at the half-way mark and 150 steps into every
+            // 300-step cycle, two to four on together at its start.
+            let phase = (k - STEPS / 2) % GROUP_CYCLE_STEPS;
+            if phase == 0 {
+                cmd = EngineCommand::default();
+            } else if phase == GROUP_CYCLE_STEPS / 2 {
+                let n = 2 + (rng.uniform() * 3.0) as usize;
+                for e in 0..n.min(ENGINE_COUNT) {
+                    switch_on(e, &mut cmd, &mut rng);
+                }
             }
         }
         let mut u = [0.0; INPUT_DIM];
         for e in 0..ENGINE_COUNT {
-            u[e] = cmd.thrust_cmd_n[e];
+            u[e] = if cmd.on[e] { cmd.thrust_cmd_n[e] } else { 0.0 };
             u[ENGINE_COUNT + e] = f64::from(u8::from(cmd.on[e]));
         }
         inputs.push(u);
@@ -108,16 +137,17 @@ fn main() -> Result<()> {
         }
     }
     // Starts where the thrust had not yet decayed below the mark are not ignitions.
-    let starts: Vec<(usize, usize, f64)> = starts
+    let starts: Vec<(usize, usize, bool, f64)> = starts
         .iter()
-        .filter_map(|s| s.ignition_s.map(|t| (s.engine, s.step, t)))
-        .filter(|&(_, _, t)| t > 0.005)
+        .filter_map(|s| s.ignition_s.map(|t| (s.engine, s.step, s.group, t)))
+        .filter(|&(_, _, _, t)| t > 0.005)
         .collect();
 
     // The clock's ignition time for each start (end of the step minus the time since).
-    let clock_times = |fill_n_s: f64| -> Vec<Option<f64>> {
+    let clock_times = |fill_n_s: f64, sag_per_n: f64| -> Vec<Option<f64>> {
         let clock = IgnitionClock {
             fill_n_s,
+            sag_per_n,
             drain_time_s: hifi_params.engine.dome_drain_time_s,
             full: 1.0 / hifi_params.engine.dome_fill_knee_frac,
             lead_s: 0.0,
@@ -145,7 +175,7 @@ fn main() -> Result<()> {
         }
         starts
             .iter()
-            .map(|&(e, step, _)| {
+            .map(|&(e, step, _, _)| {
                 ignited_at[e]
                     .iter()
                     .find(|&&(k, _)| k >= step)
@@ -153,50 +183,92 @@ fn main() -> Result<()> {
             })
             .collect()
     };
-    let spread = |fill_n_s: f64| -> Option<(f64, f64, f64)> {
-        let est = clock_times(fill_n_s);
-        let d: Vec<f64> = starts
+    // Offset and spread (RMS, max) of hifi minus clock, over all starts and over the
+    // group starts (the same offset: the model has one set of hats).
+    type Spread = ((f64, f64, f64), (f64, f64));
+    let spread = |fill_n_s: f64, sag_per_n: f64| -> Option<Spread> {
+        let est = clock_times(fill_n_s, sag_per_n);
+        let d: Vec<(bool, f64)> = starts
             .iter()
             .zip(&est)
-            .map(|(&(_, _, t), c)| c.map(|c| t - c))
+            .map(|(&(_, _, g, t), c)| c.map(|c| (g, t - c)))
             .collect::<Option<_>>()?;
-        let mean = d.iter().sum::<f64>() / d.len() as f64;
-        let rms = (d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
-        let max = d.iter().map(|x| (x - mean).abs()).fold(0.0, f64::max);
-        Some((mean, rms, max))
+        let mean = d.iter().map(|x| x.1).sum::<f64>() / d.len() as f64;
+        let stats = |group_only: bool| {
+            let e: Vec<f64> = d
+                .iter()
+                .filter(|x| x.0 || !group_only)
+                .map(|x| x.1 - mean)
+                .collect();
+            let rms = (e.iter().map(|x| x * x).sum::<f64>() / e.len().max(1) as f64).sqrt();
+            (rms, e.iter().fold(0.0, |m: f64, x| m.max(x.abs())))
+        };
+        let (rms, max) = stats(false);
+        Some(((mean, rms, max), stats(true)))
     };
-    let mut best: Option<(f64, (f64, f64, f64))> = None;
-    for i in 0..=400 {
-        let fill_n_s = 20.0 + 0.1 * f64::from(i);
-        if let Some(s) = spread(fill_n_s) {
-            if best.is_none_or(|(_, b)| s.1 < b.1) {
-                best = Some((fill_n_s, s));
+    let sags: Vec<f64> = (0..=30).map(|i| f64::from(i) * 1e-5).collect();
+    let mut best: Option<(f64, f64, Spread)> = None;
+    let mut best_per_sag = Vec::new();
+    for &sag in &sags {
+        let mut best_here: Option<(f64, Spread)> = None;
+        for i in 0..=200 {
+            let fill_n_s = 20.0 + 0.2 * f64::from(i);
+            if let Some(s) = spread(fill_n_s, sag) {
+                if best_here.is_none_or(|(_, b)| s.0 .1 < b.0 .1) {
+                    best_here = Some((fill_n_s, s));
+                }
+            }
+        }
+        if let Some((f, s)) = best_here {
+            best_per_sag.push((sag, f, s));
+            if best.is_none_or(|(_, _, b)| s.0 .1 < b.0 .1) {
+                best = Some((f, sag, s));
             }
         }
     }
     if std::env::var_os("IGNITION_TABLE").is_some() {
-        for i in 0..=20 {
-            let f = 25.0 + f64::from(i);
-            if let Some((m, r, x)) = spread(f) {
-                println!("{f:.1} {:.2} {:.2} {:.2}", m * 1e3, r * 1e3, x * 1e3);
-            }
+        println!("sag_per_n fill_n_s offset_ms rms_ms max_ms group_rms_ms group_max_ms");
+        for (sag, f, ((m, r, x), (gr, gx))) in &best_per_sag {
+            println!(
+                "{sag:.5} {f:.1} {:.2} {:.2} {:.2} {:.2} {:.2}",
+                m * 1e3,
+                r * 1e3,
+                x * 1e3,
+                gr * 1e3,
+                gx * 1e3
+            );
         }
     }
-    let Some((fill_n_s, (mean, rms, max))) = best else {
+    let Some((fill_n_s, sag_per_n, ((mean, rms, max), (group_rms, group_max)))) = best else {
         bail!("no fill constant in 20-60 N s ignites every start");
     };
+    let groups = starts.iter().filter(|s| s.2).count();
     println!(
-        "{} starts; hifi ignition {:.1}-{:.1} ms after the switch",
+        "{} starts ({groups} in group starts); hifi ignition {:.1}-{:.1} ms after the switch",
         starts.len(),
-        starts.iter().map(|s| s.2).fold(f64::INFINITY, f64::min) * 1e3,
-        starts.iter().map(|s| s.2).fold(0.0, f64::max) * 1e3
+        starts.iter().map(|s| s.3).fold(f64::INFINITY, f64::min) * 1e3,
+        starts.iter().map(|s| s.3).fold(0.0, f64::max) * 1e3
     );
     println!(
-        "fill_n_s = {fill_n_s:.1}: hifi ignites {:.2} ms after the clock on average; \
-         spread RMS {:.2} ms, max {:.2} ms",
+        "fill_n_s = {fill_n_s:.1}, sag_per_n = {sag_per_n:.5}: hifi ignites {:.2} ms after \
+         the clock on average; spread RMS {:.2} ms, max {:.2} ms (group starts: RMS {:.2} \
+         ms, max {:.2} ms)",
         mean * 1e3,
         rms * 1e3,
-        max * 1e3
+        max * 1e3,
+        group_rms * 1e3,
+        group_max * 1e3
     );
+    if let Some((_, f, ((m, r, x), (gr, gx)))) = best_per_sag.first() {
+        println!(
+            "without sag: fill_n_s = {f:.1}, offset {:.2} ms, spread RMS {:.2} ms, max {:.2} \
+             ms (group starts: RMS {:.2} ms, max {:.2} ms)",
+            m * 1e3,
+            r * 1e3,
+            x * 1e3,
+            gr * 1e3,
+            gx * 1e3
+        );
+    }
     Ok(())
 }

@@ -73,7 +73,7 @@ fn bad_model_files_are_refused_clearly() {
         2
     );
 
-    let wrong_version = good.replacen("\"version\": 4", "\"version\": 99", 1);
+    let wrong_version = good.replacen("\"version\": 5", "\"version\": 99", 1);
     let e = refusal(&wrong_version, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 99 }),
@@ -81,20 +81,49 @@ fn bad_model_files_are_refused_clearly() {
     );
     assert!(e.to_string().contains("version 99"));
     // A version-1 file (before the per-engine physics features) is refused by name.
-    let old = good.replacen("\"version\": 4", "\"version\": 1", 1);
+    let old = good.replacen("\"version\": 5", "\"version\": 1", 1);
     let e = refusal(&old, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 1 }),
         "{e}"
     );
     assert!(e.to_string().contains("retrain"), "{e}");
+    // A version-4 file setting the clock's sag is refused (version 4 had none); without
+    // the sag it reads, as a clock without sag.
+    let relabelled = good.replacen("\"version\": 5", "\"version\": 4", 1);
+    let e = refusal(&relabelled, 10_000_000);
+    assert!(e.to_string().contains("needs file version 5"), "{e}");
+    let mut stripped_sags = 0;
+    let mut unsagged: serde_json::Value = serde_json::from_str(&relabelled).unwrap();
+    for sub in unsagged["model"]["submodels"].as_array_mut().unwrap() {
+        // (`get_mut`, not indexing: indexing would insert the missing keys.)
+        let clock = sub
+            .get_mut("features")
+            .and_then(|f| f.get_mut("valve"))
+            .and_then(|v| v.get_mut("ignition"))
+            .and_then(|c| c.as_object_mut());
+        if let Some(clock) = clock {
+            assert!(clock.remove("sag_per_n").is_some());
+            stripped_sags += 1;
+        }
+    }
+    assert_eq!(
+        stripped_sags, 1,
+        "the committed model has one clock, with sag"
+    );
+    let v4 = ModelFile::parse(&unsagged.to_string()).expect("version 4 without sag reads");
+    assert!(v4.model.submodels.iter().all(|s| s
+        .features
+        .valve
+        .and_then(|v| v.ignition)
+        .is_none_or(|c| c.sag_per_n == 0.0)));
     // A version-3 file naming an ignition clock is refused (version 3 had none).
-    let relabelled = good.replacen("\"version\": 4", "\"version\": 3", 1);
+    let relabelled = good.replacen("\"version\": 5", "\"version\": 3", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 4"), "{e}");
     // Version 2 (before the valve filter) still reads; a version-2 file naming a valve
     // filter is refused (no version-2 writer made one).
-    let relabelled = good.replacen("\"version\": 4", "\"version\": 2", 1);
+    let relabelled = good.replacen("\"version\": 5", "\"version\": 2", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 3"), "{e}");
     // The default model before the valve filter, as committed then.

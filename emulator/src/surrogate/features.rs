@@ -130,9 +130,13 @@ pub struct ValveFilter {
 /// from full. The time of ignition is where the fill crosses 1, interpolated within the
 /// step; up to `lead_s` before it, the clock reads minus the time still to go at the
 /// current valve position, so that hats before the estimate can take up its scatter.
-/// Parameters: `drain_time_s` and `full` are hifi's dome figures, `fill_n_s` is fitted
-/// to hifi's ignition times (`cargo run --release -p oils-emulator --example
-/// ignition_times`).
+/// The engines share the feed: while others draw, the manifold sags and a dome fills
+/// more slowly, so `fill_n_s` is scaled by `1 + sag_per_n * (valve positions of the
+/// other engines that are on)` (hifi: a four-engine cold start ignites some 8 ms later
+/// than a single engine's at the same command).
+/// Parameters: `drain_time_s` and `full` are hifi's dome figures, `fill_n_s` and
+/// `sag_per_n` are fitted to hifi's ignition times (`cargo run --release -p
+/// oils-emulator --example ignition_times`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct IgnitionClock {
@@ -148,10 +152,18 @@ pub struct IgnitionClock {
     pub knot_spacing_s: f64,
     /// Number of hat functions, at `-lead_s`, `-lead_s + spacing`, ... from ignition.
     pub knots: usize,
+    /// Slower filling per newton of the other engines' valve positions, 1/N (0: none;
+    /// absent from files before version 5).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub sag_per_n: f64,
 }
 
 /// `since_ignition_s` of an engine that has not ignited.
 pub const NOT_IGNITED: f64 = f64::NEG_INFINITY;
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
 
 impl IgnitionClock {
     /// Describes the first invalid parameter.
@@ -167,6 +179,9 @@ impl IgnitionClock {
         }
         if !(self.full.is_finite() && self.full >= 1.0) {
             return Err("ignition full must be finite and at least 1".into());
+        }
+        if !(self.sag_per_n.is_finite() && self.sag_per_n >= 0.0) {
+            return Err("ignition sag_per_n must be finite and not negative".into());
         }
         if !(1..=64).contains(&self.knots) {
             return Err("ignition knots must be 1..=64".into());
@@ -193,39 +208,45 @@ impl IgnitionClock {
         self.knots as f64 * self.knot_spacing_s - self.lead_s
     }
 
-    /// Advances one engine's dome by a step of `dt_s` with the switch `on` and the valve
-    /// moving from `valve0_n` to `valve1_n`: `fill` and the time since ignition at the
-    /// end of the step.
+    /// Advances one engine's dome by a step of `dt_s` with the switch `on`, the valve
+    /// moving from `valve0_n` to `valve1_n` and the other engines that are on at
+    /// `others_n` (their valve positions' sum): `fill` and the time since ignition at
+    /// the end of the step.
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn advance(
         &self,
         on: bool,
         valve0_n: f64,
         valve1_n: f64,
+        others_n: f64,
         dt_s: f64,
         fill: &mut f64,
         since_s: &mut f64,
     ) {
         if on {
             let f0 = *fill;
+            // Without sag the factor is exactly 1 and the bits are those of the
+            // unscaled constant.
+            let fill_n_s = self.fill_n_s * (1.0 + self.sag_per_n * others_n);
             if f0 >= 1.0 && *since_s != NOT_IGNITED {
                 *since_s += dt_s;
                 // Running with a full dome (the common case) costs no division: the
                 // fill would only be clamped back to `full`.
                 if f0 < self.full {
-                    let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / self.fill_n_s;
+                    let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / fill_n_s;
                     *fill = f1.min(self.full);
                 }
                 return;
             }
-            let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / self.fill_n_s;
+            let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / fill_n_s;
             if f1 >= 1.0 {
                 // Ignition within the step (at its start when the dome was primed).
                 let at = ((1.0 - f0) / (f1 - f0)).max(0.0);
                 *since_s = (1.0 - at) * dt_s;
             } else {
                 // Still filling: within the lead, minus the time to go at this valve.
-                let to_go_s = (1.0 - f1) * self.fill_n_s / valve1_n;
+                let to_go_s = (1.0 - f1) * fill_n_s / valve1_n;
                 *since_s = if to_go_s <= self.lead_s {
                     -to_go_s
                 } else {
@@ -371,11 +392,18 @@ impl ValveTrack {
             valve[e] = if v > hi { hi } else { v };
         }
         if let Some(c) = &self.filter.ignition {
+            let on: [bool; ENGINE_COUNT] = std::array::from_fn(|e| input[ENGINE_COUNT + e] > 0.5);
+            let mut drawing = [0.0; ENGINE_COUNT];
+            for e in 0..ENGINE_COUNT {
+                drawing[e] = if on[e] { valve[e] } else { 0.0 };
+            }
+            let total = drawing[0] + drawing[1] + drawing[2] + drawing[3];
             for e in 0..ENGINE_COUNT {
                 c.advance(
-                    input[ENGINE_COUNT + e] > 0.5,
+                    on[e],
                     s.valve_n[e],
                     valve[e],
+                    total - drawing[e],
                     self.dt_s,
                     &mut s.fill[e],
                     &mut s.since_ignition_s[e],
@@ -1190,6 +1218,7 @@ pub(crate) mod source_tests {
             lead_s: 0.0,
             knot_spacing_s: 0.005,
             knots: 4,
+            sag_per_n: 0.0,
         };
         let f = ValveFilter {
             time_constant_s: 0.015,
@@ -1268,6 +1297,45 @@ pub(crate) mod source_tests {
         }
         assert_eq!(led.hat(-0.02, 0), 1.0);
         assert!((led.window_s() - 0.0).abs() < 1e-15);
+        // Sag: with three other engines on at 500 N each and 1/6000 per N, the dome
+        // fills at 1 / (1 + 0.25) of the rate, so ignition takes 62.5 ms instead of
+        // 50 ms: within the 7th step, 7.5 ms before its end. An engine alone is not
+        // slowed, nor by engines that are off.
+        let sagging = IgnitionClock {
+            sag_per_n: 1.0 / 6000.0,
+            ..clock
+        };
+        let all = |on: bool, others_on: bool| {
+            let mut u = [500.0; INPUT_DIM];
+            u[ENGINE_COUNT] = f64::from(u8::from(on));
+            for e in 1..ENGINE_COUNT {
+                u[ENGINE_COUNT + e] = f64::from(u8::from(others_on));
+                u[e] = if others_on { 500.0 } else { 0.0 };
+            }
+            u
+        };
+        let sag_filter = ValveFilter {
+            ignition: Some(sagging),
+            ..f
+        };
+        let mut w = ValveTrack::new(sag_filter, 0.01);
+        let since: Vec<f64> = (0..7)
+            .map(|_| w.advance(&all(true, true)).since_ignition_s)
+            .map(|s| s[0])
+            .collect();
+        assert_eq!(since[..6], [NOT_IGNITED; 6], "{since:?}");
+        assert!((since[6] - 0.0075).abs() < 1e-12, "{since:?}");
+        let mut alone = ValveTrack::new(sag_filter, 0.01);
+        let since: Vec<f64> = (0..5)
+            .map(|_| alone.advance(&all(true, false)).since_ignition_s[0])
+            .collect();
+        assert!(since[4].abs() < 1e-12, "{since:?}");
+        assert!(IgnitionClock {
+            sag_per_n: -1.0,
+            ..clock
+        }
+        .validate()
+        .is_err());
         // Validation names the bad parameter.
         assert!(IgnitionClock { full: 0.9, ..clock }.validate().is_err());
         assert!(IgnitionClock { knots: 0, ..clock }.validate().is_err());

@@ -1426,6 +1426,7 @@ pub(crate) mod tests {
         lead_s: 0.01,
         knot_spacing_s: 0.005,
         knots: 6,
+        sag_per_n: 0.0,
     };
 
     /// The valve track of `inputs` for `model` (empty when no submodel reads it).

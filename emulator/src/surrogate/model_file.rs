@@ -23,8 +23,10 @@ pub const FORMAT: &str = "oils-surrogate";
 /// and reads unchanged, so both are read, and a version-2 file that names a valve filter
 /// is refused (no version-2 writer made one). Version 4 added the ignition clock
 /// (`ignition` in a valve filter), which a version-3 reader would refuse as an unknown
-/// field; a version-3 file that names one is refused here too.
-pub const VERSION: u32 = 4;
+/// field; a version-3 file that names one is refused here too. Version 5 added the
+/// clock's manifold sag (`sag_per_n`), which a version-4 reader would refuse as an
+/// unknown field; a version-4 file that sets one is refused here too.
+pub const VERSION: u32 = 5;
 /// Oldest version this build reads.
 pub const OLDEST_VERSION: u32 = 2;
 
@@ -219,6 +221,18 @@ impl ModelFile {
         {
             return Err(ModelFileError::Invalid(
                 "an ignition clock needs file version 4".into(),
+            ));
+        }
+        if version < 5
+            && file.model.submodels.iter().any(|s| {
+                s.features
+                    .valve
+                    .and_then(|v| v.ignition)
+                    .is_some_and(|c| c.sag_per_n != 0.0)
+            })
+        {
+            return Err(ModelFileError::Invalid(
+                "an ignition clock's sag needs file version 5".into(),
             ));
         }
         if file.model.sample_time_ns == 0 {
