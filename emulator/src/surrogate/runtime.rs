@@ -116,7 +116,12 @@ impl Propulsion for SurrogatePropulsion {
         );
         let input = input_of(cmd);
         let start = self.predictor.state();
-        let substeps = (dt_ns / self.sample_time_ns).max(1);
+        // The bench steps at the model's sample time: no 64-bit division for that.
+        let substeps = if dt_ns == self.sample_time_ns {
+            1
+        } else {
+            (dt_ns / self.sample_time_ns).max(1)
+        };
         let mut sum_mean = [0.0; ENGINE_COUNT];
         let mut prev = start;
         for _ in 0..substeps {
