@@ -321,8 +321,8 @@ struct Terms {
 
 /// Independent partial sums per lane in [`Factored::add`] and [`Dense::eval`]. One
 /// running sum would make every term wait for the previous addition (a chain of some 4
-/// cycles per term, most of the step); four sums overlap them. The order of additions differs from library order,
-/// which moves the result by rounding only.
+/// cycles per term, most of the step); four sums overlap them. The order of additions
+/// differs from library order, which moves the result by rounding only.
 const PARTIAL_SUMS: usize = 4;
 
 /// Adds `c * x[f0] * x[f1] ...` of each term, per lane, round robin into the partial sums.
@@ -1418,7 +1418,8 @@ pub(crate) mod tests {
         ignition: Some(TEST_IGNITION),
     };
 
-    /// An ignition clock for the test models.
+    /// An ignition clock for the test models (with sag, so the engines' clocks depend
+    /// on each other).
     pub(crate) const TEST_IGNITION: IgnitionClock = IgnitionClock {
         fill_n_s: 20.0,
         drain_time_s: 0.6,
@@ -1426,7 +1427,7 @@ pub(crate) mod tests {
         lead_s: 0.01,
         knot_spacing_s: 0.005,
         knots: 6,
-        sag_per_n: 0.0,
+        sag_per_n: 6e-5,
     };
 
     /// The valve track of `inputs` for `model` (empty when no submodel reads it).
