@@ -272,3 +272,41 @@ fn commands_outside_the_envelope_are_counted() {
         "outside after the low commands"
     );
 }
+
+#[test]
+fn a_bench_step_of_two_samples_is_two_model_steps() {
+    // The runtime's fast path (bench step = the model's sample time) and its general path
+    // (several samples per bench step) must agree: same end state, the mean of the two
+    // trapezoids, flows over the longer step.
+    let cfg = PropulsionConfig::default();
+    let mut fine = SurrogatePropulsion::default_model(&cfg, None).unwrap();
+    let mut coarse = SurrogatePropulsion::default_model(&cfg, Some(20_000_000)).unwrap();
+    let mut cmd = EngineCommand {
+        thrust_cmd_n: [600.0; 4],
+        on: [true, true, false, true],
+    };
+    for k in 0..300u32 {
+        cmd.thrust_cmd_n[(k % 4) as usize] = 350.0 + f64::from(k % 7) * 60.0;
+        cmd.on[2] = k > 40;
+        let before = fine.output();
+        let a = fine.step(&cmd, 10_000_000);
+        let b = fine.step(&cmd, 10_000_000);
+        let c = coarse.step(&cmd, 20_000_000);
+        assert_eq!(c.thrust_n, b.thrust_n, "step {k}");
+        assert_eq!(c.ejected_fuel_kg, b.ejected_fuel_kg);
+        assert_eq!(c.gas_pressure_pa, b.gas_pressure_pa);
+        for e in 0..4 {
+            let trapezoids =
+                0.5 * (before.thrust_n[e] + a.thrust_n[e]) + 0.5 * (a.thrust_n[e] + b.thrust_n[e]);
+            assert_eq!(
+                a.mean_thrust_n[e],
+                0.5 * (before.thrust_n[e] + a.thrust_n[e])
+            );
+            assert_eq!(c.mean_thrust_n[e], trapezoids / 2.0);
+        }
+        let flow = (b.ejected_fuel_kg - before.ejected_fuel_kg) / 0.02;
+        assert!((c.fuel_flow_kg_s - flow).abs() <= 1e-9 * flow.abs().max(1e-3));
+        let fine_flow = (a.ejected_ox_kg - before.ejected_ox_kg) / 0.01;
+        assert!((a.ox_flow_kg_s - fine_flow).abs() <= 1e-9 * fine_flow.abs().max(1e-3));
+    }
+}

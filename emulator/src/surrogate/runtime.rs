@@ -20,6 +20,9 @@ pub const DEFAULT_MODEL_JSON: &str = include_str!("../../models/surrogate-defaul
 pub struct SurrogatePropulsion {
     predictor: Predictor,
     sample_time_ns: u64,
+    /// `1 / sample time`, per second: the flows of a step at the model's sample time
+    /// without a division on the step path.
+    per_sample_s: f64,
     /// Chamber pressure per newton of thrust (the model predicts thrust only).
     chamber_pa_per_n: f64,
     held: super::model_file::ReferenceOutput,
@@ -38,12 +41,13 @@ impl SurrogatePropulsion {
         let mut s = Self {
             predictor,
             sample_time_ns: file.model.sample_time_ns,
+            per_sample_s: 1e9 / file.model.sample_time_ns as f64,
             chamber_pa_per_n: cfg.chamber_pressure_max_pa / cfg.max_thrust_n,
             held: file.reference_output,
             out: PropulsionOutput::default(),
         };
         let initial = file.model.initial_state;
-        s.out = s.output_of(&initial, &initial, 0);
+        s.out = s.output_of(&initial, &initial, 0.0);
         Ok(s)
     }
 
@@ -71,7 +75,10 @@ impl SurrogatePropulsion {
         self.predictor.out_of_envelope_steps()
     }
 
-    fn output_of(&self, prev: &StateVec, now: &StateVec, dt_ns: u64) -> PropulsionOutput {
+    /// The output after a step from `prev` to `now`; `per_s` is 1 / the step's length in
+    /// seconds (0 before any step: no flows).
+    #[inline(always)]
+    fn output_of(&self, prev: &StateVec, now: &StateVec, per_s: f64) -> PropulsionOutput {
         let mut o = PropulsionOutput {
             gas_pressure_pa: now[STATE_P],
             fuel_tank_pressure_pa: self.held.fuel_tank_pressure_pa,
@@ -86,11 +93,8 @@ impl SurrogatePropulsion {
             o.mean_thrust_n[e] = 0.5 * (prev[e] + now[e]);
             o.chamber_pressure_pa[e] = now[e] * self.chamber_pa_per_n;
         }
-        if dt_ns > 0 {
-            let per_s = 1e9 / dt_ns as f64;
-            o.fuel_flow_kg_s = (now[STATE_MF] - prev[STATE_MF]) * per_s;
-            o.ox_flow_kg_s = (now[STATE_MO] - prev[STATE_MO]) * per_s;
-        }
+        o.fuel_flow_kg_s = (now[STATE_MF] - prev[STATE_MF]) * per_s;
+        o.ox_flow_kg_s = (now[STATE_MO] - prev[STATE_MO]) * per_s;
         o
     }
 }
@@ -116,12 +120,14 @@ impl Propulsion for SurrogatePropulsion {
         );
         let input = input_of(cmd);
         let start = self.predictor.state();
-        // The bench steps at the model's sample time: no 64-bit division for that.
-        let substeps = if dt_ns == self.sample_time_ns {
-            1
-        } else {
-            (dt_ns / self.sample_time_ns).max(1)
-        };
+        // The bench steps at the model's sample time: one prediction, its trapezoid is the
+        // mean thrust, no divisions (the same bits as the general path below).
+        if dt_ns == self.sample_time_ns {
+            let now = self.predictor.step(&input);
+            self.out = self.output_of(&start, &now, self.per_sample_s);
+            return self.out;
+        }
+        let substeps = (dt_ns / self.sample_time_ns).max(1);
         let mut sum_mean = [0.0; ENGINE_COUNT];
         let mut prev = start;
         for _ in 0..substeps {
@@ -131,7 +137,8 @@ impl Propulsion for SurrogatePropulsion {
             }
             prev = now;
         }
-        let mut out = self.output_of(&start, &prev, dt_ns);
+        let per_s = if dt_ns > 0 { 1e9 / dt_ns as f64 } else { 0.0 };
+        let mut out = self.output_of(&start, &prev, per_s);
         for e in 0..ENGINE_COUNT {
             out.mean_thrust_n[e] = sum_mean[e] / substeps as f64;
         }
