@@ -61,6 +61,13 @@ pub struct VariantConfig {
     /// rows are smooth functions of the thrusts, and a larger penalty drops terms the
     /// step would otherwise pay for (see docs/surrogate.md, "Cost").
     pub system_mu_scale: f64,
+    /// The shared-engine variant's pressure and mass model is fitted at this penalty
+    /// whatever `mu` cross-validation tries for the thrust model (overrides
+    /// `system_mu_scale`). Those rows trade terms the step pays for against the module
+    /// mass over a descent, a trade the CV score (dominated by the thrust's starts) does
+    /// not see (docs/surrogate.md, "Penalties").
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub system_mu: Option<f64>,
     /// Beyond the paper: give the per-engine thrust model the command passed through a
     /// model of the throttle valve's actuator (`T_v`, see [`FeatureSpec::valve`]).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -83,6 +90,7 @@ impl Default for VariantConfig {
             engine_phase_degree: 0,
             engine_command_sum: false,
             system_mu_scale: 1.0,
+            system_mu: None,
             engine_valve: None,
             engine_history_max: 0,
         }
@@ -100,8 +108,27 @@ pub struct SubSpec {
     pub target: Target,
     /// State indices predicted.
     pub outputs: Vec<usize>,
-    /// Multiple of the variant's penalty this submodel is fitted at.
-    pub mu_scale: f64,
+    /// The penalty this submodel is fitted at, given the variant's.
+    pub penalty: Penalty,
+}
+
+/// How a submodel's Lasso penalty follows the variant's penalty `mu`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Penalty {
+    /// `mu` times this factor (1: the variant's penalty).
+    Scaled(f64),
+    /// This penalty whatever `mu` is.
+    Fixed(f64),
+}
+
+impl Penalty {
+    /// The submodel's penalty when the variant's is `mu`.
+    pub fn at(self, mu: f64) -> f64 {
+        match self {
+            Penalty::Scaled(k) => mu * k,
+            Penalty::Fixed(m) => m,
+        }
+    }
 }
 
 impl SubSpec {
@@ -139,7 +166,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
             degree: cfg.paper_degree,
             target: Target::Absolute,
             outputs: (0..STATE_DIM).collect(),
-            mu_scale: 1.0,
+            penalty: Penalty::Scaled(1.0),
         }],
         Variant::SharedEngine => vec![
             SubSpec {
@@ -156,7 +183,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                 degree: cfg.engine_degree,
                 target: Target::Increment,
                 outputs: (0..ENGINE_COUNT).collect(),
-                mu_scale: 1.0,
+                penalty: Penalty::Scaled(1.0),
             },
             SubSpec {
                 features: FeatureSpec {
@@ -172,7 +199,10 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                 degree: cfg.system_degree,
                 target: Target::Increment,
                 outputs: (ENGINE_COUNT..STATE_DIM).collect(),
-                mu_scale: cfg.system_mu_scale,
+                penalty: match cfg.system_mu {
+                    Some(m) => Penalty::Fixed(m),
+                    None => Penalty::Scaled(cfg.system_mu_scale),
+                },
             },
         ],
     }
@@ -372,7 +402,7 @@ pub struct PathFit {
     pub unconverged: Vec<usize>,
 }
 
-/// Lasso path over `mus` (descending; each times the submodel's `mu_scale`),
+/// Lasso path over `mus` (descending; each through the submodel's [`Penalty`]),
 /// warm-started, on the standardised problem of `stats`. Returned coefficients apply to
 /// unscaled library terms.
 pub fn fit_path(
@@ -391,7 +421,7 @@ pub fn fit_path(
         let prob = std.problem(c);
         let mut w = vec![0.0; p];
         for (i, &mu) in mus.iter().enumerate() {
-            let r = lasso_gram(&prob, mu * prep.spec.mu_scale, settings, &mut w, &mut h);
+            let r = lasso_gram(&prob, prep.spec.penalty.at(mu), settings, &mut w, &mut h);
             unconverged[i] += usize::from(!r.converged);
             coefs[i].push(std.unscale(c, &w, &zero_shift, prep.y_shift[c]));
         }

@@ -120,6 +120,13 @@ impl TrainConfig {
                 v.system_mu_scale
             )));
         }
+        if let Some(m) = v.system_mu {
+            if !(m.is_finite() && m > 0.0) {
+                return Err(e(format!(
+                    "variants.system_mu = {m}: must be a positive number"
+                )));
+            }
+        }
         if v.engine_history_max != 0 && v.engine_history_max < self.cv.history_min {
             return Err(e(format!(
                 "variants.engine_history_max = {}: must be 0 (the [cv] range) or at least cv.history_min",
