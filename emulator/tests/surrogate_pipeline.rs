@@ -310,3 +310,48 @@ fn a_bench_step_of_two_samples_is_two_model_steps() {
         assert!((a.ox_flow_kg_s - fine_flow).abs() <= 1e-9 * fine_flow.abs().max(1e-3));
     }
 }
+
+#[test]
+fn bad_penalties_in_a_training_configuration_are_refused_clearly() {
+    let text = std::fs::read_to_string(root().join("config/train.toml")).unwrap();
+    assert!(
+        text.contains("\nsystem_mu = 1e-3\n"),
+        "the committed setting moved"
+    );
+    for (bad, key) in [
+        ("system_mu = -1e-3", "variants.system_mu = -0.001"),
+        ("system_mu = 0.0", "variants.system_mu = 0"),
+        ("system_mu = nan", "variants.system_mu = NaN"),
+    ] {
+        let edited = text.replace("\nsystem_mu = 1e-3\n", &format!("\n{bad}\n"));
+        let err = TrainConfig::from_toml(&edited).unwrap_err().to_string();
+        assert!(
+            err.contains(key) && err.contains("positive"),
+            "{bad}: unclear error {err:?}"
+        );
+    }
+    // Without it, the penalty multiple applies again (and is checked).
+    let without = text.replace("\nsystem_mu = 1e-3\n", "\n");
+    let cfg = TrainConfig::from_toml(&without).unwrap();
+    assert_eq!(cfg.variants.system_mu, None);
+    let zero_scale = without.replace("system_mu_scale = 10.0", "system_mu_scale = 0.0");
+    let err = TrainConfig::from_toml(&zero_scale).unwrap_err().to_string();
+    assert!(err.contains("variants.system_mu_scale"), "{err}");
+}
+
+#[test]
+fn a_fixed_penalty_ignores_the_variant_penalty() {
+    use oils_emulator::surrogate::fit::{sub_specs, Penalty, Variant};
+    let cfg = committed_config();
+    let specs = sub_specs(Variant::SharedEngine, 2, &cfg.variants);
+    assert_eq!(specs[0].penalty, Penalty::Scaled(1.0));
+    assert_eq!(specs[1].penalty, Penalty::Fixed(1e-3));
+    for mu in [1e-6, 1e-5, 1.0] {
+        assert_eq!(specs[0].penalty.at(mu), mu);
+        assert_eq!(specs[1].penalty.at(mu), 1e-3);
+    }
+    let mut scaled = cfg.variants.clone();
+    scaled.system_mu = None;
+    let specs = sub_specs(Variant::SharedEngine, 2, &scaled);
+    assert_eq!(specs[1].penalty.at(1e-5), 1e-5 * scaled.system_mu_scale);
+}
