@@ -34,7 +34,11 @@ const GROUP_CYCLE_STEPS: usize = 300;
 /// Thrust that marks ignition, N.
 const IGNITION_THRUST_N: f64 = 100.0;
 
-/// A small deterministic generator (xorshift64), so the run needs no extra crate.
+/// A small deterministic generator (xorshift64). The crate's `rand_chacha` would do; this
+/// one stays because the committed `fill_n_s` was fitted on its stream: with
+/// `ChaCha8Rng::seed_from_u64(7)` instead (311 other starts) the best fill constant at
+/// sag 6e-5 / N is 38.0 rather than 38.4 N s (spread RMS 3.15 vs 3.20 ms), which is
+/// also a measure of how well 300 starts pin it down.
 struct Xorshift(u64);
 
 impl Xorshift {

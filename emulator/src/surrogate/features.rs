@@ -1160,15 +1160,13 @@ pub(crate) mod source_tests {
             actuator: 320.0,
             valve: 320.0,
         }; ENGINE_COUNT];
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
         let mut lagging_steps = 0;
         for k in 0..2000 {
             let mut u = [0.0; INPUT_DIM];
             for (e, h) in hifi.iter_mut().enumerate() {
-                seed ^= seed << 13;
-                seed ^= seed >> 7;
-                seed ^= seed << 17;
-                let r = (seed >> 11) as f64 / (1u64 << 53) as f64;
+                let r: f64 = rng.gen();
                 let on = (k / 37 + e) % 5 != 0;
                 u[e] = if on { 300.0 + 500.0 * r * r } else { 0.0 };
                 u[ENGINE_COUNT + e] = f64::from(u8::from(on));
@@ -1330,16 +1328,21 @@ pub(crate) mod source_tests {
             .map(|_| alone.advance(&all(true, false)).since_ignition_s[0])
             .collect();
         assert!(since[4].abs() < 1e-12, "{since:?}");
-        assert!(IgnitionClock {
-            sag_per_n: -1.0,
-            ..clock
-        }
-        .validate()
-        .is_err());
         // Validation names the bad parameter.
-        assert!(IgnitionClock { full: 0.9, ..clock }.validate().is_err());
-        assert!(IgnitionClock { knots: 0, ..clock }.validate().is_err());
-        assert!(ValveFilter {
+        let names = |c: IgnitionClock, name: &str| {
+            let err = c.validate().unwrap_err();
+            assert!(err.contains(name), "{err:?} does not name {name}");
+        };
+        names(
+            IgnitionClock {
+                sag_per_n: -1.0,
+                ..clock
+            },
+            "sag_per_n",
+        );
+        names(IgnitionClock { full: 0.9, ..clock }, "full");
+        names(IgnitionClock { knots: 0, ..clock }, "knots");
+        let err = ValveFilter {
             ignition: Some(IgnitionClock {
                 fill_n_s: -1.0,
                 ..clock
@@ -1347,7 +1350,8 @@ pub(crate) mod source_tests {
             ..f
         }
         .validate()
-        .is_err());
+        .unwrap_err();
+        assert!(err.contains("fill_n_s"), "{err:?}");
     }
 
     #[test]

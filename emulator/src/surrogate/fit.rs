@@ -63,9 +63,9 @@ pub struct VariantConfig {
     pub system_mu_scale: f64,
     /// The shared-engine variant's pressure and mass model is fitted at this penalty
     /// whatever `mu` cross-validation tries for the thrust model (overrides
-    /// `system_mu_scale`). Those rows trade terms the step pays for against the module
-    /// mass over a descent, a trade the CV score (dominated by the thrust's starts) does
-    /// not see (docs/surrogate.md, "Penalties").
+    /// `system_mu_scale`), so CV chooses the thrust's penalty alone instead of moving
+    /// both submodels together. The committed value is where the mass rows' CV free-run
+    /// errors are lowest (docs/surrogate.md, "Penalties and sweeps").
     #[serde(skip_serializing_if = "Option::is_none")]
     pub system_mu: Option<f64>,
     /// Beyond the paper: give the per-engine thrust model the command passed through a

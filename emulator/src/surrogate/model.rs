@@ -663,6 +663,7 @@ struct CompiledSub<const LANES: usize> {
     /// per gathered feature: a feature then costs one vector multiply-add for every row
     /// at once instead of one scalar multiply-add per row that uses it.
     dense: Option<Dense>,
+    /// The rows' terms, compiled (empty when `dense` evaluates the submodel).
     rows: Vec<CompiledRow>,
 }
 
@@ -946,14 +947,20 @@ impl<const LANES: usize> CompiledSub<LANES> {
             };
             for (r, row) in rows.iter().enumerate() {
                 d.intercept[r] = row.intercept;
-                // Folded rows are linear: every term is a single factor.
-                debug_assert!(row.terms.groups.is_empty());
+                // Folded rows are linear: every term is a single factor (checked here,
+                // once, so that no term could be dropped silently).
+                assert!(
+                    row.terms.groups.is_empty(),
+                    "a folded row has only linear terms"
+                );
                 for &([a], c) in &row.terms.single {
                     d.coef[a as usize][r] += c;
                 }
             }
             d
         });
+        // The dense coefficients replace the rows.
+        let rows = if dense.is_some() { Vec::new() } else { rows };
         Self {
             dense,
             phase_group,
