@@ -208,10 +208,17 @@ impl IgnitionClock {
         self.knots as f64 * self.knot_spacing_s - self.lead_s
     }
 
+    /// How far the square root of the fill falls in a step of `dt_s` while draining
+    /// (see [`IgnitionClock::advance`]).
+    fn drain_root_per_step(&self, dt_s: f64) -> f64 {
+        self.full.sqrt() * dt_s / self.drain_time_s
+    }
+
     /// Advances one engine's dome by a step of `dt_s` with the switch `on`, the valve
     /// moving from `valve0_n` to `valve1_n` and the other engines that are on at
     /// `others_n` (their valve positions' sum): `fill` and the time since ignition at
-    /// the end of the step.
+    /// the end of the step. `drain_root` is [`IgnitionClock::drain_root_per_step`] of
+    /// `dt_s`, computed once rather than per step.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn advance(
@@ -221,6 +228,7 @@ impl IgnitionClock {
         valve1_n: f64,
         others_n: f64,
         dt_s: f64,
+        drain_root: f64,
         fill: &mut f64,
         since_s: &mut f64,
     ) {
@@ -256,7 +264,7 @@ impl IgnitionClock {
             *fill = f1.min(self.full);
         } else {
             *since_s = NOT_IGNITED;
-            let root = fill.sqrt() - self.full.sqrt() * dt_s / self.drain_time_s;
+            let root = fill.sqrt() - drain_root;
             *fill = if root > 0.0 { root * root } else { 0.0 };
         }
     }
@@ -317,6 +325,8 @@ pub struct ValveTrack {
     dynamics: TfcvDynamics,
     dt_s: f64,
     decay: f64,
+    /// [`IgnitionClock::drain_root_per_step`] of `dt_s` (0 without a clock).
+    drain_root: f64,
     /// State after the latest step.
     pub state: ValveState,
 }
@@ -334,6 +344,7 @@ impl ValveTrack {
             },
             dt_s,
             decay: (-dt_s / filter.time_constant_s).exp(),
+            drain_root: filter.ignition.map_or(0.0, |c| c.drain_root_per_step(dt_s)),
             state: filter.rest(),
         }
     }
@@ -405,6 +416,7 @@ impl ValveTrack {
                     valve[e],
                     total - drawing[e],
                     self.dt_s,
+                    self.drain_root,
                     &mut s.fill[e],
                     &mut s.since_ignition_s[e],
                 );

@@ -26,7 +26,14 @@ pub struct SurrogatePropulsion {
     /// Chamber pressure per newton of thrust (the model predicts thrust only).
     chamber_pa_per_n: f64,
     held: super::model_file::ReferenceOutput,
-    out: PropulsionOutput,
+    /// What [`Propulsion::output`] is computed from (with the predictor's latest state):
+    /// the state at the start of the latest step, 1 / its length in seconds (0 before
+    /// any step) and its mean thrust. Kept instead of the 152-byte output itself, whose
+    /// copy per step (just written value by value, then read back wide) cost more than
+    /// the wrapper's arithmetic.
+    start: StateVec,
+    per_s: f64,
+    mean_thrust_n: [f64; ENGINE_COUNT],
 }
 
 impl SurrogatePropulsion {
@@ -44,10 +51,11 @@ impl SurrogatePropulsion {
             per_sample_s: 1e9 / file.model.sample_time_ns as f64,
             chamber_pa_per_n: cfg.chamber_pressure_max_pa / cfg.max_thrust_n,
             held: file.reference_output,
-            out: PropulsionOutput::default(),
+            start: file.model.initial_state,
+            per_s: 0.0,
+            mean_thrust_n: [0.0; ENGINE_COUNT],
         };
-        let initial = file.model.initial_state;
-        s.out = s.output_of(&initial, &initial, 0.0);
+        s.mean_thrust_n = s.output().thrust_n;
         Ok(s)
     }
 
@@ -124,8 +132,11 @@ impl Propulsion for SurrogatePropulsion {
         // mean thrust, no divisions (the same bits as the general path below).
         if dt_ns == self.sample_time_ns {
             let now = self.predictor.step(&input);
-            self.out = self.output_of(&start, &now, self.per_sample_s);
-            return self.out;
+            let out = self.output_of(&start, &now, self.per_sample_s);
+            self.start = start;
+            self.per_s = self.per_sample_s;
+            self.mean_thrust_n = out.mean_thrust_n;
+            return out;
         }
         let substeps = (dt_ns / self.sample_time_ns).max(1);
         let mut sum_mean = [0.0; ENGINE_COUNT];
@@ -142,12 +153,16 @@ impl Propulsion for SurrogatePropulsion {
         for e in 0..ENGINE_COUNT {
             out.mean_thrust_n[e] = sum_mean[e] / substeps as f64;
         }
-        self.out = out;
+        self.start = start;
+        self.per_s = per_s;
+        self.mean_thrust_n = out.mean_thrust_n;
         out
     }
 
     fn output(&self) -> PropulsionOutput {
-        self.out
+        let mut out = self.output_of(&self.start, &self.predictor.state(), self.per_s);
+        out.mean_thrust_n = self.mean_thrust_n;
+        out
     }
 
     fn diagnostics(&self) -> Option<crate::propulsion::PropulsionDiagnostics> {
