@@ -292,6 +292,10 @@ fn a_bench_step_of_two_samples_is_two_model_steps() {
         let a = fine.step(&cmd, 10_000_000);
         let b = fine.step(&cmd, 10_000_000);
         let c = coarse.step(&cmd, 20_000_000);
+        // `output()` is recomputed from the latest step, not stored: it must be what the
+        // step returned, on either path.
+        assert_eq!(fine.output(), b, "step {k}");
+        assert_eq!(coarse.output(), c, "step {k}");
         assert_eq!(c.thrust_n, b.thrust_n, "step {k}");
         assert_eq!(c.ejected_fuel_kg, b.ejected_fuel_kg);
         assert_eq!(c.gas_pressure_pa, b.gas_pressure_pa);
