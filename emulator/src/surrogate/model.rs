@@ -660,13 +660,18 @@ struct CompiledSub<const LANES: usize> {
     /// Linear terms only, their coefficients scaled: the features are gathered clamped
     /// but unscaled.
     folded: bool,
-    /// A folded submodel of up to four rows, as one vector of the rows' coefficients
-    /// per gathered feature: a feature then costs one vector multiply-add for every row
-    /// at once instead of one scalar multiply-add per row that uses it.
+    /// A folded submodel of up to [`DENSE_ROWS`] rows as dense coefficients, four
+    /// features at a time: a chunk of four features then costs one vector multiply-add
+    /// per row instead of one scalar multiply-add per term.
     dense: Option<Dense>,
     /// The rows' terms, compiled (empty when `dense` evaluates the submodel).
     rows: Vec<CompiledRow>,
 }
+
+/// Rows of a [`Dense`] submodel, at most: the pressure and the two ejected masses. (At
+/// four, the compiler vectorised each feature across the rows, with the coefficients
+/// gathered lane by lane, instead of each row across the chunk's four features.)
+const DENSE_ROWS: usize = 3;
 
 /// See [`CompiledSub::dense`]: the rows' intercepts and their coefficients, laid out
 /// for the step. Features come in chunks of four, feature `k` of a chunk into partial
@@ -674,11 +679,6 @@ struct CompiledSub<const LANES: usize> {
 /// envelope bounds are one read each. (A vector of the rows' coefficients per feature
 /// cost a broadcast, a multiply and an add per feature.) Every partial sum adds the
 /// same terms in the same order as one feature at a time, so the bits are the same.
-/// Rows of a [`Dense`] submodel, at most: the pressure and the two ejected masses. (At
-/// four, the compiler vectorised each feature across the rows, with the coefficients
-/// gathered lane by lane, instead of each row across the chunk's four features.)
-const DENSE_ROWS: usize = 3;
-
 #[derive(Debug, Clone)]
 struct Dense {
     intercept: [f64; DENSE_ROWS],
@@ -819,9 +819,11 @@ impl Dense {
         }
         let mut sums = [[0.0; PARTIAL_SUMS]; DENSE_ROWS];
         for (s, a) in sums.iter_mut().zip(acc) {
+            // SAFETY: four f64 values.
             unsafe { _mm256_storeu_pd(s.as_mut_ptr(), a) };
         }
         let mut bits = [0u64; PARTIAL_SUMS];
+        // SAFETY: four 64-bit values (the lanes' bit patterns).
         unsafe { _mm256_storeu_pd(bits.as_mut_ptr().cast(), changed) };
         (sums, bits)
     }
@@ -1762,8 +1764,8 @@ pub(crate) mod tests {
         .unwrap()
         .model;
         let (cmds, _) = crate::surrogate::features::source_tests::switching_trajectory(400);
-        // The same switching at 2.5 times the thrust: the predictions, and with them
-        // the fed-back features, leave the envelope and are clamped.
+        // The same switching at 2.5 times the thrust: commands beyond the on-range,
+        // clamped and counted.
         let wild: Vec<InputVec> = cmds
             .iter()
             .map(|u| std::array::from_fn(|k| if k < ENGINE_COUNT { 2.5 * u[k] } else { u[k] }))
