@@ -1,4 +1,4 @@
-//! The state at descent start, from [`InitialStateConfig`].
+//! The state at descent start, from [`crate::config::InitialStateConfig`].
 //!
 //! The lander starts above the `mci` +X axis and flies horizontally along +Y (so the
 //! orbit plane is X-Y and the orbit normal +Z). Its thrust axis (body +Z) points against

@@ -11,7 +11,7 @@ use super::dataset::Dataset;
 use super::features::STATE_DIM;
 use super::fit::{assemble, fit_path, sse, sub_specs, Prepared, Variant, VariantConfig};
 use super::lasso::{mu_grid, GramStats, LassoSettings};
-use super::model::Predictor;
+use super::predictor::Predictor;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 

@@ -1062,7 +1062,7 @@ pub(crate) mod source_tests {
                 stop_steps: 4,
                 phase_degree: 0,
                 command_sum: true,
-                valve: Some(crate::surrogate::model::tests::TEST_VALVE),
+                valve: Some(crate::surrogate::predictor::tests::TEST_VALVE),
             },
         ] {
             let valve_rest = spec.valve.map_or_else(ValveState::default, |f| f.rest());

@@ -3,7 +3,7 @@
 
 use super::cv::{CvResult, GridPoint};
 use super::features::{StateVec, STATE_DIM};
-use super::model::Predictor;
+use super::predictor::Predictor;
 use super::report::{at_chosen_n, best_per_n};
 use super::TrainOutcome;
 use crate::plot::{write_png, Panel, PlotError, Series};

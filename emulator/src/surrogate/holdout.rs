@@ -7,7 +7,8 @@
 use super::dataset::Dataset;
 use super::excitation::{sphere_signal, Excitation, Segment};
 use super::features::{InputVec, StateVec, INPUT_DIM, STATE_MF, STATE_MO};
-use super::model::{Model, Predictor};
+use super::model::Model;
+use super::predictor::Predictor;
 use crate::propulsion::Propulsion;
 use oils_shared::profile::ThrustProfile;
 use oils_shared::ENGINE_COUNT;

@@ -20,6 +20,7 @@ pub mod lasso;
 pub mod library;
 pub mod model;
 pub mod model_file;
+pub mod predictor;
 pub mod report;
 pub mod runtime;
 

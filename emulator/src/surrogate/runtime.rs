@@ -4,8 +4,8 @@
 //! envelope are clamped and counted ([`SurrogatePropulsion::out_of_envelope_steps`]).
 
 use super::features::{InputVec, StateVec, INPUT_DIM, STATE_MF, STATE_MO, STATE_P};
-use super::model::Predictor;
 use super::model_file::{ModelFile, ModelFileError};
+use super::predictor::Predictor;
 use crate::config::PropulsionConfig;
 use crate::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
 use oils_shared::ENGINE_COUNT;

@@ -1,0 +1,118 @@
+//! The predictor's history: a ring of records, each stored twice so that the
+//! latest `depth` records are always one contiguous window.
+
+use crate::surrogate::features::{
+    command_sum_of, lambda_of, InputVec, StateVec, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO,
+};
+use oils_shared::ENGINE_COUNT;
+
+/// Components of a ring record: the step's inputs, its command sum and the four
+/// valve-filtered commands after it, then the state at its end and lambda of that state
+/// (each computed once when stored, not per read).
+pub(super) const REC_SUM: usize = INPUT_DIM;
+pub(super) const REC_VALVE: usize = INPUT_DIM + 1;
+pub(super) const REC_STATE: usize = REC_VALVE + ENGINE_COUNT;
+pub(super) const REC_LAMBDA: usize = REC_STATE + STATE_DIM;
+pub(super) const REC_DIM: usize = REC_LAMBDA + 1;
+
+/// The history: the last `depth` records, each stored twice (at `i` and `i + depth`), so
+/// that the records from `depth - 1` steps back to the latest always lie in one
+/// contiguous window. A feature is then a fixed offset into the window, found when the
+/// model is compiled, instead of a wrap-around computation per read.
+#[derive(Debug, Clone)]
+pub(super) struct Ring {
+    pub(super) buf: Vec<f64>,
+    pub(super) depth: usize,
+    /// Record index of the step being predicted, `0..depth`.
+    pub(super) head: usize,
+}
+
+impl Ring {
+    pub(super) fn new(depth: usize) -> Self {
+        Self {
+            buf: vec![0.0; 2 * depth * REC_DIM],
+            depth,
+            head: 0,
+        }
+    }
+
+    /// Where component `comp` of the record `lag` steps back lies in the window.
+    pub(super) fn offset(depth: usize, lag: usize, comp: usize) -> usize {
+        (depth - 1 - lag) * REC_DIM + comp
+    }
+
+    /// The window: record `head - depth + 1` (wrapped) first, `head` last.
+    #[inline(always)]
+    pub(super) fn window(&self) -> &[f64] {
+        let start = (self.head + 1) * REC_DIM;
+        &self.buf[start..start + self.depth * REC_DIM]
+    }
+
+    /// The record `lag` steps back.
+    pub(super) fn rec(&self, lag: usize) -> &[f64] {
+        let i = self.head + self.depth - lag;
+        &self.buf[i * REC_DIM..(i + 1) * REC_DIM]
+    }
+
+    /// Moves `head` on by one record (a compare, not the division of `%`, on the step
+    /// path) and returns it.
+    #[inline(always)]
+    pub(super) fn advance(&mut self) -> usize {
+        self.head += 1;
+        if self.head == self.depth {
+            self.head = 0;
+        }
+        self.head
+    }
+
+    /// Index of the record `lag` steps back.
+    pub(super) fn index(&self, lag: usize) -> usize {
+        (self.head + self.depth - lag) % self.depth
+    }
+
+    /// Writes `values` from component `comp` of record `i`, in both copies, then
+    /// `last` after them. Value by value rather than through an assembled array: the
+    /// values were just computed one by one, and a wide read of them would wait for
+    /// the narrow writes (a store-forwarding stall: in a profile of the step, those
+    /// wide reads were among its hottest instructions). `N` is a constant so that the
+    /// copy is a few moves: over a slice of run-time length it compiled to a call to
+    /// `memcpy`, some 5 % of the step.
+    #[inline(always)]
+    pub(super) fn write<const N: usize>(
+        &mut self,
+        i: usize,
+        comp: usize,
+        values: &[f64; N],
+        last: Option<f64>,
+    ) {
+        for copy in [i, i + self.depth] {
+            let at = copy * REC_DIM + comp;
+            let r: &mut [f64; N] = (&mut self.buf[at..at + N])
+                .try_into()
+                .expect("a slice of N values");
+            *r = *values;
+            if let Some(v) = last {
+                self.buf[at + N] = v;
+            }
+        }
+    }
+
+    pub(super) fn set_state(&mut self, i: usize, s: &StateVec) {
+        let lambda = lambda_of(s[STATE_MF], s[STATE_MO]);
+        self.write(i, REC_STATE, s, Some(lambda));
+    }
+
+    pub(super) fn set_valve(&mut self, i: usize, valve_n: &[f64; ENGINE_COUNT]) {
+        self.write(i, REC_VALVE, valve_n, None);
+    }
+
+    pub(super) fn set_input(&mut self, i: usize, u: &InputVec) {
+        self.write(i, 0, u, Some(command_sum_of(u)));
+    }
+
+    /// The latest state.
+    pub(super) fn state(&self) -> StateVec {
+        let r = self.rec(0);
+        std::array::from_fn(|k| r[REC_STATE + k])
+    }
+}
