@@ -1,32 +1,44 @@
 //! Shared by the allocation-proof test binaries: a global allocator that counts every
-//! allocation and reallocation. Each binary installs it with
+//! allocation and reallocation (per thread). Each binary installs it with
 //! `#[global_allocator] static GLOBAL: common::CountingAlloc = common::CountingAlloc;`
 //! (a global allocator is per binary, so it cannot live in the library).
 
 use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::cell::Cell;
 
 /// The system allocator, counting.
 pub struct CountingAlloc;
 
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+thread_local! {
+    /// Allocations and reallocations made by this thread. Per thread, because the test
+    /// harness's own threads allocate too (on a loaded machine, inside a test's counting
+    /// window: a process-wide count once failed `surrogate_no_alloc` with 4 allocations
+    /// no step made). Every step path under test runs on the test's thread. A const
+    /// `Cell` without a destructor: reading it never allocates.
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
 
-/// Allocations and reallocations so far in this process.
+fn count_one() {
+    // `try_with`: during a thread's teardown the counter may already be gone.
+    let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
+}
+
+/// Allocations and reallocations so far by the calling thread.
 pub fn allocations() -> usize {
-    ALLOCATIONS.load(Ordering::SeqCst)
+    ALLOCATIONS.with(Cell::get)
 }
 
 // SAFETY: every call is forwarded unchanged to the system allocator.
 unsafe impl GlobalAlloc for CountingAlloc {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        count_one();
         unsafe { System.alloc(layout) }
     }
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
         unsafe { System.dealloc(ptr, layout) }
     }
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        count_one();
         unsafe { System.realloc(ptr, layout, new_size) }
     }
 }
