@@ -169,7 +169,6 @@ mod tests {
     use crate::config::PropulsionConfig;
     use crate::propulsion::ideal::IdealPropulsion;
     use crate::surrogate::excitation::ExcitationConfig;
-    use crate::surrogate::features::Layout;
 
     #[test]
     fn records_and_exports() {
@@ -190,16 +189,7 @@ mod tests {
         assert_eq!(d.initial[STATE_MF], 0.0);
         assert!(d.states.last().unwrap()[0] > 100.0);
         let dir = std::env::temp_dir().join(format!("oils-dataset-test-{}", std::process::id()));
-        let spec = FeatureSpec {
-            layout: Layout::Mimo,
-            history: 2,
-            mass_features: true,
-            start_steps: 0,
-            stop_steps: 0,
-            phase_degree: 0,
-            command_sum: false,
-            valve: None,
-        };
+        let spec = FeatureSpec::paper(2);
         d.export_csv(&dir, &spec).unwrap();
         let f = std::fs::read_to_string(dir.join("features_n2.csv")).unwrap();
         let header = f.lines().next().unwrap();

@@ -573,6 +573,22 @@ pub trait History {
 }
 
 impl FeatureSpec {
+    /// The paper's Section V vector of `11n + 10` features for history `n`: all four
+    /// engines in one MIMO vector, with the ejected-mass histories and lambda, and none
+    /// of the physics features beyond it.
+    pub fn paper(history: usize) -> Self {
+        Self {
+            layout: Layout::Mimo,
+            history,
+            mass_features: true,
+            start_steps: 0,
+            stop_steps: 0,
+            phase_degree: 0,
+            command_sum: false,
+            valve: None,
+        }
+    }
+
     /// Deepest state lag read (`n+1`, for the gas pressure history).
     pub fn max_state_lag(&self) -> usize {
         self.history + 1
@@ -912,16 +928,7 @@ mod tests {
     #[test]
     fn paper_dimension_is_11n_plus_10() {
         for n in 1..=10 {
-            let s = FeatureSpec {
-                layout: Layout::Mimo,
-                history: n,
-                mass_features: true,
-                start_steps: 0,
-                stop_steps: 0,
-                phase_degree: 0,
-                command_sum: false,
-                valve: None,
-            };
+            let s = FeatureSpec::paper(n);
             assert_eq!(s.dim(), 11 * n + 10);
             assert_eq!(s.names().len(), 11 * n + 10);
         }
@@ -934,16 +941,7 @@ mod tests {
         let inputs: Vec<InputVec> = (0..10).map(|k| [k as f64; INPUT_DIM]).collect();
         let states: Vec<StateVec> = (0..10).map(|k| [100.0 + k as f64; STATE_DIM]).collect();
         let initial = [-1.0; STATE_DIM];
-        let spec = FeatureSpec {
-            layout: Layout::Mimo,
-            history: 2,
-            mass_features: true,
-            start_steps: 0,
-            stop_steps: 0,
-            phase_degree: 0,
-            command_sum: false,
-            valve: None,
-        };
+        let spec = FeatureSpec::paper(2);
         let mut out = vec![0.0; spec.dim()];
         let h = TrajectoryHistory {
             inputs: &inputs,
@@ -1044,16 +1042,7 @@ pub(crate) mod source_tests {
         let (inputs, states) = switching_trajectory(120);
         let initial = [1.0, 2.0, 3.0, 4.0, 2.8e7, 0.0, 0.0];
         for spec in [
-            FeatureSpec {
-                layout: Layout::Mimo,
-                history: 3,
-                mass_features: true,
-                start_steps: 0,
-                stop_steps: 0,
-                phase_degree: 0,
-                command_sum: false,
-                valve: None,
-            },
+            FeatureSpec::paper(3),
             FeatureSpec {
                 layout: Layout::PerEngine,
                 history: 2,

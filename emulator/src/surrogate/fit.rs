@@ -153,16 +153,7 @@ impl SubSpec {
 pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec> {
     match variant {
         Variant::Paper => vec![SubSpec {
-            features: FeatureSpec {
-                layout: Layout::Mimo,
-                history: n,
-                mass_features: true,
-                start_steps: 0,
-                stop_steps: 0,
-                phase_degree: 0,
-                command_sum: false,
-                valve: None,
-            },
+            features: FeatureSpec::paper(n),
             degree: cfg.paper_degree,
             target: Target::Absolute,
             outputs: (0..STATE_DIM).collect(),
@@ -186,16 +177,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                 penalty: Penalty::Scaled(1.0),
             },
             SubSpec {
-                features: FeatureSpec {
-                    layout: Layout::Mimo,
-                    history: n,
-                    mass_features: true,
-                    start_steps: 0,
-                    stop_steps: 0,
-                    phase_degree: 0,
-                    command_sum: false,
-                    valve: None,
-                },
+                features: FeatureSpec::paper(n),
                 degree: cfg.system_degree,
                 target: Target::Increment,
                 outputs: (ENGINE_COUNT..STATE_DIM).collect(),

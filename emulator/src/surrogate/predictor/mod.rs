@@ -322,16 +322,7 @@ pub(crate) mod tests {
                 (0..ENGINE_COUNT).collect::<Vec<_>>(),
             ),
             (
-                FeatureSpec {
-                    layout: Layout::Mimo,
-                    history: 1,
-                    mass_features: true,
-                    start_steps: 0,
-                    stop_steps: 0,
-                    phase_degree: 0,
-                    command_sum: false,
-                    valve: None,
-                },
+                FeatureSpec::paper(1),
                 mimo_degree,
                 (ENGINE_COUNT..STATE_DIM).collect(),
             ),
