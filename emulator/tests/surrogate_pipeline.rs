@@ -73,7 +73,7 @@ fn bad_model_files_are_refused_clearly() {
         2
     );
 
-    let wrong_version = good.replacen("\"version\": 5", "\"version\": 99", 1);
+    let wrong_version = good.replacen("\"version\": 6", "\"version\": 99", 1);
     let e = refusal(&wrong_version, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 99 }),
@@ -81,16 +81,43 @@ fn bad_model_files_are_refused_clearly() {
     );
     assert!(e.to_string().contains("version 99"));
     // A version-1 file (before the per-engine physics features) is refused by name.
-    let old = good.replacen("\"version\": 5", "\"version\": 1", 1);
+    let old = good.replacen("\"version\": 6", "\"version\": 1", 1);
     let e = refusal(&old, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 1 }),
         "{e}"
     );
     assert!(e.to_string().contains("retrain"), "{e}");
+    // A version-5 file with draw changes is refused (version 5 had none). Taking the key
+    // out leaves features the model's terms count on: refused, not misread.
+    let relabelled = good.replacen("\"version\": 6", "\"version\": 5", 1);
+    let e = refusal(&relabelled, 10_000_000);
+    assert!(e.to_string().contains("needs file version 6"), "{e}");
+    let mut unsummed: serde_json::Value = serde_json::from_str(&relabelled).unwrap();
+    let mut stripped_sums = 0;
+    for sub in unsummed["model"]["submodels"].as_array_mut().unwrap() {
+        let features = sub["features"].as_object_mut().unwrap();
+        stripped_sums += usize::from(features.remove("valve_sum").is_some());
+    }
+    assert_eq!(
+        stripped_sums, 1,
+        "the committed model reads the draw changes"
+    );
+    let e = refusal(&unsummed.to_string(), 10_000_000);
+    assert!(e.to_string().contains("feature_names has"), "{e}");
+    // The default model before the draw changes, as committed then (version 5), reads
+    // and runs.
+    let v5_text = include_str!("data/surrogate-v5.json");
+    let v5 = ModelFile::parse(v5_text).expect("version 5 reads");
+    assert!(v5.model.submodels.iter().all(|s| !s.features.valve_sum));
+    let mut old_model = oils_emulator::surrogate::predictor::Predictor::new(&v5.model);
+    for k in 0..200 {
+        let x = old_model.step(&[600.0 + k as f64, 500.0, 700.0, 650.0, 1.0, 1.0, 1.0, 1.0]);
+        assert!(x.iter().all(|v| v.is_finite()));
+    }
     // A version-4 file setting the clock's sag is refused (version 4 had none); without
     // the sag it reads, as a clock without sag.
-    let relabelled = good.replacen("\"version\": 5", "\"version\": 4", 1);
+    let relabelled = v5_text.replacen("\"version\": 5", "\"version\": 4", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 5"), "{e}");
     let mut stripped_sags = 0;
@@ -118,12 +145,12 @@ fn bad_model_files_are_refused_clearly() {
         .and_then(|v| v.ignition)
         .is_none_or(|c| c.sag_per_n == 0.0)));
     // A version-3 file naming an ignition clock is refused (version 3 had none).
-    let relabelled = good.replacen("\"version\": 5", "\"version\": 3", 1);
+    let relabelled = good.replacen("\"version\": 6", "\"version\": 3", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 4"), "{e}");
     // Version 2 (before the valve filter) still reads; a version-2 file naming a valve
     // filter is refused (no version-2 writer made one).
-    let relabelled = good.replacen("\"version\": 5", "\"version\": 2", 1);
+    let relabelled = good.replacen("\"version\": 6", "\"version\": 2", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 3"), "{e}");
     // The default model before the valve filter, as committed then.
@@ -138,6 +165,16 @@ fn bad_model_files_are_refused_clearly() {
     let mut stripped: serde_json::Value = serde_json::from_str(good).unwrap();
     for sub in stripped["model"]["submodels"].as_array_mut().unwrap() {
         sub["features"].as_object_mut().unwrap().remove("valve");
+    }
+    // The draw changes are summed over the valve filter: that is named first.
+    let e = refusal(&stripped.to_string(), 10_000_000);
+    assert!(
+        e.to_string()
+            .contains("valve_sum needs a per-engine layout with a valve filter"),
+        "{e}"
+    );
+    for sub in stripped["model"]["submodels"].as_array_mut().unwrap() {
+        sub["features"].as_object_mut().unwrap().remove("valve_sum");
     }
     let e = refusal(&stripped.to_string(), 10_000_000);
     assert!(e.to_string().contains("feature_names has"), "{e}");
@@ -155,6 +192,18 @@ fn bad_model_files_are_refused_clearly() {
     );
     let e = refusal(&text, 10_000_000);
     assert!(e.to_string().contains("per-engine features only"), "{e}");
+    // So are draw changes there: a MIMO submodel has no valve filter to sum.
+    let text = format!(
+        "{}\"start_steps\": 0, \"valve_sum\": true{}",
+        &good[..at],
+        &good[at + "\"start_steps\": 0".len()..]
+    );
+    let e = refusal(&text, 10_000_000);
+    assert!(
+        e.to_string()
+            .contains("valve_sum needs a per-engine layout"),
+        "{e}"
+    );
 
     let e = refusal(good, 15_000_000);
     assert!(matches!(e, ModelFileError::SampleTime { .. }), "{e}");
@@ -341,6 +390,30 @@ fn bad_penalties_in_a_training_configuration_are_refused_clearly() {
     let zero_scale = without.replace("system_mu_scale = 10.0", "system_mu_scale = 0.0");
     let err = TrainConfig::from_toml(&zero_scale).unwrap_err().to_string();
     assert!(err.contains("variants.system_mu_scale"), "{err}");
+}
+
+#[test]
+fn draw_changes_without_a_valve_filter_are_refused_clearly() {
+    let text = std::fs::read_to_string(root().join("config/train.toml")).unwrap();
+    assert!(
+        TrainConfig::from_toml(&text)
+            .unwrap()
+            .variants
+            .engine_valve_sum
+    );
+    // Without the valve filter there is nothing to sum.
+    let start = text
+        .find("[variants.engine_valve]")
+        .expect("a valve filter section");
+    let without_valve = &text[..start];
+    assert!(!without_valve.contains("[variants.engine_valve"));
+    let err = TrainConfig::from_toml(without_valve)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("engine_valve_sum") && err.contains("engine_valve]"),
+        "unclear error {err:?}"
+    );
 }
 
 #[test]

@@ -88,6 +88,19 @@ pub struct FeatureSpec {
     /// histories cannot be both at once. `None`: no such features (the paper's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub valve: Option<ValveFilter>,
+    /// Beyond the paper, per-engine layout with a valve filter only: how much more the
+    /// engines that are on draw than a step before, `dT_vsum[t]`, and the same for the
+    /// last `n` steps, `dT_vsum[t-1..t-n]` ([`valve_sum_change_of`]). The four engines
+    /// draw through one feed, so an engine's thrust dips while the others open and
+    /// recovers as the feed settles. `T_rsum[t]` gives the level of the total draw but
+    /// no history, so it cannot carry that recovery. Changes, not levels: they are 0 in
+    /// steady running, so these features move the transients and cannot shift a hold
+    /// (levels, tried first, moved the descent's steady thrust and doubled its mass
+    /// error). Over the `sine-700` validation case, hifi's thrust less a least-squares
+    /// fit of a cubic in its own valve and two lags leaves 6.5 N max; adding the total
+    /// draw and its last two steps leaves 2.4 N (measured before any training).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub valve_sum: bool,
 }
 
 /// A throttle valve actuator in newtons: the valve position, expressed as the thrust it
@@ -434,6 +447,29 @@ pub fn command_sum_of(input: &InputVec) -> f64 {
     input[0] + input[1] + input[2] + input[3]
 }
 
+/// Sum of the valve positions `valve_n` of the engines that are on in `input`, in engine
+/// order: what the engines draw through their shared feed. A parked valve of an engine
+/// that is off draws nothing.
+#[inline(always)]
+pub fn valve_sum_of(input: &InputVec, valve_n: &[f64; ENGINE_COUNT]) -> f64 {
+    let drawing = |e: usize| {
+        if input[ENGINE_COUNT + e] > 0.5 {
+            valve_n[e]
+        } else {
+            0.0
+        }
+    };
+    drawing(0) + drawing(1) + drawing(2) + drawing(3)
+}
+
+/// How much more the engines draw after step `t - lag` than after the step before
+/// ([`valve_sum_of`], [`FeatureSpec::valve_sum`]).
+#[inline]
+pub fn valve_sum_change_of<H: History + ?Sized>(h: &H, lag: usize) -> f64 {
+    valve_sum_of(h.input(lag), &h.valve(lag).valve_n)
+        - valve_sum_of(h.input(lag + 1), &h.valve(lag + 1).valve_n)
+}
+
 /// The features a phase indicator is multiplied with in the library: the command, the
 /// latest thrust and the latest gas pressure. A start or stop transient is then a lookup
 /// of per-step gains on these (`start3[t]*T_r[t]`, ...) rather than products with every
@@ -485,6 +521,12 @@ pub enum Source {
     Lambda,
     /// The sum of the four commands at `t` ([`command_sum_of`]).
     CommandSum,
+    /// The change of what the engines that are on draw, after step `t - lag`
+    /// ([`valve_sum_change_of`]).
+    ValveSum {
+        /// Steps back (0: after the step being predicted).
+        lag: usize,
+    },
     /// 1 when the engine switched on exactly `k` steps before `t` (see [`phase_age`]).
     Start(usize),
     /// 1 when the engine switched off exactly `k` steps before `t`.
@@ -501,7 +543,7 @@ impl Source {
     pub fn per_engine(&self) -> bool {
         match *self {
             Source::Input { per_engine, .. } | Source::State { per_engine, .. } => per_engine,
-            Source::Lambda | Source::CommandSum => false,
+            Source::Lambda | Source::CommandSum | Source::ValveSum { .. } => false,
             Source::Start(_)
             | Source::Stop(_)
             | Source::Valve { .. }
@@ -529,6 +571,7 @@ impl Source {
                 lambda_of(s[STATE_MF], s[STATE_MO])
             }
             Source::CommandSum => command_sum_of(h.input(0)),
+            Source::ValveSum { lag } => valve_sum_change_of(h, lag),
             Source::Valve { lag } => h.valve(lag).valve_n[engine],
             Source::Start(k) => indicator(phase_age(h, engine, true, k + 1) == Some(k)),
             Source::Stop(k) => indicator(phase_age(h, engine, false, k + 1) == Some(k)),
@@ -586,6 +629,7 @@ impl FeatureSpec {
             phase_degree: 0,
             command_sum: false,
             valve: None,
+            valve_sum: false,
         }
     }
 
@@ -610,6 +654,7 @@ impl FeatureSpec {
     /// ignition clock).
     fn physics_features(&self) -> usize {
         self.valve_features()
+            + self.valve_sum_features()
             + usize::from(self.command_sum)
             + self.phase_features()
             + self.ignition_features()
@@ -633,6 +678,15 @@ impl FeatureSpec {
     pub fn valve_features(&self) -> usize {
         if self.valve.is_some() && self.layout == Layout::PerEngine {
             self.history + 1
+        } else {
+            0
+        }
+    }
+
+    /// Number of valve-sum features (`dT_vsum[t]` and its history), 0 without them.
+    pub fn valve_sum_features(&self) -> usize {
+        if self.valve_sum {
+            self.valve_features()
         } else {
             0
         }
@@ -699,6 +753,9 @@ impl FeatureSpec {
         if self.layout == Layout::PerEngine {
             for k in 0..self.valve_features() {
                 v.push(format!("T_v{}", lag(k)));
+            }
+            for k in 0..self.valve_sum_features() {
+                v.push(format!("dT_vsum{}", lag(k)));
             }
             if self.command_sum {
                 v.push(format!("T_rsum{}", lag(0)));
@@ -768,6 +825,7 @@ impl FeatureSpec {
         }
         if per {
             v.extend((0..self.valve_features()).map(|lag| Source::Valve { lag }));
+            v.extend((0..self.valve_sum_features()).map(|lag| Source::ValveSum { lag }));
             if self.command_sum {
                 v.push(Source::CommandSum);
             }
@@ -861,6 +919,9 @@ impl FeatureSpec {
         }
         for k in 0..self.valve_features() {
             put(h.valve(k).valve_n[engine]);
+        }
+        for k in 0..self.valve_sum_features() {
+            put(valve_sum_change_of(h, k));
         }
         if self.layout == Layout::PerEngine && self.command_sum {
             put(command_sum_of(h.input(0)));
@@ -988,6 +1049,7 @@ mod tests {
             phase_degree: 0,
             command_sum: false,
             valve: None,
+            valve_sum: false,
         };
         let mut out = vec![0.0; spec.dim()];
         let h = TrajectoryHistory {
@@ -1052,6 +1114,7 @@ pub(crate) mod source_tests {
                 phase_degree: 0,
                 command_sum: true,
                 valve: Some(crate::surrogate::predictor::tests::TEST_VALVE),
+                valve_sum: true,
             },
         ] {
             let valve_rest = spec.valve.map_or_else(ValveState::default, |f| f.rest());
@@ -1086,6 +1149,91 @@ pub(crate) mod source_tests {
             assert!(spec.phase_features() == 0 || starts > 20.0);
             assert!(spec.ignition_features() == 0 || ignitions > 20.0);
         }
+    }
+
+    /// The draw changes: what the engines that are on draw after a step, less what they
+    /// drew after the step before; an engine that is off draws nothing, however its
+    /// valve is parked, and before the first step nothing was drawn.
+    #[test]
+    fn draw_changes_count_only_engines_that_are_on() {
+        let spec = FeatureSpec {
+            layout: Layout::PerEngine,
+            history: 2,
+            mass_features: false,
+            start_steps: 0,
+            stop_steps: 0,
+            phase_degree: 0,
+            command_sum: false,
+            valve: Some(crate::surrogate::predictor::tests::TEST_VALVE),
+            valve_sum: true,
+        };
+        let names = spec.names();
+        let first = names.iter().position(|s| s == "dT_vsum[t]").unwrap();
+        assert_eq!(
+            names[first..first + 3],
+            ["dT_vsum[t]", "dT_vsum[t-1]", "dT_vsum[t-2]"]
+        );
+        // Hand-made valve states: each valve at 100 * (engine + 1) + step; engines 0 and
+        // 2 on from step 0, engine 1 on from step 2, engine 3 never.
+        let on = |t: usize, e: usize| e == 0 || e == 2 || (e == 1 && t >= 2);
+        let inputs: Vec<InputVec> = (0..4)
+            .map(|t| {
+                let mut u = [0.0; INPUT_DIM];
+                for e in 0..ENGINE_COUNT {
+                    u[ENGINE_COUNT + e] = f64::from(u8::from(on(t, e)));
+                }
+                u
+            })
+            .collect();
+        let valves: Vec<ValveState> = (0..4)
+            .map(|t| ValveState {
+                valve_n: std::array::from_fn(|e| 100.0 * (e + 1) as f64 + t as f64),
+                ..ValveState::default()
+            })
+            .collect();
+        let drawn = |t: usize| -> f64 {
+            (0..ENGINE_COUNT)
+                .filter(|&e| on(t, e))
+                .map(|e| valves[t].valve_n[e])
+                .sum()
+        };
+        let states = vec![[0.0; STATE_DIM]; 4];
+        let mut out = vec![0.0; spec.dim()];
+        for t in 0..4 {
+            let h = TrajectoryHistory {
+                inputs: &inputs,
+                states: &states,
+                initial: &[0.0; STATE_DIM],
+                valves: &valves,
+                // Parked valves of engines that are off: not drawn.
+                valve_rest: ValveState {
+                    valve_n: [320.0; ENGINE_COUNT],
+                    ..ValveState::default()
+                },
+                t,
+            };
+            for engine in 0..ENGINE_COUNT {
+                spec.fill(&h, engine, &mut out);
+                for lag in 0..3 {
+                    let drawn_at = |k: isize| if k < 0 { 0.0 } else { drawn(k as usize) };
+                    let k = t as isize - lag as isize;
+                    let want = drawn_at(k) - drawn_at(k - 1);
+                    assert_eq!(out[first + lag], want, "t {t} lag {lag} engine {engine}");
+                }
+            }
+        }
+        // Step 2: engine 1 switches on (+ its 202 N) and the other two open by 1 N each.
+        let h = TrajectoryHistory {
+            inputs: &inputs,
+            states: &states,
+            initial: &[0.0; STATE_DIM],
+            valves: &valves,
+            valve_rest: ValveState::default(),
+            t: 2,
+        };
+        assert_eq!(valve_sum_change_of(&h, 0), 204.0);
+        // Step 0: engines 0 and 2 start drawing 100 + 300 N.
+        assert_eq!(valve_sum_change_of(&h, 2), 400.0);
     }
 
     /// The valve filter: parked when off, a large step at the rate limit, a small one

@@ -72,6 +72,10 @@ pub struct VariantConfig {
     /// model of the throttle valve's actuator (`T_v`, see [`FeatureSpec::valve`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub engine_valve: Option<ValveFilter>,
+    /// Beyond the paper: give the per-engine thrust model how the engines' total draw
+    /// changed over the last steps, `dT_vsum[t..t-n]` (see [`FeatureSpec::valve_sum`]).
+    /// Needs `engine_valve`.
+    pub engine_valve_sum: bool,
     /// Largest history length the shared-engine variant's cross-validation tries (0: the
     /// `[cv]` range). The step's cost grows with `n`, while the score barely moves past
     /// 2 (docs/surrogate.md, "Cost").
@@ -92,6 +96,7 @@ impl Default for VariantConfig {
             system_mu_scale: 1.0,
             system_mu: None,
             engine_valve: None,
+            engine_valve_sum: false,
             engine_history_max: 0,
         }
     }
@@ -170,6 +175,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                     phase_degree: cfg.engine_phase_degree,
                     command_sum: cfg.engine_command_sum,
                     valve: cfg.engine_valve,
+                    valve_sum: cfg.engine_valve_sum,
                 },
                 degree: cfg.engine_degree,
                 target: Target::Increment,

@@ -211,6 +211,7 @@ mod tests {
             phase_degree: 3,
             command_sum: true,
             valve: None,
+            valve_sum: false,
         };
         let names = spec.names();
         let lib = Library::new(spec.dim(), 2, &spec.roles(), spec.phase_degree);

@@ -138,6 +138,11 @@ impl TrainConfig {
             f.validate()
                 .map_err(|m| e(format!("variants.engine_valve: {m}")))?;
         }
+        if v.engine_valve_sum && v.engine_valve.is_none() {
+            return Err(e(
+                "variants.engine_valve_sum = true needs a [variants.engine_valve] filter".into(),
+            ));
+        }
         if v.engine_phase_degree > library::MAX_DEGREE {
             return Err(e(format!(
                 "variants.engine_phase_degree = {}: must be 0..=3",

@@ -142,6 +142,13 @@ impl Model {
             if s.features.layout == Layout::Mimo && s.features.phase_features() > 0 {
                 return Err(ctx("phase indicators are per-engine features only"));
             }
+            if s.features.valve_sum
+                && (s.features.layout != Layout::PerEngine || s.features.valve.is_none())
+            {
+                return Err(ctx(
+                    "valve_sum needs a per-engine layout with a valve filter",
+                ));
+            }
             if let Some(f) = &s.features.valve {
                 f.validate().map_err(|m| ctx(&m))?;
                 let other = self.submodels.iter().filter_map(|o| o.features.valve);

@@ -25,8 +25,11 @@ pub const FORMAT: &str = "oils-surrogate";
 /// (`ignition` in a valve filter), which a version-3 reader would refuse as an unknown
 /// field; a version-3 file that names one is refused here too. Version 5 added the
 /// clock's manifold sag (`sag_per_n`), which a version-4 reader would refuse as an
-/// unknown field; a version-4 file that sets one is refused here too.
-pub const VERSION: u32 = 5;
+/// unknown field; a version-4 file that sets one is refused here too. Version 6 added
+/// the valve sum (`valve_sum` in a feature spec), which a version-5 reader would ignore
+/// (feature specs accept unknown fields) and so misread; a version-5 file that sets it
+/// is refused here.
+pub const VERSION: u32 = 6;
 /// Oldest version this build reads.
 pub const OLDEST_VERSION: u32 = 2;
 
@@ -233,6 +236,11 @@ impl ModelFile {
         {
             return Err(ModelFileError::Invalid(
                 "an ignition clock's sag needs file version 5".into(),
+            ));
+        }
+        if version < 6 && file.model.submodels.iter().any(|s| s.features.valve_sum) {
+            return Err(ModelFileError::Invalid(
+                "a valve sum (`valve_sum`) needs file version 6".into(),
             ));
         }
         if file.model.sample_time_ns == 0 {

@@ -5,7 +5,7 @@ use super::dense::{Dense, DENSE_ROWS};
 #[cfg(target_arch = "x86_64")]
 use super::gather::gather_lanes_avx2;
 use super::gather::{Clock, ClockGather, FeatureScaling, Gather, PhaseGather, Phases};
-use super::ring::{Ring, REC_LAMBDA, REC_STATE, REC_SUM, REC_VALVE};
+use super::ring::{Ring, REC_LAMBDA, REC_STATE, REC_SUM, REC_VALVE, REC_VALVE_SUM_CHANGE};
 use super::terms::CompiledRow;
 use crate::surrogate::features::{IgnitionClock, Layout, Source, StateVec};
 use crate::surrogate::model::{Submodel, Target};
@@ -105,6 +105,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
                 Source::Lambda => shared.push((j, read(j, 1, REC_LAMBDA))),
                 Source::CommandSum => shared.push((j, read(j, 0, REC_SUM))),
                 Source::Valve { lag } => lanes.push((j, read(j, lag, REC_VALVE))),
+                Source::ValveSum { lag } => shared.push((j, read(j, lag, REC_VALVE_SUM_CHANGE))),
                 Source::Start(_) | Source::Stop(_) => phase_js.push(j),
                 Source::Priming | Source::Ignition(..) => clock_js.push(j),
             }

@@ -16,8 +16,8 @@ mod ring;
 mod terms;
 
 use super::features::{
-    History, InputVec, Layout, StateVec, ValveState, ValveTrack, INPUT_DIM, STATE_MF, STATE_MO,
-    STATE_P,
+    valve_sum_of, History, InputVec, Layout, StateVec, ValveState, ValveTrack, INPUT_DIM, STATE_MF,
+    STATE_MO, STATE_P,
 };
 use super::model::Model;
 use compiled::CompiledSub;
@@ -114,7 +114,9 @@ impl Predictor {
         });
         for i in 0..self.ring.depth {
             self.ring.set_input(i, &[0.0; INPUT_DIM]);
-            self.ring.set_valve(i, &rest.valve_n);
+            // At rest nothing draws, before or after.
+            self.ring
+                .set_valve(i, &rest.valve_n, &[0.0; INPUT_DIM], 0.0);
             self.ring.set_state(i, state);
         }
         self.ring.head = 0;
@@ -133,7 +135,9 @@ impl Predictor {
             let i = self.ring.index(lag);
             self.ring.set_input(i, h.input(lag));
             if self.valve.is_some() {
-                self.ring.set_valve(i, &h.valve(lag).valve_n);
+                let before = valve_sum_of(h.input(lag + 1), &h.valve(lag + 1).valve_n);
+                self.ring
+                    .set_valve(i, &h.valve(lag).valve_n, h.input(lag), before);
             }
             self.ring.set_state(i, h.state(lag));
         }
@@ -213,7 +217,8 @@ impl Predictor {
         if let Some(v) = &mut self.valve {
             let ignition = v.ignition();
             let s = v.advance(&u);
-            self.ring.set_valve(head, &s.valve_n);
+            let before = self.ring.valve_sum(1);
+            self.ring.set_valve(head, &s.valve_n, &u, before);
             if let Some(c) = ignition {
                 // The switches are the phases' (already updated for this step).
                 let window_s = c.window_s();
@@ -317,6 +322,7 @@ pub(crate) mod tests {
                     phase_degree: 0,
                     command_sum: true,
                     valve: Some(TEST_VALVE),
+                    valve_sum: true,
                 },
                 3,
                 (0..ENGINE_COUNT).collect::<Vec<_>>(),

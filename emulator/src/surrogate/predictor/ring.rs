@@ -2,16 +2,20 @@
 //! latest `depth` records are always one contiguous window.
 
 use crate::surrogate::features::{
-    command_sum_of, lambda_of, InputVec, StateVec, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO,
+    command_sum_of, lambda_of, valve_sum_of, InputVec, StateVec, INPUT_DIM, STATE_DIM, STATE_MF,
+    STATE_MO,
 };
 use oils_shared::ENGINE_COUNT;
 
-/// Components of a ring record: the step's inputs, its command sum and the four
-/// valve-filtered commands after it, then the state at its end and lambda of that state
+/// Components of a ring record: the step's inputs, its command sum, the four
+/// valve-filtered commands after it, their sum over the engines that are on and that
+/// sum's change from the step before, then the state at its end and lambda of that state
 /// (each computed once when stored, not per read).
 pub(super) const REC_SUM: usize = INPUT_DIM;
 pub(super) const REC_VALVE: usize = INPUT_DIM + 1;
-pub(super) const REC_STATE: usize = REC_VALVE + ENGINE_COUNT;
+pub(super) const REC_VALVE_SUM: usize = REC_VALVE + ENGINE_COUNT;
+pub(super) const REC_VALVE_SUM_CHANGE: usize = REC_VALVE_SUM + 1;
+pub(super) const REC_STATE: usize = REC_VALVE_SUM_CHANGE + 1;
 pub(super) const REC_LAMBDA: usize = REC_STATE + STATE_DIM;
 pub(super) const REC_DIM: usize = REC_LAMBDA + 1;
 
@@ -102,8 +106,24 @@ impl Ring {
         self.write(i, REC_STATE, s, Some(lambda));
     }
 
-    pub(super) fn set_valve(&mut self, i: usize, valve_n: &[f64; ENGINE_COUNT]) {
-        self.write(i, REC_VALVE, valve_n, None);
+    /// The valve positions after step `i`, whose inputs were `u`; `sum_before` is what
+    /// the engines drew after the step before ([`valve_sum_of`]).
+    pub(super) fn set_valve(
+        &mut self,
+        i: usize,
+        valve_n: &[f64; ENGINE_COUNT],
+        u: &InputVec,
+        sum_before: f64,
+    ) {
+        let sum = valve_sum_of(u, valve_n);
+        self.write(i, REC_VALVE, valve_n, Some(sum));
+        self.write(i, REC_VALVE_SUM_CHANGE, &[sum - sum_before], None);
+    }
+
+    /// What the engines drew after the step `lag` steps back ([`valve_sum_of`]).
+    #[inline(always)]
+    pub(super) fn valve_sum(&self, lag: usize) -> f64 {
+        self.rec(lag)[REC_VALVE_SUM]
     }
 
     pub(super) fn set_input(&mut self, i: usize, u: &InputVec) {
