@@ -7,7 +7,7 @@ use super::gather::gather_lanes_avx2;
 use super::gather::{Clock, ClockGather, FeatureScaling, Gather, PhaseGather, Phases};
 use super::ring::{Ring, REC_LAMBDA, REC_STATE, REC_SUM, REC_VALVE, REC_VALVE_SUM_CHANGE};
 use super::terms::CompiledRow;
-use crate::surrogate::features::{IgnitionClock, Layout, Source, StateVec};
+use crate::surrogate::features::{IgnitionClock, Layout, Source, StateVec, STATE_MF, STATE_MO};
 use crate::surrogate::model::{Submodel, Target};
 use oils_shared::ENGINE_COUNT;
 
@@ -356,8 +356,9 @@ impl<const LANES: usize> CompiledSub<LANES> {
         outside != 0
     }
 
-    /// Predicts this submodel's outputs into `next`; true when a feature was outside its
-    /// envelope. `avx2`: the step runs in its AVX2 build (see [`super::Predictor::step`]).
+    /// Predicts this submodel's outputs into `next`, guarded ([`guarded`]); true when a
+    /// feature was outside its envelope or a prediction was not finite. `avx2`: the step
+    /// runs in its AVX2 build (see [`super::Predictor::step`]).
     #[inline(always)]
     pub(super) fn eval(
         &mut self,
@@ -368,20 +369,21 @@ impl<const LANES: usize> CompiledSub<LANES> {
         next: &mut StateVec,
         avx2: bool,
     ) -> bool {
+        let mut nonfinite = false;
         if let Some(d) = &self.dense {
             debug_assert!(self.lanes.is_empty() && self.phases.is_empty() && self.clock.is_empty());
             let (y, outside) = d.eval(window, avx2);
             for (&o, y) in self.outputs.iter().zip(y) {
-                next[o] = self.target.apply(prev[o], y);
+                next[o] = guarded(o, self.target.apply(prev[o], y), prev[o], &mut nonfinite);
             }
-            return outside;
+            return outside | nonfinite;
         }
         let outside = self.gather(window, phases, clock, avx2);
         if LANES == 1 {
             for (row, &o) in self.rows.iter().zip(&self.outputs) {
                 let mut y = [row.intercept; LANES];
                 row.terms.add(&self.x, &mut y);
-                next[o] = self.target.apply(prev[o], y[0]);
+                next[o] = guarded(o, self.target.apply(prev[o], y[0]), prev[o], &mut nonfinite);
             }
         } else {
             // One shared row for the engines, plus each engine's phase terms.
@@ -398,9 +400,30 @@ impl<const LANES: usize> CompiledSub<LANES> {
                 }
             }
             for (&o, y) in self.outputs.iter().zip(y) {
-                next[o] = self.target.apply(prev[o], y);
+                next[o] = guarded(o, self.target.apply(prev[o], y), prev[o], &mut nonfinite);
             }
         }
-        outside
+        outside | nonfinite
+    }
+}
+
+/// The physical guards on output `o`: thrust and pressure not negative, ejected mass
+/// never falling; a prediction that is not finite keeps the previous value (and sets
+/// `nonfinite`, so the step is counted). Applied as each output is written, not over the
+/// assembled state afterwards: that pass read the state back as vectors just after it
+/// was written value by value, a store-forwarding stall.
+#[inline(always)]
+fn guarded(o: usize, v: f64, prev: f64, nonfinite: &mut bool) -> f64 {
+    let v = if v.is_finite() {
+        v
+    } else {
+        *nonfinite = true;
+        prev
+    };
+    if o == STATE_MF || o == STATE_MO {
+        v.max(prev)
+    } else {
+        // The thrusts and the gas pressure.
+        v.max(0.0)
     }
 }

@@ -16,8 +16,7 @@ mod ring;
 mod terms;
 
 use super::features::{
-    valve_sum_of, History, InputVec, Layout, StateVec, ValveState, ValveTrack, INPUT_DIM, STATE_MF,
-    STATE_MO, STATE_P,
+    valve_sum_of, History, InputVec, Layout, StateVec, ValveState, ValveTrack, INPUT_DIM,
 };
 use super::model::Model;
 use compiled::CompiledSub;
@@ -192,17 +191,23 @@ impl Predictor {
     fn step_portable(&mut self, input: &InputVec) -> StateVec {
         let prev = self.ring.state();
         let head = self.ring.advance();
-        let mut u = *input;
-        let mut outside = false;
         let [lo, hi] = self.on_command_range_n;
+        // The four commands clamped as one vector (no branch per engine), so that `u`
+        // is stored whole and read whole: written engine by engine and then read back
+        // wide by the ring's copy, it stalled on store forwarding.
+        let u: InputVec = std::array::from_fn(|i| {
+            let raw = input[i % ENGINE_COUNT];
+            let on = input[ENGINE_COUNT + i % ENGINE_COUNT] > 0.5;
+            if i < ENGINE_COUNT && on {
+                raw.clamp(lo, hi)
+            } else {
+                input[i]
+            }
+        });
+        let mut outside = false;
         for e in 0..ENGINE_COUNT {
             let on = u[ENGINE_COUNT + e] > 0.5;
-            if on {
-                let raw = u[e];
-                let v = raw.clamp(lo, hi);
-                outside |= v != raw;
-                u[e] = v;
-            }
+            outside |= on && u[e] != input[e];
             let ph = &mut self.phases;
             ph.run[e] = if on == ph.on[e] {
                 (ph.run[e] + 1).min(ph.cap + 1)
@@ -241,20 +246,8 @@ impl Predictor {
         for sub in &mut self.mimo {
             outside |= sub.eval(window, &self.phases, &self.clock, &prev, &mut next, avx2);
         }
-        // Physical guards: thrust and pressure are not negative, ejected mass never
-        // falls. A non-finite prediction keeps the previous state (and counts).
-        for (o, v) in next.iter_mut().enumerate() {
-            if !v.is_finite() {
-                *v = prev[o];
-                outside = true;
-            }
-        }
-        for v in next.iter_mut().take(ENGINE_COUNT) {
-            *v = v.max(0.0);
-        }
-        next[STATE_P] = next[STATE_P].max(0.0);
-        next[STATE_MF] = next[STATE_MF].max(prev[STATE_MF]);
-        next[STATE_MO] = next[STATE_MO].max(prev[STATE_MO]);
+        // The physical guards are applied as each output is written (`compiled::guarded`;
+        // every output is written by exactly one submodel, `Model::check`).
         self.out_of_envelope_steps += u64::from(outside);
         self.ring.set_state(head, &next);
         next
@@ -265,7 +258,8 @@ impl Predictor {
 pub(crate) mod tests {
     use super::*;
     use crate::surrogate::features::{
-        FeatureSpec, IgnitionClock, TrajectoryHistory, ValveFilter, STATE_DIM,
+        FeatureSpec, IgnitionClock, TrajectoryHistory, ValveFilter, STATE_DIM, STATE_MF, STATE_MO,
+        STATE_P,
     };
     use crate::surrogate::library::Library;
     use crate::surrogate::model::{ActiveTerm, OutputRow, Submodel, Target};
@@ -417,6 +411,42 @@ pub(crate) mod tests {
 
     /// The AVX2 build of the step gives the same bits as the portable one (on a CPU
     /// without AVX2 both runs take the portable path).
+    /// The guards, applied as each output is written: a command that is not a number
+    /// makes predictions that are not finite; those outputs keep their previous values,
+    /// nothing goes negative or backwards, and the step is counted.
+    #[test]
+    fn a_prediction_that_is_not_finite_keeps_the_previous_value_and_is_counted() {
+        let model = crate::surrogate::model_file::ModelFile::parse(
+            crate::surrogate::runtime::DEFAULT_MODEL_JSON,
+        )
+        .unwrap()
+        .model;
+        let mut p = Predictor::new(&model);
+        let good = [600.0, 650.0, 700.0, 550.0, 1.0, 1.0, 1.0, 1.0];
+        for _ in 0..200 {
+            p.step(&good);
+        }
+        assert_eq!(p.out_of_envelope_steps(), 0);
+        let before = p.state();
+        // Engine 2 switched off with a command that is not a number: no on-range clamp
+        // sees it, so only the guards can count the step.
+        let mut bad = good;
+        bad[1] = f64::NAN;
+        bad[ENGINE_COUNT + 1] = 0.0;
+        let after = p.step(&bad);
+        assert_eq!(p.out_of_envelope_steps(), 1);
+        assert!(after.iter().all(|v| v.is_finite()), "{after:?}");
+        // Engine 2's own features are not numbers: its thrust is held.
+        assert_eq!(after[1], before[1]);
+        assert!(after[..ENGINE_COUNT].iter().all(|&t| t >= 0.0));
+        assert!(after[STATE_P] >= 0.0);
+        assert!(after[STATE_MF] >= before[STATE_MF] && after[STATE_MO] >= before[STATE_MO]);
+        assert_eq!(p.state(), after, "the ring holds the guarded state");
+        // And the model carries on from there.
+        let next = p.step(&good);
+        assert!(next.iter().all(|v| v.is_finite()));
+    }
+
     #[test]
     fn avx2_and_portable_steps_agree_bit_for_bit() {
         let committed = crate::surrogate::model_file::ModelFile::parse(
