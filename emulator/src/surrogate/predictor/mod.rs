@@ -410,8 +410,6 @@ pub(crate) mod tests {
         assert!(e.contains("more than one phase or ignition feature"), "{e}");
     }
 
-    /// The AVX2 build of the step gives the same bits as the portable one (on a CPU
-    /// without AVX2 both runs take the portable path).
     /// The guards, applied as each output is written: a command that is not a number
     /// makes predictions that are not finite; those outputs keep their previous values,
     /// nothing goes negative or backwards, and the step is counted.
@@ -448,6 +446,8 @@ pub(crate) mod tests {
         assert!(next.iter().all(|v| v.is_finite()));
     }
 
+    /// The AVX2 build of the step gives the same bits as the portable one (on a CPU
+    /// without AVX2 both runs take the portable path).
     #[test]
     fn avx2_and_portable_steps_agree_bit_for_bit() {
         let committed = crate::surrogate::model_file::ModelFile::parse(
