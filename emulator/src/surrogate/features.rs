@@ -417,17 +417,14 @@ impl ValveTrack {
         }
         if let Some(c) = &self.filter.ignition {
             let on: [bool; ENGINE_COUNT] = std::array::from_fn(|e| input[ENGINE_COUNT + e] > 0.5);
-            let mut drawing = [0.0; ENGINE_COUNT];
+            let total = valve_sum_of(input, &valve);
             for e in 0..ENGINE_COUNT {
-                drawing[e] = if on[e] { valve[e] } else { 0.0 };
-            }
-            let total = drawing[0] + drawing[1] + drawing[2] + drawing[3];
-            for e in 0..ENGINE_COUNT {
+                let drawing = if on[e] { valve[e] } else { 0.0 };
                 c.advance(
                     on[e],
                     s.valve_n[e],
                     valve[e],
-                    total - drawing[e],
+                    total - drawing,
                     self.dt_s,
                     self.drain_root,
                     &mut s.fill[e],
@@ -630,6 +627,17 @@ impl FeatureSpec {
             command_sum: false,
             valve: None,
             valve_sum: false,
+        }
+    }
+
+    /// The per-engine layout for history `n` without any feature beyond the paper's
+    /// (tests state only how theirs differ, with struct update syntax).
+    #[cfg(test)]
+    pub(crate) fn per_engine(history: usize) -> Self {
+        Self {
+            layout: Layout::PerEngine,
+            mass_features: false,
+            ..Self::paper(history)
         }
     }
 
@@ -1040,17 +1048,7 @@ mod tests {
         let states: Vec<StateVec> = (0..4)
             .map(|_| [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0])
             .collect();
-        let spec = FeatureSpec {
-            layout: Layout::PerEngine,
-            history: 1,
-            mass_features: false,
-            start_steps: 0,
-            stop_steps: 0,
-            phase_degree: 0,
-            command_sum: false,
-            valve: None,
-            valve_sum: false,
-        };
+        let spec = FeatureSpec::per_engine(1);
         let mut out = vec![0.0; spec.dim()];
         let h = TrajectoryHistory {
             inputs: &inputs,
@@ -1106,15 +1104,13 @@ pub(crate) mod source_tests {
         for spec in [
             FeatureSpec::paper(3),
             FeatureSpec {
-                layout: Layout::PerEngine,
-                history: 2,
                 mass_features: true,
                 start_steps: 7,
                 stop_steps: 4,
-                phase_degree: 0,
                 command_sum: true,
                 valve: Some(crate::surrogate::predictor::tests::TEST_VALVE),
                 valve_sum: true,
+                ..FeatureSpec::per_engine(2)
             },
         ] {
             let valve_rest = spec.valve.map_or_else(ValveState::default, |f| f.rest());
@@ -1157,15 +1153,9 @@ pub(crate) mod source_tests {
     #[test]
     fn draw_changes_count_only_engines_that_are_on() {
         let spec = FeatureSpec {
-            layout: Layout::PerEngine,
-            history: 2,
-            mass_features: false,
-            start_steps: 0,
-            stop_steps: 0,
-            phase_degree: 0,
-            command_sum: false,
             valve: Some(crate::surrogate::predictor::tests::TEST_VALVE),
             valve_sum: true,
+            ..FeatureSpec::per_engine(2)
         };
         let names = spec.names();
         let first = names.iter().position(|s| s == "dT_vsum[t]").unwrap();

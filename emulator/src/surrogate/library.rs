@@ -201,17 +201,13 @@ mod tests {
 
     #[test]
     fn phase_indicators_multiply_only_their_partners() {
-        use crate::surrogate::features::{FeatureSpec, Layout};
+        use crate::surrogate::features::FeatureSpec;
         let spec = FeatureSpec {
-            layout: Layout::PerEngine,
-            history: 1,
-            mass_features: false,
             start_steps: 2,
             stop_steps: 1,
             phase_degree: 3,
             command_sum: true,
-            valve: None,
-            valve_sum: false,
+            ..FeatureSpec::per_engine(1)
         };
         let names = spec.names();
         let lib = Library::new(spec.dim(), 2, &spec.roles(), spec.phase_degree);

@@ -309,15 +309,13 @@ pub(crate) mod tests {
         let specs = [
             (
                 FeatureSpec {
-                    layout: Layout::PerEngine,
-                    history: 2,
                     mass_features: true,
                     start_steps: 5,
                     stop_steps: 3,
-                    phase_degree: 0,
                     command_sum: true,
                     valve: Some(TEST_VALVE),
                     valve_sum: true,
+                    ..FeatureSpec::per_engine(2)
                 },
                 3,
                 (0..ENGINE_COUNT).collect::<Vec<_>>(),
@@ -410,17 +408,21 @@ pub(crate) mod tests {
         assert!(e.contains("more than one phase or ignition feature"), "{e}");
     }
 
+    /// The committed default model.
+    fn committed_model() -> Model {
+        crate::surrogate::model_file::ModelFile::parse(
+            crate::surrogate::runtime::DEFAULT_MODEL_JSON,
+        )
+        .expect("the committed model parses")
+        .model
+    }
+
     /// The guards, applied as each output is written: a command that is not a number
     /// makes predictions that are not finite; those outputs keep their previous values,
     /// nothing goes negative or backwards, and the step is counted.
     #[test]
     fn a_prediction_that_is_not_finite_keeps_the_previous_value_and_is_counted() {
-        let model = crate::surrogate::model_file::ModelFile::parse(
-            crate::surrogate::runtime::DEFAULT_MODEL_JSON,
-        )
-        .unwrap()
-        .model;
-        let mut p = Predictor::new(&model);
+        let mut p = Predictor::new(&committed_model());
         let good = [600.0, 650.0, 700.0, 550.0, 1.0, 1.0, 1.0, 1.0];
         for _ in 0..200 {
             p.step(&good);
@@ -450,11 +452,7 @@ pub(crate) mod tests {
     /// without AVX2 both runs take the portable path).
     #[test]
     fn avx2_and_portable_steps_agree_bit_for_bit() {
-        let committed = crate::surrogate::model_file::ModelFile::parse(
-            crate::surrogate::runtime::DEFAULT_MODEL_JSON,
-        )
-        .unwrap()
-        .model;
+        let committed = committed_model();
         let (cmds, _) = crate::surrogate::features::source_tests::switching_trajectory(400);
         // The same switching at 2.5 times the thrust: commands beyond the on-range,
         // clamped and counted.
