@@ -1,6 +1,7 @@
 //! One submodel compiled for the step: the features its active terms use, gathered
 //! from the history window, and its rows' terms evaluated per engine lane.
 
+use super::aligned::LaneSlots;
 use super::dense::{Dense, DENSE_ROWS};
 #[cfg(target_arch = "x86_64")]
 use super::gather::gather_lanes_avx2;
@@ -37,7 +38,7 @@ pub(super) struct CompiledSub<const LANES: usize> {
     /// the indicators whose terms are kept apart (see [`CompiledRow`]).
     pub(super) phase_group: [Vec<Option<usize>>; 2],
     /// Gathered scaled features followed by the constant 1.0, one value per lane.
-    pub(super) x: Vec<[f64; LANES]>,
+    pub(super) x: LaneSlots<LANES>,
     /// Linear terms only, their coefficients scaled: the features are gathered clamped
     /// but unscaled.
     pub(super) folded: bool,
@@ -259,7 +260,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
             phase_group,
             target: s.target,
             outputs: s.outputs.clone(),
-            x,
+            x: LaneSlots::new(&x),
             folded,
             shared,
             lanes: lanes.into_iter().map(unscaled).collect(),
@@ -287,7 +288,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
         let at = |i: usize| unsafe { *window.get_unchecked(i) };
         debug_assert!(self.lanes.iter().all(|g| g.offset + LANES <= window.len()));
         debug_assert!(self.shared.iter().all(|g| g.offset < window.len()));
-        let (x_shared, x_rest) = self.x.split_at_mut(self.shared.len());
+        let (x_shared, x_rest) = self.x.slots_mut().split_at_mut(self.shared.len());
         if self.folded {
             for (g, x) in self.shared.iter().zip(x_shared) {
                 let (v, out) = g.scaling.clamp(at(g.offset));
@@ -328,7 +329,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
             }
         }
         for g in &self.phases {
-            let x = &mut self.x[g.slot];
+            let x = &mut self.x.slots_mut()[g.slot];
             for (e, x) in x.iter_mut().enumerate() {
                 let hit = phases.on[e] == g.on && phases.run[e] == g.run;
                 let (v, out) = g.scaling.apply(f64::from(u8::from(hit)));
@@ -339,7 +340,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
         if let Some(c) = &self.ignition {
             if clock.any || !self.clock_grouped {
                 for g in &self.clock {
-                    let x = &mut self.x[g.slot];
+                    let x = &mut self.x.slots_mut()[g.slot];
                     for (e, x) in x.iter_mut().enumerate() {
                         let since = clock.since_ignition_s[e];
                         let raw = match g.hat {
@@ -382,21 +383,21 @@ impl<const LANES: usize> CompiledSub<LANES> {
         if LANES == 1 {
             for (row, &o) in self.rows.iter().zip(&self.outputs) {
                 let mut y = [row.intercept; LANES];
-                row.terms.add(&self.x, &mut y);
+                row.terms.add(self.x.slots(), &mut y);
                 next[o] = guarded(o, self.target.apply(prev[o], y[0]), prev[o], &mut nonfinite);
             }
         } else {
             // One shared row for the engines, plus each engine's phase terms.
             let row = &self.rows[0];
             let mut y = [row.intercept; LANES];
-            row.terms.add(&self.x, &mut y);
+            row.terms.add(self.x.slots(), &mut y);
             for (e, y) in y.iter_mut().enumerate() {
                 let table = &self.phase_group[usize::from(!phases.on[e])];
                 if let Some(&Some(g)) = table.get(phases.run[e] - 1) {
-                    row.phase[g].add_lane(&self.x, e, y);
+                    row.phase[g].add_lane(self.x.slots(), e, y);
                 }
                 if self.clock_grouped && clock.active[e] {
-                    row.clock.add_lane(&self.x, e, y);
+                    row.clock.add_lane(self.x.slots(), e, y);
                 }
             }
             for (&o, y) in self.outputs.iter().zip(y) {

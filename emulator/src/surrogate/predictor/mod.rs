@@ -3,12 +3,14 @@
 //! loop. [`Predictor::new`] compiles the model once (only the features and terms it
 //! uses, laid out for the step); [`Predictor::step`] allocates nothing.
 //!
+//! - `aligned`: the gathered features' storage, vectors on 32-byte boundaries;
 //! - `ring`: the history window the features are read from;
 //! - `gather`: feature reads, envelope clamp and scaling, phase and ignition features;
 //! - `terms`: a row's terms, factored and summed in partial sums;
 //! - `dense`: the linear pressure/mass rows as dense coefficients;
 //! - `compiled`: one submodel compiled from these parts.
 
+mod aligned;
 mod compiled;
 mod dense;
 mod gather;
