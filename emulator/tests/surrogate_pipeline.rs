@@ -334,6 +334,12 @@ fn a_bench_step_of_two_samples_is_two_model_steps() {
         thrust_cmd_n: [600.0; 4],
         on: [true, true, false, true],
     };
+    // Before any step: no flows, and the mean thrust is the thrust.
+    for s in [&fine, &coarse] {
+        let at_rest = s.output();
+        assert_eq!(at_rest.mean_thrust_n, at_rest.thrust_n);
+        assert_eq!((at_rest.fuel_flow_kg_s, at_rest.ox_flow_kg_s), (0.0, 0.0));
+    }
     for k in 0..300u32 {
         cmd.thrust_cmd_n[(k % 4) as usize] = 350.0 + f64::from(k % 7) * 60.0;
         cmd.on[2] = k > 40;

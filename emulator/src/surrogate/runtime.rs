@@ -26,14 +26,27 @@ pub struct SurrogatePropulsion {
     /// Chamber pressure per newton of thrust (the model predicts thrust only).
     chamber_pa_per_n: f64,
     held: super::model_file::ReferenceOutput,
-    /// What [`Propulsion::output`] is computed from (with the predictor's latest state):
-    /// the state at the start of the latest step, 1 / its length in seconds (0 before
-    /// any step) and its mean thrust. Kept instead of the 152-byte output itself, whose
-    /// copy per step (just written value by value, then read back wide) cost more than
-    /// the wrapper's arithmetic.
-    start: StateVec,
-    per_s: f64,
-    mean_thrust_n: [f64; ENGINE_COUNT],
+    /// What the latest step was, for [`Propulsion::output`].
+    last: LastStep,
+}
+
+/// The latest step, as far as [`Propulsion::output`] needs it. Kept instead of the
+/// 152-byte output itself, whose copy per step (just written value by value, then read
+/// back wide) cost more than the wrapper's arithmetic; and for a step of one sample,
+/// the loop's case, nothing at all: its start is the predictor's previous state.
+#[derive(Debug, Clone, Copy)]
+enum LastStep {
+    /// No step yet: no flows, the mean thrust is the thrust.
+    None,
+    /// One step at the model's sample time.
+    Sample,
+    /// A step of several samples: the state at its start, 1 / its length in seconds
+    /// (0 for a step of length 0) and its mean thrust.
+    Substeps {
+        start: StateVec,
+        per_s: f64,
+        mean_thrust_n: [f64; ENGINE_COUNT],
+    },
 }
 
 impl SurrogatePropulsion {
@@ -44,19 +57,14 @@ impl SurrogatePropulsion {
         bench_step_ns: u64,
     ) -> Result<Self, ModelFileError> {
         file.check_step(bench_step_ns)?;
-        let predictor = Predictor::new(&file.model);
-        let mut s = Self {
-            predictor,
+        Ok(Self {
+            predictor: Predictor::new(&file.model),
             sample_time_ns: file.model.sample_time_ns,
             per_sample_s: 1e9 / file.model.sample_time_ns as f64,
             chamber_pa_per_n: cfg.chamber_pressure_max_pa / cfg.max_thrust_n,
             held: file.reference_output,
-            start: file.model.initial_state,
-            per_s: 0.0,
-            mean_thrust_n: [0.0; ENGINE_COUNT],
-        };
-        s.mean_thrust_n = s.output().thrust_n;
-        Ok(s)
+            last: LastStep::None,
+        })
     }
 
     /// Loads the model at `path`.
@@ -127,17 +135,15 @@ impl Propulsion for SurrogatePropulsion {
             "checked at construction"
         );
         let input = input_of(cmd);
-        let start = self.predictor.state();
         // The bench steps at the model's sample time: one prediction, its trapezoid is the
-        // mean thrust, no divisions (the same bits as the general path below).
+        // mean thrust, no divisions (the same bits as the general path below). Its start
+        // is read back from the predictor's history rather than kept across the step.
         if dt_ns == self.sample_time_ns {
             let now = self.predictor.step(&input);
-            let out = self.output_of(&start, &now, self.per_sample_s);
-            self.start = start;
-            self.per_s = self.per_sample_s;
-            self.mean_thrust_n = out.mean_thrust_n;
-            return out;
+            self.last = LastStep::Sample;
+            return self.output_of(&self.predictor.previous_state(), &now, self.per_sample_s);
         }
+        let start = self.predictor.state();
         let substeps = (dt_ns / self.sample_time_ns).max(1);
         let mut sum_mean = [0.0; ENGINE_COUNT];
         let mut prev = start;
@@ -153,16 +159,30 @@ impl Propulsion for SurrogatePropulsion {
         for e in 0..ENGINE_COUNT {
             out.mean_thrust_n[e] = sum_mean[e] / substeps as f64;
         }
-        self.start = start;
-        self.per_s = per_s;
-        self.mean_thrust_n = out.mean_thrust_n;
+        self.last = LastStep::Substeps {
+            start,
+            per_s,
+            mean_thrust_n: out.mean_thrust_n,
+        };
         out
     }
 
     fn output(&self) -> PropulsionOutput {
-        let mut out = self.output_of(&self.start, &self.predictor.state(), self.per_s);
-        out.mean_thrust_n = self.mean_thrust_n;
-        out
+        let now = self.predictor.state();
+        match self.last {
+            LastStep::None => self.output_of(&now, &now, 0.0),
+            LastStep::Sample => {
+                self.output_of(&self.predictor.previous_state(), &now, self.per_sample_s)
+            }
+            LastStep::Substeps {
+                start,
+                per_s,
+                mean_thrust_n,
+            } => PropulsionOutput {
+                mean_thrust_n,
+                ..self.output_of(&start, &now, per_s)
+            },
+        }
     }
 
     fn diagnostics(&self) -> Option<crate::propulsion::PropulsionDiagnostics> {

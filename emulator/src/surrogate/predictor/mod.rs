@@ -168,6 +168,11 @@ impl Predictor {
         self.ring.state()
     }
 
+    /// The state before the latest step (the latest state, before any step).
+    pub fn previous_state(&self) -> StateVec {
+        self.ring.state_at(1)
+    }
+
     /// Predicts the state at the end of a step with `input` held, and makes it history.
     #[inline]
     pub fn step(&mut self, input: &InputVec) -> StateVec {

@@ -132,7 +132,12 @@ impl Ring {
 
     /// The latest state.
     pub(super) fn state(&self) -> StateVec {
-        let r = self.rec(0);
+        self.state_at(0)
+    }
+
+    /// The state `lag` steps back.
+    pub(super) fn state_at(&self, lag: usize) -> StateVec {
+        let r = self.rec(lag);
         std::array::from_fn(|k| r[REC_STATE + k])
     }
 }
