@@ -1,4 +1,5 @@
-//! Storage for the gathered features whose vectors never straddle a cache line.
+//! Storage whose four-value vectors never straddle a cache line: the gathered features
+//! and the history ring.
 
 /// 32 bytes, aligned to 32: one AVX2 vector.
 #[derive(Debug, Clone, Copy, Default)]
@@ -43,6 +44,43 @@ impl<const LANES: usize> LaneSlots<LANES> {
     }
 }
 
+/// `len` values from a 32-byte boundary (the history ring's buffer: its records, and
+/// the engines' values within them, are laid out so that each engine vector is a
+/// 32-byte aligned read, see [`super::ring`]).
+#[derive(Debug, Clone)]
+pub(super) struct AlignedValues {
+    store: Vec<Block>,
+    len: usize,
+}
+
+impl AlignedValues {
+    /// `len` zeros.
+    pub(super) fn zeros(len: usize) -> Self {
+        Self {
+            store: vec![Block::default(); len.div_ceil(4)],
+            len,
+        }
+    }
+}
+
+impl std::ops::Deref for AlignedValues {
+    type Target = [f64];
+
+    #[inline(always)]
+    fn deref(&self) -> &[f64] {
+        // SAFETY: `store` holds at least `len` contiguous f64 (see `LaneSlots::slots`).
+        unsafe { std::slice::from_raw_parts(self.store.as_ptr().cast(), self.len) }
+    }
+}
+
+impl std::ops::DerefMut for AlignedValues {
+    #[inline(always)]
+    fn deref_mut(&mut self) -> &mut [f64] {
+        // SAFETY: as in `deref`, borrowed mutably through `self`.
+        unsafe { std::slice::from_raw_parts_mut(self.store.as_mut_ptr().cast(), self.len) }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -59,5 +97,15 @@ mod tests {
         let one: Vec<[f64; 1]> = (0..3).map(|i| [i as f64]).collect();
         assert_eq!(LaneSlots::new(&one).slots(), &one[..]);
         assert!(LaneSlots::<4>::new(&[]).slots().is_empty());
+    }
+
+    #[test]
+    fn values_start_on_a_32_byte_boundary_and_hold_len_zeros() {
+        let mut v = AlignedValues::zeros(7);
+        assert_eq!(v.len(), 7);
+        assert_eq!(v.as_ptr() as usize % 32, 0);
+        assert!(v.iter().all(|&x| x == 0.0));
+        v[6] = 1.5;
+        assert_eq!(v[6], 1.5);
     }
 }

@@ -1,23 +1,37 @@
 //! The predictor's history: a ring of records, each stored twice so that the
 //! latest `depth` records are always one contiguous window.
 
+use super::aligned::AlignedValues;
 use crate::surrogate::features::{
     command_sum_of, lambda_of, valve_sum_of, InputVec, StateVec, INPUT_DIM, STATE_DIM, STATE_MF,
     STATE_MO,
 };
 use oils_shared::ENGINE_COUNT;
 
-/// Components of a ring record: the step's inputs, its command sum, the four
-/// valve-filtered commands after it, their sum over the engines that are on and that
-/// sum's change from the step before, then the state at its end and lambda of that state
-/// (each computed once when stored, not per read).
+/// Components of a ring record: the step's inputs, its command sum and the change of
+/// the valve sum from the step before, the four valve-filtered commands after it and
+/// their sum over the engines that are on, then the state at its end and lambda of that
+/// state (each computed once when stored, not per read). Every per-engine group (the
+/// commands, the switches, the valves, the thrusts) starts at a multiple of four values
+/// and a record is a multiple of four long, so in the 32-byte aligned buffer each is
+/// one aligned vector read (unused values pad the gaps).
 pub(super) const REC_SUM: usize = INPUT_DIM;
-pub(super) const REC_VALVE: usize = INPUT_DIM + 1;
+pub(super) const REC_VALVE_SUM_CHANGE: usize = REC_SUM + 1;
+pub(super) const REC_VALVE: usize = 12;
 pub(super) const REC_VALVE_SUM: usize = REC_VALVE + ENGINE_COUNT;
-pub(super) const REC_VALVE_SUM_CHANGE: usize = REC_VALVE_SUM + 1;
-pub(super) const REC_STATE: usize = REC_VALVE_SUM_CHANGE + 1;
+pub(super) const REC_STATE: usize = 20;
 pub(super) const REC_LAMBDA: usize = REC_STATE + STATE_DIM;
-pub(super) const REC_DIM: usize = REC_LAMBDA + 1;
+pub(super) const REC_DIM: usize = 28;
+
+// The layout above: groups in order without overlap, engine groups and records on
+// four-value boundaries.
+const _: () = {
+    assert!(REC_VALVE_SUM_CHANGE < REC_VALVE && REC_VALVE_SUM < REC_STATE);
+    assert!(REC_LAMBDA < REC_DIM);
+    assert!(REC_VALVE.is_multiple_of(4) && REC_STATE.is_multiple_of(4));
+    assert!(ENGINE_COUNT.is_multiple_of(4));
+    assert!(REC_DIM.is_multiple_of(4) && INPUT_DIM.is_multiple_of(4));
+};
 
 /// The history: the last `depth` records, each stored twice (at `i` and `i + depth`), so
 /// that the records from `depth - 1` steps back to the latest always lie in one
@@ -25,7 +39,7 @@ pub(super) const REC_DIM: usize = REC_LAMBDA + 1;
 /// model is compiled, instead of a wrap-around computation per read.
 #[derive(Debug, Clone)]
 pub(super) struct Ring {
-    pub(super) buf: Vec<f64>,
+    pub(super) buf: AlignedValues,
     pub(super) depth: usize,
     /// Record index of the step being predicted, `0..depth`.
     pub(super) head: usize,
@@ -34,7 +48,7 @@ pub(super) struct Ring {
 impl Ring {
     pub(super) fn new(depth: usize) -> Self {
         Self {
-            buf: vec![0.0; 2 * depth * REC_DIM],
+            buf: AlignedValues::zeros(2 * depth * REC_DIM),
             depth,
             head: 0,
         }
