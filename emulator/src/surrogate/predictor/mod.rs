@@ -3,7 +3,7 @@
 //! loop. [`Predictor::new`] compiles the model once (only the features and terms it
 //! uses, laid out for the step); [`Predictor::step`] allocates nothing.
 //!
-//! - `aligned`: the gathered features' storage, vectors on 32-byte boundaries;
+//! - `aligned`: storage from 32-byte boundaries (the ring's buffer, the gathered features);
 //! - `ring`: the history window the features are read from;
 //! - `gather`: feature reads, envelope clamp and scaling, phase and ignition features;
 //! - `terms`: a row's terms, factored and summed in partial sums;
