@@ -13,16 +13,15 @@ struct Block([f64; 4]);
 /// its read cost two. Aligned, a 32-byte slot lies within one line.
 #[derive(Debug, Clone)]
 pub(super) struct LaneSlots<const LANES: usize> {
-    store: Vec<Block>,
-    len: usize,
+    /// The slots' values, slot after slot.
+    values: AlignedValues,
 }
 
 impl<const LANES: usize> LaneSlots<LANES> {
     /// Holds `values`, in order.
     pub(super) fn new(values: &[[f64; LANES]]) -> Self {
         let mut s = Self {
-            store: vec![Block::default(); (values.len() * LANES).div_ceil(4)],
-            len: values.len(),
+            values: AlignedValues::zeros(values.len() * LANES),
         };
         s.slots_mut().copy_from_slice(values);
         s
@@ -31,22 +30,25 @@ impl<const LANES: usize> LaneSlots<LANES> {
     /// The slots.
     #[inline(always)]
     pub(super) fn slots(&self) -> &[[f64; LANES]] {
-        // SAFETY: `store` holds at least `len * LANES` contiguous f64 (a `Block` is four
-        // f64 with no padding, `repr(C)`), and `[f64; LANES]` needs only f64 alignment.
-        unsafe { std::slice::from_raw_parts(self.store.as_ptr().cast(), self.len) }
+        // SAFETY: `values` holds `len * LANES` contiguous f64 and `[f64; LANES]` needs
+        // only f64 alignment.
+        unsafe {
+            std::slice::from_raw_parts(self.values.as_ptr().cast(), self.values.len() / LANES)
+        }
     }
 
     /// The slots, to write.
     #[inline(always)]
     pub(super) fn slots_mut(&mut self) -> &mut [[f64; LANES]] {
+        let len = self.values.len() / LANES;
         // SAFETY: as in `slots`, and borrowed mutably through `self`.
-        unsafe { std::slice::from_raw_parts_mut(self.store.as_mut_ptr().cast(), self.len) }
+        unsafe { std::slice::from_raw_parts_mut(self.values.as_mut_ptr().cast(), len) }
     }
 }
 
-/// `len` values from a 32-byte boundary (the history ring's buffer: its records, and
+/// `len` values from a 32-byte boundary: the history ring's buffer (its records, and
 /// the engines' values within them, are laid out so that each engine vector is a
-/// 32-byte aligned read, see [`super::ring`]).
+/// 32-byte aligned read, see [`super::ring`]) and [`LaneSlots`]' store.
 #[derive(Debug, Clone)]
 pub(super) struct AlignedValues {
     store: Vec<Block>,
@@ -68,7 +70,8 @@ impl std::ops::Deref for AlignedValues {
 
     #[inline(always)]
     fn deref(&self) -> &[f64] {
-        // SAFETY: `store` holds at least `len` contiguous f64 (see `LaneSlots::slots`).
+        // SAFETY: `store` holds at least `len` contiguous f64 (a `Block` is four f64
+        // with no padding, `repr(C)`); f64 needs less alignment than a `Block`.
         unsafe { std::slice::from_raw_parts(self.store.as_ptr().cast(), self.len) }
     }
 }

@@ -24,7 +24,8 @@ pub(super) const REC_LAMBDA: usize = REC_STATE + STATE_DIM;
 pub(super) const REC_DIM: usize = 28;
 
 // The layout above: groups in order without overlap, engine groups and records on
-// four-value boundaries.
+// four-value boundaries (the switches follow the four commands, so the engine count
+// must keep them there too).
 const _: () = {
     assert!(REC_VALVE_SUM_CHANGE < REC_VALVE && REC_VALVE_SUM < REC_STATE);
     assert!(REC_LAMBDA < REC_DIM);
