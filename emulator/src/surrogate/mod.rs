@@ -23,6 +23,7 @@ pub mod model_file;
 pub mod predictor;
 pub mod report;
 pub mod runtime;
+pub mod stroke_map;
 
 use crate::config::PropulsionConfig;
 use crate::propulsion::hifi::HifiParams;

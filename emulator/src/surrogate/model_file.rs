@@ -28,8 +28,10 @@ pub const FORMAT: &str = "oils-surrogate";
 /// unknown field; a version-4 file that sets one is refused here too. Version 6 added
 /// the valve sum (`valve_sum` in a feature spec), which a version-5 reader would ignore
 /// (feature specs accept unknown fields) and so misread; a version-5 file that sets it
-/// is refused here.
-pub const VERSION: u32 = 6;
+/// is refused here. Version 7 added the valve's stroke map (`stroke` in a valve filter),
+/// which a version-6 reader would refuse as an unknown field; a version-6 file that names
+/// one is refused here too.
+pub const VERSION: u32 = 7;
 /// Oldest version this build reads.
 pub const OLDEST_VERSION: u32 = 2;
 
@@ -241,6 +243,17 @@ impl ModelFile {
         if version < 6 && file.model.submodels.iter().any(|s| s.features.valve_sum) {
             return Err(ModelFileError::Invalid(
                 "a valve sum (`valve_sum`) needs file version 6".into(),
+            ));
+        }
+        if version < 7
+            && file
+                .model
+                .submodels
+                .iter()
+                .any(|s| s.features.valve.is_some_and(|v| v.stroke.is_some()))
+        {
+            return Err(ModelFileError::Invalid(
+                "a valve stroke map (`stroke`) needs file version 7".into(),
             ));
         }
         if file.model.sample_time_ns == 0 {

@@ -371,6 +371,12 @@ impl HifiPropulsion {
         Ok(model)
     }
 
+    /// The throttle calibration: commanded thrust to TFCV positions (the surrogate's
+    /// valve filter takes its stroke map from it, `emulator/config/train.toml`).
+    pub fn throttle_table(&self) -> &ThrottleTable {
+        &self.table
+    }
+
     fn actuation(&self) -> Actuation {
         let mut a = Actuation::default();
         for e in 0..ENGINE_COUNT {

@@ -279,6 +279,7 @@ pub(crate) mod tests {
         backlash_n: 4.7,
         park_n: 320.0,
         ignition: Some(TEST_IGNITION),
+        stroke: None,
     };
 
     /// An ignition clock for the test models (with sag, so the engines' clocks depend
