@@ -89,6 +89,21 @@ fn bad_model_files_are_refused_clearly() {
         "{e}"
     );
     assert!(e.to_string().contains("retrain"), "{e}");
+    // A stroke map that does not rise, or that leaves the park position outside its
+    // range, is refused by name.
+    let mut bent: serde_json::Value = serde_json::from_str(good).unwrap();
+    bent["model"]["submodels"][0]["features"]["valve"]["stroke"]["stroke"][1] =
+        serde_json::json!(0.1);
+    let e = refusal(&bent.to_string(), 10_000_000);
+    assert!(
+        e.to_string().contains("stroke map: strokes must rise"),
+        "{e}"
+    );
+    let mut moved: serde_json::Value = serde_json::from_str(good).unwrap();
+    moved["model"]["submodels"][0]["features"]["valve"]["stroke"]["first_n"] =
+        serde_json::json!(400.0);
+    let e = refusal(&moved.to_string(), 10_000_000);
+    assert!(e.to_string().contains("outside the stroke map"), "{e}");
     // A version-6 file with a stroke map is refused (version 6 had none).
     let relabelled = good.replacen("\"version\": 7", "\"version\": 6", 1);
     let e = refusal(&relabelled, 10_000_000);
