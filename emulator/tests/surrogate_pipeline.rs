@@ -520,6 +520,17 @@ fn the_stroke_map_is_hifis_calibration() {
     assert!(map.slope_at(map.first_n()) > 2.0 * map.slope_at(map.last_n()));
 }
 
+/// The model inputs of a validation case, step by 10 ms step, with each step's start.
+fn case_inputs(
+    case: &oils_emulator::validation::cases::Case,
+) -> impl Iterator<Item = (i64, oils_emulator::surrogate::features::InputVec)> + '_ {
+    use oils_emulator::surrogate::runtime::input_of;
+    use oils_emulator::validation::compare::command_at;
+    (0..case.duration_ns)
+        .step_by(10_000_000)
+        .map(|t_ns| (t_ns, input_of(&command_at(case, t_ns))))
+}
+
 /// With the stroke map, the valve filter follows hifi's own TFCV element run in stroke
 /// through hifi's calibration table (lag, rate and backlash from hifi's parameters,
 /// without quantisation), on the validation cases' commands: within 0.15 N RMS once the
@@ -530,9 +541,8 @@ fn the_stroke_map_is_hifis_calibration() {
 #[test]
 fn the_valve_filter_follows_hifis_valve_in_stroke() {
     use oils_emulator::propulsion::hifi::engine::{Tfcv, TfcvDynamics};
-    use oils_emulator::surrogate::features::{ValveTrack, INPUT_DIM};
+    use oils_emulator::surrogate::features::ValveTrack;
     use oils_emulator::validation::cases::builtin;
-    use oils_emulator::validation::compare::command_at;
 
     let cfg = committed_config();
     let filter = cfg.variants.engine_valve.expect("a valve filter");
@@ -575,14 +585,7 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
                 actuator: rest,
                 valve: rest,
             }; 4];
-            let mut t_ns = 0;
-            while t_ns < case.duration_ns {
-                let c = command_at(&case, t_ns);
-                let mut u = [0.0; INPUT_DIM];
-                for e in 0..4 {
-                    u[e] = c.thrust_cmd_n[e];
-                    u[4 + e] = f64::from(u8::from(c.on[e]));
-                }
+            for (t_ns, u) in case_inputs(&case) {
                 let s = track.advance(&u);
                 for (e, v) in valves.iter_mut().enumerate() {
                     v.target = stroke_of(u[e].max(filter.park_n));
@@ -594,7 +597,6 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
                         n += 1.0;
                     }
                 }
-                t_ns += 10_000_000;
             }
         }
         (worst, (sum2 / n).sqrt())
@@ -620,20 +622,12 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
     for case in builtin() {
         let (mut with_map, mut without) =
             (ValveTrack::new(filter, dt_s), ValveTrack::new(plain, dt_s));
-        let mut t_ns = 0;
-        while t_ns < case.duration_ns {
-            let c = command_at(&case, t_ns);
-            let mut u = [0.0; INPUT_DIM];
-            for e in 0..4 {
-                u[e] = c.thrust_cmd_n[e];
-                u[4 + e] = f64::from(u8::from(c.on[e]));
-            }
+        for (t_ns, u) in case_inputs(&case) {
             let (a, b) = (*with_map.advance(&u), *without.advance(&u));
             assert_eq!(a.clock.valve, b.valve_n, "{} at {t_ns} ns", case.name);
             assert_eq!(a.clock.actuator, b.actuator_n);
             assert_eq!(a.since_ignition_s, b.since_ignition_s);
             assert_eq!(a.fill, b.fill);
-            t_ns += 10_000_000;
         }
     }
 }

@@ -6,7 +6,7 @@
 //! JSON because it is readable, diffable and serde_json writes every f64 so it reads
 //! back bit for bit (shortest round-trip digits), which the reproduce test relies on.
 
-use super::features::STATE_DIM;
+use super::features::{FeatureSpec, STATE_DIM};
 use super::fit::Variant;
 use super::model::Model;
 use crate::propulsion::PropulsionOutput;
@@ -32,6 +32,25 @@ pub const FORMAT: &str = "oils-surrogate";
 /// which a version-6 reader would refuse as an unknown field; a version-6 file that names
 /// one is refused here too.
 pub const VERSION: u32 = 7;
+/// The version that added each optional feature, what to call it, and whether a
+/// submodel's features use it (see [`VERSION`]).
+type AddedIn = (u64, &'static str, fn(&FeatureSpec) -> bool);
+const ADDED_IN: [AddedIn; 5] = [
+    (3, "a valve filter", |f| f.valve.is_some()),
+    (4, "an ignition clock", |f| {
+        f.valve.is_some_and(|v| v.ignition.is_some())
+    }),
+    (5, "an ignition clock's sag", |f| {
+        f.valve
+            .and_then(|v| v.ignition)
+            .is_some_and(|c| c.sag_per_n != 0.0)
+    }),
+    (6, "a valve sum (`valve_sum`)", |f| f.valve_sum),
+    (7, "a valve stroke map (`stroke`)", |f| {
+        f.valve.is_some_and(|v| v.stroke.is_some())
+    }),
+];
+
 /// Oldest version this build reads.
 pub const OLDEST_VERSION: u32 = 2;
 
@@ -206,55 +225,14 @@ impl ModelFile {
         }
         let file: Self = serde_json::from_value(value).map_err(|e| json_error(e, text))?;
         file.model.check().map_err(ModelFileError::Invalid)?;
-        if version < 3
-            && file
-                .model
-                .submodels
-                .iter()
-                .any(|s| s.features.valve.is_some())
-        {
-            return Err(ModelFileError::Invalid(
-                "a valve filter needs file version 3".into(),
-            ));
-        }
-        if version < 4
-            && file
-                .model
-                .submodels
-                .iter()
-                .any(|s| s.features.valve.is_some_and(|v| v.ignition.is_some()))
-        {
-            return Err(ModelFileError::Invalid(
-                "an ignition clock needs file version 4".into(),
-            ));
-        }
-        if version < 5
-            && file.model.submodels.iter().any(|s| {
-                s.features
-                    .valve
-                    .and_then(|v| v.ignition)
-                    .is_some_and(|c| c.sag_per_n != 0.0)
-            })
-        {
-            return Err(ModelFileError::Invalid(
-                "an ignition clock's sag needs file version 5".into(),
-            ));
-        }
-        if version < 6 && file.model.submodels.iter().any(|s| s.features.valve_sum) {
-            return Err(ModelFileError::Invalid(
-                "a valve sum (`valve_sum`) needs file version 6".into(),
-            ));
-        }
-        if version < 7
-            && file
-                .model
-                .submodels
-                .iter()
-                .any(|s| s.features.valve.is_some_and(|v| v.stroke.is_some()))
-        {
-            return Err(ModelFileError::Invalid(
-                "a valve stroke map (`stroke`) needs file version 7".into(),
-            ));
+        // A feature newer than the file's version was written by no writer of that
+        // version: refused rather than read with a meaning that version did not have.
+        for (since, what, uses) in ADDED_IN {
+            if version < since && file.model.submodels.iter().any(|s| uses(&s.features)) {
+                return Err(ModelFileError::Invalid(format!(
+                    "{what} needs file version {since}"
+                )));
+            }
         }
         if file.model.sample_time_ns == 0 {
             return Err(ModelFileError::Invalid("sample_time_ns is 0".into()));

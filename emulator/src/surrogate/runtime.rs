@@ -115,7 +115,9 @@ impl SurrogatePropulsion {
     }
 }
 
-fn input_of(cmd: &EngineCommand) -> InputVec {
+/// The model's input for one step of `cmd`: the four commands (0 for an engine that is
+/// off) and the four switches.
+pub fn input_of(cmd: &EngineCommand) -> InputVec {
     let mut v = [0.0; INPUT_DIM];
     for e in 0..ENGINE_COUNT {
         v[e] = if cmd.on[e] { cmd.thrust_cmd_n[e] } else { 0.0 };

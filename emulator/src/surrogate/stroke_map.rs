@@ -98,38 +98,36 @@ impl TryFrom<StrokeMapSpec> for StrokeMap {
         if s.stroke.windows(2).any(|w| w[1] <= w[0]) {
             return Err("stroke map: strokes must rise from knot to knot".into());
         }
-        // Least squares of each segment's slope at its midpoint, in thrust relative to
-        // the table's middle (for conditioning), then expanded to powers of thrust.
-        let centre_n = s.first_n + 0.5 * s.step_n * (knots - 1) as f64;
-        let rows = knots - 1;
-        let a = nalgebra::DMatrix::from_fn(rows, 3, |r, c| {
-            (s.first_n + s.step_n * (r as f64 + 0.5) - centre_n).powi(c as i32)
-        });
-        let b = nalgebra::DVector::from_fn(rows, |r, _| {
-            s.step_n / ((s.stroke[r + 1] - s.stroke[r]) * s.full_stroke_n)
-        });
-        let q = a
-            .svd(true, true)
-            .solve(&b, 1e-12)
-            .map_err(|e| format!("stroke map: cannot fit its slope ({e})"))?;
-        let slope = StrokeSlope {
-            lo_n: s.first_n,
-            hi_n: s.first_n + s.step_n * (knots - 1) as f64,
-            q: [
-                q[0] - q[1] * centre_n + q[2] * centre_n * centre_n,
-                q[1] - 2.0 * q[2] * centre_n,
-                q[2],
-            ],
-        };
         let mut m = StrokeMap {
             first_n: s.first_n,
             step_n: s.step_n,
             full_stroke_n: s.full_stroke_n,
             knots,
             stroke: [0.0; STROKE_MAP_MAX_KNOTS],
-            slope,
+            slope: StrokeSlope {
+                lo_n: s.first_n,
+                hi_n: s.first_n + s.step_n * (knots - 1) as f64,
+                q: [0.0; 3],
+            },
         };
         m.stroke[..knots].copy_from_slice(&s.stroke);
+        // Least squares of each segment's slope at its midpoint, in thrust relative to
+        // the table's middle (for conditioning), then expanded to powers of thrust.
+        let centre_n = 0.5 * (m.first_n + m.last_n());
+        let points: Vec<(f64, f64)> = m.segment_slopes().collect();
+        let a = nalgebra::DMatrix::from_fn(points.len(), 3, |r, c| {
+            (points[r].0 - centre_n).powi(c as i32)
+        });
+        let b = nalgebra::DVector::from_fn(points.len(), |r, _| points[r].1);
+        let q = a
+            .svd(true, true)
+            .solve(&b, 1e-12)
+            .map_err(|e| format!("stroke map: cannot fit its slope ({e})"))?;
+        m.slope.q = [
+            q[0] - q[1] * centre_n + q[2] * centre_n * centre_n,
+            q[1] - 2.0 * q[2] * centre_n,
+            q[2],
+        ];
         let last_n = m.last_n();
         if !(m.slope_at(s.first_n) > 0.0 && m.slope_at(last_n) > 0.0) {
             return Err("stroke map: its fitted slope is not positive over the range".into());
@@ -174,11 +172,6 @@ impl StrokeMap {
     /// Commanded thrust between knots, N.
     pub fn step_n(&self) -> f64 {
         self.step_n
-    }
-
-    /// The thrust a full stroke stands for, N.
-    pub fn full_stroke_n(&self) -> f64 {
-        self.full_stroke_n
     }
 
     /// Stroke fraction at each knot.
