@@ -541,7 +541,7 @@ fn case_inputs(
 #[test]
 fn the_valve_filter_follows_hifis_valve_in_stroke() {
     use oils_emulator::propulsion::hifi::engine::{Tfcv, TfcvDynamics};
-    use oils_emulator::surrogate::features::ValveTrack;
+    use oils_emulator::surrogate::valve::ValveTrack;
     use oils_emulator::validation::cases::builtin;
 
     let cfg = committed_config();
@@ -575,7 +575,7 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
         0.5 * (lo + hi)
     };
     // (worst, RMS after 3 s) over all cases, with and without the map.
-    let stray = |filter: oils_emulator::surrogate::features::ValveFilter| {
+    let stray = |filter: oils_emulator::surrogate::valve::ValveFilter| {
         let (mut worst, mut sum2, mut n) = (0.0f64, 0.0, 0.0);
         for case in builtin() {
             let mut track = ValveTrack::new(filter, dt_s);
@@ -602,7 +602,7 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
         (worst, (sum2 / n).sqrt())
     };
     let (worst_n, rms_n) = stray(filter);
-    let (plain_worst_n, plain_rms_n) = stray(oils_emulator::surrogate::features::ValveFilter {
+    let (plain_worst_n, plain_rms_n) = stray(oils_emulator::surrogate::valve::ValveFilter {
         stroke: None,
         ..filter
     });
@@ -615,7 +615,7 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
 
     // Beside the map, the ignition clock integrates the filter in newtons: the same
     // bits, and the same clock, as the filter without the map.
-    let plain = oils_emulator::surrogate::features::ValveFilter {
+    let plain = oils_emulator::surrogate::valve::ValveFilter {
         stroke: None,
         ..filter
     };

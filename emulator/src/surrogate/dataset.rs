@@ -3,9 +3,10 @@
 
 use super::excitation::Excitation;
 use super::features::{
-    FeatureSpec, InputVec, StateVec, TrajectoryHistory, ValveFilter, ValveState, STATE_DIM,
-    STATE_MF, STATE_MO, STATE_NAMES, STATE_P,
+    FeatureSpec, InputVec, StateVec, TrajectoryHistory, STATE_DIM, STATE_MF, STATE_MO, STATE_NAMES,
+    STATE_P,
 };
+use super::valve::{ValveFilter, ValveState};
 use crate::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
 use oils_shared::ENGINE_COUNT;
 use std::fmt::Write as _;

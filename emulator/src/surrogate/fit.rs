@@ -3,10 +3,11 @@
 //! into [`Submodel`]s.
 
 use super::dataset::Dataset;
-use super::features::{FeatureSpec, Layout, ValveFilter, STATE_DIM, STATE_NAMES};
+use super::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
 use super::lasso::{lasso_gram, GramStats, LassoSettings, Standardised};
 use super::library::Library;
 use super::model::{active_terms_of, Model, OutputRow, Submodel, Target};
+use super::valve::ValveFilter;
 use oils_shared::ENGINE_COUNT;
 use serde::{Deserialize, Serialize};
 

@@ -24,6 +24,7 @@ pub mod predictor;
 pub mod report;
 pub mod runtime;
 pub mod stroke_map;
+pub mod valve;
 
 use crate::config::PropulsionConfig;
 use crate::propulsion::hifi::HifiParams;

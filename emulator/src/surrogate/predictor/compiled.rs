@@ -8,8 +8,9 @@ use super::gather::gather_lanes_avx2;
 use super::gather::{Clock, ClockGather, FeatureScaling, Gather, PhaseGather, Phases};
 use super::ring::{Ring, REC_LAMBDA, REC_STATE, REC_SUM, REC_VALVE, REC_VALVE_SUM_CHANGE};
 use super::terms::CompiledRow;
-use crate::surrogate::features::{IgnitionClock, Layout, Source, StateVec, STATE_MF, STATE_MO};
+use crate::surrogate::features::{Layout, Source, StateVec, STATE_MF, STATE_MO};
 use crate::surrogate::model::{Submodel, Target};
+use crate::surrogate::valve::IgnitionClock;
 use oils_shared::ENGINE_COUNT;
 
 /// A submodel compiled for `LANES` evaluations per step: 1 for a MIMO submodel, 4 (one

@@ -17,10 +17,9 @@ mod gather;
 mod ring;
 mod terms;
 
-use super::features::{
-    valve_sum_of, History, InputVec, Layout, StateVec, ValveState, ValveTrack, INPUT_DIM,
-};
+use super::features::{History, InputVec, Layout, StateVec, INPUT_DIM};
 use super::model::Model;
+use super::valve::{valve_sum_of, ValveState, ValveTrack};
 use compiled::CompiledSub;
 use gather::{Clock, Phases};
 use oils_shared::ENGINE_COUNT;
@@ -266,11 +265,11 @@ impl Predictor {
 pub(crate) mod tests {
     use super::*;
     use crate::surrogate::features::{
-        FeatureSpec, IgnitionClock, TrajectoryHistory, ValveFilter, STATE_DIM, STATE_MF, STATE_MO,
-        STATE_P,
+        FeatureSpec, TrajectoryHistory, STATE_DIM, STATE_MF, STATE_MO, STATE_P,
     };
     use crate::surrogate::library::Library;
     use crate::surrogate::model::{ActiveTerm, OutputRow, Submodel, Target};
+    use crate::surrogate::valve::{IgnitionClock, ValveFilter};
 
     /// A valve filter for the test models (hifi's TFCV figures in newtons).
     pub(crate) const TEST_VALVE: ValveFilter = ValveFilter {

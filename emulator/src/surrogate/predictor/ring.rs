@@ -3,9 +3,9 @@
 
 use super::aligned::AlignedValues;
 use crate::surrogate::features::{
-    command_sum_of, lambda_of, valve_sum_of, InputVec, StateVec, INPUT_DIM, STATE_DIM, STATE_MF,
-    STATE_MO,
+    command_sum_of, lambda_of, InputVec, StateVec, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO,
 };
+use crate::surrogate::valve::valve_sum_of;
 use oils_shared::ENGINE_COUNT;
 
 /// Components of a ring record: the step's inputs, its command sum and the change of
