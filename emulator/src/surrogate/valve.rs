@@ -143,6 +143,40 @@ impl IgnitionClock {
         self.full.sqrt() * dt_s / self.drain_time_s
     }
 
+    /// The part of [`IgnitionClock::advance`] for an engine that is on and has not yet
+    /// ignited: the dome fills, ignition is placed within the step or the time still to
+    /// go is read against the lead. Out of line and cold: it runs only in the first tens
+    /// of milliseconds of a start.
+    #[allow(clippy::too_many_arguments)]
+    #[cold]
+    #[inline(never)]
+    fn filling(
+        &self,
+        f0: f64,
+        valve0_n: f64,
+        valve1_n: f64,
+        fill_n_s: f64,
+        dt_s: f64,
+        fill: &mut f64,
+        since_s: &mut f64,
+    ) {
+        let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / fill_n_s;
+        if f1 >= 1.0 {
+            // Ignition within the step (at its start when the dome was primed).
+            let at = ((1.0 - f0) / (f1 - f0)).max(0.0);
+            *since_s = (1.0 - at) * dt_s;
+        } else {
+            // Still filling: within the lead, minus the time to go at this valve.
+            let to_go_s = (1.0 - f1) * fill_n_s / valve1_n;
+            *since_s = if to_go_s <= self.lead_s {
+                -to_go_s
+            } else {
+                NOT_IGNITED
+            };
+        }
+        *fill = f1.min(self.full);
+    }
+
     /// Advances one engine's dome by a step of `dt_s` with the switch `on`, the valve
     /// moving from `valve0_n` to `valve1_n` and the other engines that are on at
     /// `others_n` (their valve positions' sum): `fill` and the time since ignition at
@@ -176,21 +210,7 @@ impl IgnitionClock {
                 }
                 return;
             }
-            let f1 = f0 + dt_s * 0.5 * (valve0_n + valve1_n) / fill_n_s;
-            if f1 >= 1.0 {
-                // Ignition within the step (at its start when the dome was primed).
-                let at = ((1.0 - f0) / (f1 - f0)).max(0.0);
-                *since_s = (1.0 - at) * dt_s;
-            } else {
-                // Still filling: within the lead, minus the time to go at this valve.
-                let to_go_s = (1.0 - f1) * fill_n_s / valve1_n;
-                *since_s = if to_go_s <= self.lead_s {
-                    -to_go_s
-                } else {
-                    NOT_IGNITED
-                };
-            }
-            *fill = f1.min(self.full);
+            self.filling(f0, valve0_n, valve1_n, fill_n_s, dt_s, fill, since_s);
         } else {
             *since_s = NOT_IGNITED;
             let root = fill.sqrt() - drain_root;
@@ -273,20 +293,18 @@ fn step_valve(
         actuator[e] = target[e] - err * decay;
     }
     if lagging != 0 {
-        for e in (0..ENGINE_COUNT).filter(|e| lagging & (1 << e) != 0) {
-            let mut v = Tfcv {
-                target: target[e],
-                actuator: actuator_n[e],
-                valve: valve_n[e],
-            };
-            let engine = TfcvDynamics {
-                rate_per_s: rate_per_s[e],
-                half_backlash: half_backlash[e],
-                ..*d
-            };
-            v.advance(dt_s, &engine, decay);
-            actuator[e] = v.actuator;
-        }
+        actuator = rate_limited(
+            lagging,
+            actuator,
+            *actuator_n,
+            *valve_n,
+            *target,
+            rate_per_s,
+            half_backlash,
+            d,
+            dt_s,
+            decay,
+        );
     }
     for e in 0..ENGINE_COUNT {
         // `f64::clamp`'s two comparisons, without its check that lo <= hi (always
@@ -300,6 +318,43 @@ fn step_valve(
         valve_n[e] = if v > hi { hi } else { v };
     }
     *actuator_n = actuator;
+}
+
+/// The actuators of `step_valve` that are outside the lag's band of their target (bit e
+/// of `lagging`): [`Tfcv::advance`], rate limit included, in `actuator`. Out of line
+/// and cold: only a large command step gets here, and inline it put some hundreds of
+/// instructions between the step's hot parts. Arrays by value: a reference to a local
+/// array would keep it in memory for the whole step, not only on this path.
+#[allow(clippy::too_many_arguments)]
+#[cold]
+#[inline(never)]
+fn rate_limited(
+    lagging: u8,
+    mut actuator: [f64; ENGINE_COUNT],
+    actuator_n: [f64; ENGINE_COUNT],
+    valve_n: [f64; ENGINE_COUNT],
+    target: [f64; ENGINE_COUNT],
+    rate_per_s: [f64; ENGINE_COUNT],
+    half_backlash: [f64; ENGINE_COUNT],
+    d: &TfcvDynamics,
+    dt_s: f64,
+    decay: f64,
+) -> [f64; ENGINE_COUNT] {
+    for e in (0..ENGINE_COUNT).filter(|e| lagging & (1 << e) != 0) {
+        let mut v = Tfcv {
+            target: target[e],
+            actuator: actuator_n[e],
+            valve: valve_n[e],
+        };
+        let engine = TfcvDynamics {
+            rate_per_s: rate_per_s[e],
+            half_backlash: half_backlash[e],
+            ..*d
+        };
+        v.advance(dt_s, &engine, decay);
+        actuator[e] = v.actuator;
+    }
+    actuator
 }
 
 impl ValveState {
@@ -450,15 +505,18 @@ impl ValveTrack {
                     actuator[e] = target_n[e] - err * decay;
                 }
                 if lagging != 0 {
-                    for e in (0..ENGINE_COUNT).filter(|e| lagging & (1 << e) != 0) {
-                        let mut v = Tfcv {
-                            target: target_n[e],
-                            actuator: s.actuator_n[e],
-                            valve: s.valve_n[e],
-                        };
-                        v.advance(dt_s, d, decay);
-                        actuator[e] = v.actuator;
-                    }
+                    actuator = rate_limited(
+                        lagging,
+                        actuator,
+                        s.actuator_n,
+                        s.valve_n,
+                        target_n,
+                        [d.rate_per_s; ENGINE_COUNT],
+                        [d.half_backlash; ENGINE_COUNT],
+                        d,
+                        dt_s,
+                        decay,
+                    );
                 }
                 for e in 0..ENGINE_COUNT {
                     let (lo, hi) = (actuator[e] - d.half_backlash, actuator[e] + d.half_backlash);

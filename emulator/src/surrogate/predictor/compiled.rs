@@ -274,14 +274,13 @@ impl<const LANES: usize> CompiledSub<LANES> {
     }
 
     /// Gathers, clamps and scales the used features of the history `window` into `x`;
-    /// true when one was outside its envelope. `avx2`: as in [`CompiledSub::eval`].
+    /// true when one was outside its envelope. `AVX2`: as in [`CompiledSub::eval`].
     #[inline(always)]
-    pub(super) fn gather(
+    pub(super) fn gather<const AVX2: bool>(
         &mut self,
         window: &[f64],
         phases: &Phases,
         clock: &Clock,
-        avx2: bool,
     ) -> bool {
         let mut outside = 0;
         // SAFETY: `compile` places every read (and the engines after it) inside a window
@@ -304,7 +303,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
             }
         }
         #[cfg(target_arch = "x86_64")]
-        let lanes_done = if avx2 && LANES == ENGINE_COUNT {
+        let lanes_done = if AVX2 && LANES == ENGINE_COUNT {
             // SAFETY: `[f64; LANES]` is `[f64; 4]` here; the CPU has AVX2 (the caller
             // checked); reads as above.
             let x4 = unsafe {
@@ -316,10 +315,7 @@ impl<const LANES: usize> CompiledSub<LANES> {
             false
         };
         #[cfg(not(target_arch = "x86_64"))]
-        let lanes_done = {
-            let _ = avx2;
-            false
-        };
+        let lanes_done = false;
         if !lanes_done {
             for (g, x) in self.lanes.iter().zip(x_rest) {
                 for (e, x) in x.iter_mut().enumerate() {
@@ -338,49 +334,60 @@ impl<const LANES: usize> CompiledSub<LANES> {
                 outside |= out;
             }
         }
-        if let Some(c) = &self.ignition {
-            if clock.any || !self.clock_grouped {
-                for g in &self.clock {
-                    let x = &mut self.x.slots_mut()[g.slot];
-                    for (e, x) in x.iter_mut().enumerate() {
-                        let since = clock.since_ignition_s[e];
-                        let raw = match g.hat {
-                            None => IgnitionClock::priming(phases.on[e], since),
-                            Some(j) => c.hat(since, j),
-                        };
-                        let (v, out) = g.scaling.apply(raw);
-                        *x = v;
-                        outside |= out;
-                    }
-                }
-            }
+        if self.ignition.is_some() && (clock.any || !self.clock_grouped) {
+            outside |= self.gather_clock(phases, clock);
         }
         outside != 0
     }
 
+    /// The ignition features, per engine (non-zero: one was outside its envelope). Out of
+    /// line and cold: they are read only while an engine is in its ignition window.
+    #[cold]
+    #[inline(never)]
+    fn gather_clock(&mut self, phases: &Phases, clock: &Clock) -> u64 {
+        let mut outside = 0;
+        let Some(c) = &self.ignition else {
+            return 0;
+        };
+        for g in &self.clock {
+            let x = &mut self.x.slots_mut()[g.slot];
+            for (e, x) in x.iter_mut().enumerate() {
+                let since = clock.since_ignition_s[e];
+                let raw = match g.hat {
+                    None => IgnitionClock::priming(phases.on[e], since),
+                    Some(j) => c.hat(since, j),
+                };
+                let (v, out) = g.scaling.apply(raw);
+                *x = v;
+                outside |= out;
+            }
+        }
+        outside
+    }
+
     /// Predicts this submodel's outputs into `next`, guarded ([`guarded`]); true when a
-    /// feature was outside its envelope or a prediction was not finite. `avx2`: the step
-    /// runs in its AVX2 build (see [`super::Predictor::step`]).
+    /// feature was outside its envelope or a prediction was not finite. `AVX2`: the step
+    /// runs in its AVX2 build (see [`super::Predictor::step`]), and the lanes, term sums
+    /// and dense rows take their AVX2 intrinsics.
     #[inline(always)]
-    pub(super) fn eval(
+    pub(super) fn eval<const AVX2: bool>(
         &mut self,
         window: &[f64],
         phases: &Phases,
         clock: &Clock,
         prev: &StateVec,
         next: &mut StateVec,
-        avx2: bool,
     ) -> bool {
         let mut nonfinite = false;
         if let Some(d) = &self.dense {
             debug_assert!(self.lanes.is_empty() && self.phases.is_empty() && self.clock.is_empty());
-            let (y, outside) = d.eval(window, avx2);
+            let (y, outside) = d.eval::<AVX2>(window);
             for (&o, y) in self.outputs.iter().zip(y) {
                 next[o] = guarded(o, self.target.apply(prev[o], y), prev[o], &mut nonfinite);
             }
             return outside | nonfinite;
         }
-        let outside = self.gather(window, phases, clock, avx2);
+        let outside = self.gather::<AVX2>(window, phases, clock);
         if LANES == 1 {
             for (row, &o) in self.rows.iter().zip(&self.outputs) {
                 let mut y = [row.intercept; LANES];
@@ -391,7 +398,25 @@ impl<const LANES: usize> CompiledSub<LANES> {
             // One shared row for the engines, plus each engine's phase terms.
             let row = &self.rows[0];
             let mut y = [row.intercept; LANES];
-            row.terms.add(self.x.slots(), &mut y);
+            #[cfg(target_arch = "x86_64")]
+            let added = if AVX2 && LANES == ENGINE_COUNT {
+                let x = self.x.slots();
+                // SAFETY: `[f64; LANES]` is `[f64; 4]` here; the CPU has AVX2 (the caller
+                // checked); `compile` maps every factor to a slot of `x`.
+                unsafe {
+                    let x4 = std::slice::from_raw_parts(x.as_ptr().cast::<[f64; 4]>(), x.len());
+                    let y4 = &mut *std::ptr::from_mut(&mut y).cast::<[f64; 4]>();
+                    row.terms.add_avx2(x4, y4);
+                }
+                true
+            } else {
+                false
+            };
+            #[cfg(not(target_arch = "x86_64"))]
+            let added = false;
+            if !added {
+                row.terms.add(self.x.slots(), &mut y);
+            }
             for (e, y) in y.iter_mut().enumerate() {
                 let table = &self.phase_group[usize::from(!phases.on[e])];
                 if let Some(&Some(g)) = table.get(phases.run[e] - 1) {

@@ -69,13 +69,14 @@ impl Dense {
     /// feature was outside its envelope. One pass: a feature is read, clamped and
     /// multiplied into every row while in a register, rather than stored and read back.
     ///
-    /// `avx2`: the CPU has AVX2 and the chunks take [`Dense::chunks_avx2`].
+    /// `AVX2`: the step runs in its AVX2 build, and the chunks take
+    /// [`Dense::chunks_avx2`].
     #[inline(always)]
-    pub(super) fn eval(&self, window: &[f64], avx2: bool) -> ([f64; DENSE_ROWS], bool) {
+    pub(super) fn eval<const AVX2: bool>(&self, window: &[f64]) -> ([f64; DENSE_ROWS], bool) {
         // `acc[r][k]`: row r's partial sum k.
         let (mut acc, mut outside) = {
             #[cfg(target_arch = "x86_64")]
-            if avx2 {
+            if AVX2 {
                 // SAFETY: the CPU has AVX2 (checked by the caller); reads as below.
                 unsafe { self.chunks_avx2(window) }
             } else {
@@ -83,7 +84,6 @@ impl Dense {
             }
             #[cfg(not(target_arch = "x86_64"))]
             {
-                let _ = avx2;
                 self.chunks(window)
             }
         };

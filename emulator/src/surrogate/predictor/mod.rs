@@ -180,7 +180,7 @@ impl Predictor {
             // SAFETY: the CPU has AVX2 (checked in `new`).
             return unsafe { self.step_avx2(input) };
         }
-        self.step_portable(input)
+        self.step_in::<false>(input)
     }
 
     /// [`Predictor::step`] compiled for AVX2: the four engines' lanes in one vector
@@ -190,11 +190,14 @@ impl Predictor {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     unsafe fn step_avx2(&mut self, input: &InputVec) -> StateVec {
-        self.step_portable(input)
+        self.step_in::<true>(input)
     }
 
+    /// The step; `AVX2` only in [`Predictor::step_avx2`]. A constant rather than a flag
+    /// read at run time, so that each build holds only its own paths: with the flag,
+    /// the AVX2 build carried the portable fallbacks too, between its hot parts.
     #[inline(always)]
-    fn step_portable(&mut self, input: &InputVec) -> StateVec {
+    fn step_in<const AVX2: bool>(&mut self, input: &InputVec) -> StateVec {
         let prev = self.ring.state();
         let head = self.ring.advance();
         let [lo, hi] = self.on_command_range_n;
@@ -246,12 +249,11 @@ impl Predictor {
         }
         let mut next = prev;
         let window = self.ring.window();
-        let avx2 = self.avx2;
         for sub in &mut self.per_engine {
-            outside |= sub.eval(window, &self.phases, &self.clock, &prev, &mut next, avx2);
+            outside |= sub.eval::<AVX2>(window, &self.phases, &self.clock, &prev, &mut next);
         }
         for sub in &mut self.mimo {
-            outside |= sub.eval(window, &self.phases, &self.clock, &prev, &mut next, avx2);
+            outside |= sub.eval::<AVX2>(window, &self.phases, &self.clock, &prev, &mut next);
         }
         // The physical guards are applied as each output is written (`compiled::guarded`;
         // every output is written by exactly one submodel, `Model::check`).

@@ -61,7 +61,8 @@ impl Terms {
     }
 
     /// Adds the terms of one lane to `y` (the few phase terms of one engine).
-    #[inline(always)]
+    #[cold]
+    #[inline(never)]
     pub(super) fn add_lane<const LANES: usize>(&self, x: &[[f64; LANES]], e: usize, y: &mut f64) {
         let v = |i: u16| x[i as usize][e];
         for &([a], c) in &self.lin {
@@ -216,6 +217,84 @@ impl Factored {
         }
         for e in 0..LANES {
             y[e] += ((acc[0][e] + acc[1][e]) + (acc[2][e] + acc[3][e])) + groups[e];
+        }
+    }
+}
+
+impl Factored {
+    /// [`Factored::add`] for four lanes in AVX2 vectors: the same IEEE operations per
+    /// lane in the same order (no fused multiply-add), so the same bits; tested against
+    /// the portable path. Written with intrinsics because the compiler's vectorisation
+    /// of the portable loops is fragile: a small change to them (four partial sums
+    /// instead of two) turned the group sums into scalar code with its sums on the
+    /// stack, a step of 310 against 205 ns.
+    ///
+    /// # Safety
+    /// The CPU has AVX2; every slot in the terms is below `x.len()` (as for `add`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    #[inline]
+    pub(super) unsafe fn add_avx2(&self, x: &[[f64; 4]], y: &mut [f64; 4]) {
+        use std::arch::x86_64::*;
+        let base = x.as_ptr().cast::<f64>();
+        // Macros rather than closures: a closure is not compiled with the enclosing
+        // function's target features, and the intrinsics would not be inlined into it.
+        macro_rules! at {
+            ($i:expr) => {
+                // SAFETY: the slot is below `x.len()` (the caller's contract), and each
+                // slot holds four values.
+                unsafe { _mm256_loadu_pd(base.add(usize::from($i) * 4)) }
+            };
+        }
+        macro_rules! term {
+            ($c:expr, $x:expr) => {
+                _mm256_mul_pd(_mm256_set1_pd($c), $x)
+            };
+        }
+        let mut acc = [_mm256_setzero_pd(); PARTIAL_SUMS];
+        let mut chunks = self.single.chunks_exact(PARTIAL_SUMS);
+        for chunk in &mut chunks {
+            for (a, &([f], c)) in acc.iter_mut().zip(chunk) {
+                *a = _mm256_add_pd(*a, term!(c, at!(f)));
+            }
+        }
+        for (a, &([f], c)) in acc.iter_mut().zip(chunks.remainder()) {
+            *a = _mm256_add_pd(*a, term!(c, at!(f)));
+        }
+        let mut groups = _mm256_setzero_pd();
+        for g in &self.groups {
+            let mut i0 = _mm256_set1_pd(g.constant);
+            let (mut i1, mut i2) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+            // SAFETY: the group ranges lie within `lin` and `quad` (built together).
+            let lin = unsafe { self.lin.get_unchecked(g.lin[0] as usize..g.lin[1] as usize) };
+            let mut pairs = lin.chunks_exact(2);
+            for p in &mut pairs {
+                let ((b0, c0), (b1, c1)) = (p[0], p[1]);
+                i0 = _mm256_add_pd(i0, term!(c0, at!(b0)));
+                i1 = _mm256_add_pd(i1, term!(c1, at!(b1)));
+            }
+            for &(b, c) in pairs.remainder() {
+                i0 = _mm256_add_pd(i0, term!(c, at!(b)));
+            }
+            // SAFETY: as for `lin`.
+            let quad = unsafe {
+                self.quad
+                    .get_unchecked(g.quad[0] as usize..g.quad[1] as usize)
+            };
+            for &([b, d], c) in quad {
+                i2 = _mm256_add_pd(i2, term!(c, _mm256_mul_pd(at!(b), at!(d))));
+            }
+            let inner = _mm256_add_pd(_mm256_add_pd(i0, i1), i2);
+            groups = _mm256_add_pd(groups, _mm256_mul_pd(at!(g.outer), inner));
+        }
+        let singles = _mm256_add_pd(_mm256_add_pd(acc[0], acc[1]), _mm256_add_pd(acc[2], acc[3]));
+        // SAFETY: `y` holds four values.
+        unsafe {
+            let sum = _mm256_add_pd(singles, groups);
+            _mm256_storeu_pd(
+                y.as_mut_ptr(),
+                _mm256_add_pd(_mm256_loadu_pd(y.as_ptr()), sum),
+            );
         }
     }
 }
