@@ -1,6 +1,6 @@
-//! Measures hifi's ignition times and fits the ignition clock's fill constant and sag to
-//! them (`fill_n_s` and `sag_per_n` in `[variants.engine_valve.ignition]` of
-//! `emulator/config/train.toml`).
+//! Measures hifi's ignition times and fits the ignition clock's fill constant and sags to
+//! them (`fill_n_s`, `sag_per_n` and `priming_sag_per_n` in
+//! `[variants.engine_valve.ignition]` of `emulator/config/train.toml`).
 //!
 //! `cargo run --release --example ignition_times [TRAIN_TOML]`
 //!
@@ -13,9 +13,9 @@
 //! 100 N, interpolated. The clock runs on the same commands at the surrogate's 10 ms
 //! step, with the training configuration's valve filter and hifi's dome drain time and
 //! knee. A constant offset between clock and hifi is absorbed by the hat functions, so
-//! the fit minimises the spread of the difference over a grid of fill constants and
-//! sags, and prints the offset and the spread, for all starts and for group starts
-//! (with `IGNITION_TABLE=1` also the best spread for each sag).
+//! the fit minimises the spread of the difference over a grid of fill constants, sags
+//! and priming sags, and prints the offset and the spread, for all starts and for group
+//! starts (with `IGNITION_TABLE=1` also the best spread for each sag).
 
 use anyhow::{bail, Context, Result};
 use oils_emulator::propulsion::hifi::HifiPropulsion;
@@ -147,10 +147,11 @@ fn main() -> Result<()> {
         .collect();
 
     // The clock's ignition time for each start (end of the step minus the time since).
-    let clock_times = |fill_n_s: f64, sag_per_n: f64| -> Vec<Option<f64>> {
+    let clock_times = |fill_n_s: f64, sag_per_n: f64, priming_sag_per_n: f64| {
         let clock = IgnitionClock {
             fill_n_s,
             sag_per_n,
+            priming_sag_per_n,
             drain_time_s: hifi_params.engine.dome_drain_time_s,
             full: 1.0 / hifi_params.engine.dome_fill_knee_frac,
             lead_s: 0.0,
@@ -184,13 +185,13 @@ fn main() -> Result<()> {
                     .find(|&&(k, _)| k >= step)
                     .map(|&(_, t)| t - step as f64 * 1e-2)
             })
-            .collect()
+            .collect::<Vec<Option<f64>>>()
     };
     // Offset and spread (RMS, max) of hifi minus clock, over all starts and over the
     // group starts (the same offset: the model has one set of hats).
     type Spread = ((f64, f64, f64), (f64, f64));
-    let spread = |fill_n_s: f64, sag_per_n: f64| -> Option<Spread> {
-        let est = clock_times(fill_n_s, sag_per_n);
+    let spread = |fill_n_s: f64, sag_per_n: f64, priming_sag_per_n: f64| -> Option<Spread> {
+        let est = clock_times(fill_n_s, sag_per_n, priming_sag_per_n);
         let d: Vec<(bool, f64)> = starts
             .iter()
             .zip(&est)
@@ -209,31 +210,39 @@ fn main() -> Result<()> {
         let (rms, max) = stats(false);
         Some(((mean, rms, max), stats(true)))
     };
-    let sags: Vec<f64> = (0..=30).map(|i| f64::from(i) * 1e-5).collect();
-    let mut best: Option<(f64, f64, Spread)> = None;
+    // Sags in steps of 5e-6 / N, fill constants in steps of 0.2 N s: for each sag, the
+    // best priming sag and fill constant.
+    let sags: Vec<f64> = (0..=12).map(|i| f64::from(i) * 5e-6).collect();
+    let priming_sags: Vec<f64> = (0..=24).map(|i| f64::from(i) * 5e-6).collect();
+    let mut best: Option<(f64, f64, f64, Spread)> = None;
     let mut best_per_sag = Vec::new();
     for &sag in &sags {
-        let mut best_here: Option<(f64, Spread)> = None;
-        for i in 0..=200 {
-            let fill_n_s = 20.0 + 0.2 * f64::from(i);
-            if let Some(s) = spread(fill_n_s, sag) {
-                if best_here.is_none_or(|(_, b)| s.0 .1 < b.0 .1) {
-                    best_here = Some((fill_n_s, s));
+        let mut best_here: Option<(f64, f64, Spread)> = None;
+        for &priming in &priming_sags {
+            for i in 0..=150 {
+                let fill_n_s = 25.0 + 0.2 * f64::from(i);
+                if let Some(s) = spread(fill_n_s, sag, priming) {
+                    if best_here.is_none_or(|(_, _, b)| s.0 .1 < b.0 .1) {
+                        best_here = Some((fill_n_s, priming, s));
+                    }
                 }
             }
         }
-        if let Some((f, s)) = best_here {
-            best_per_sag.push((sag, f, s));
-            if best.is_none_or(|(_, _, b)| s.0 .1 < b.0 .1) {
-                best = Some((f, sag, s));
+        if let Some((f, p, s)) = best_here {
+            best_per_sag.push((sag, f, p, s));
+            if best.is_none_or(|(_, _, _, b)| s.0 .1 < b.0 .1) {
+                best = Some((f, sag, p, s));
             }
         }
     }
     if std::env::var_os("IGNITION_TABLE").is_some() {
-        println!("sag_per_n fill_n_s offset_ms rms_ms max_ms group_rms_ms group_max_ms");
-        for (sag, f, ((m, r, x), (gr, gx))) in &best_per_sag {
+        println!(
+            "sag_per_n priming_sag_per_n fill_n_s offset_ms rms_ms max_ms group_rms_ms \
+             group_max_ms"
+        );
+        for (sag, f, p, ((m, r, x), (gr, gx))) in &best_per_sag {
             println!(
-                "{sag:.5} {f:.1} {:.2} {:.2} {:.2} {:.2} {:.2}",
+                "{sag:.6} {p:.6} {f:.1} {:.2} {:.2} {:.2} {:.2} {:.2}",
                 m * 1e3,
                 r * 1e3,
                 x * 1e3,
@@ -242,8 +251,10 @@ fn main() -> Result<()> {
             );
         }
     }
-    let Some((fill_n_s, sag_per_n, ((mean, rms, max), (group_rms, group_max)))) = best else {
-        bail!("no fill constant in 20-60 N s ignites every start");
+    let Some((fill_n_s, sag_per_n, priming_sag_per_n, ((mean, rms, max), (group_rms, group_max)))) =
+        best
+    else {
+        bail!("no fill constant in 25-55 N s ignites every start");
     };
     let groups = starts.iter().filter(|s| s.2).count();
     println!(
@@ -253,7 +264,8 @@ fn main() -> Result<()> {
         starts.iter().map(|s| s.3).fold(0.0, f64::max) * 1e3
     );
     println!(
-        "fill_n_s = {fill_n_s:.1}, sag_per_n = {sag_per_n:.5}: hifi ignites {:.2} ms after \
+        "fill_n_s = {fill_n_s:.1}, sag_per_n = {sag_per_n:.6}, priming_sag_per_n = \
+         {priming_sag_per_n:.6}: hifi ignites {:.2} ms after \
          the clock on average; spread RMS {:.2} ms, max {:.2} ms (group starts: RMS {:.2} \
          ms, max {:.2} ms)",
         mean * 1e3,
@@ -262,16 +274,32 @@ fn main() -> Result<()> {
         group_rms * 1e3,
         group_max * 1e3
     );
-    if let Some((_, f, ((m, r, x), (gr, gx)))) = best_per_sag.first() {
-        println!(
-            "without sag: fill_n_s = {f:.1}, offset {:.2} ms, spread RMS {:.2} ms, max {:.2} \
-             ms (group starts: RMS {:.2} ms, max {:.2} ms)",
-            m * 1e3,
-            r * 1e3,
-            x * 1e3,
-            gr * 1e3,
-            gx * 1e3
-        );
+    // For comparison: the best fill constant without either sag, and with the manifold
+    // sag alone (the clock before the priming sag).
+    for (what, sag_zero) in [("without sag", true), ("without priming sag", false)] {
+        let sag_grid: &[f64] = if sag_zero { &[0.0] } else { &sags };
+        let mut best_here: Option<(f64, f64, Spread)> = None;
+        for &sag in sag_grid {
+            for i in 0..=150 {
+                let f = 25.0 + 0.2 * f64::from(i);
+                if let Some(s) = spread(f, sag, 0.0) {
+                    if best_here.is_none_or(|(_, _, b)| s.0 .1 < b.0 .1) {
+                        best_here = Some((f, sag, s));
+                    }
+                }
+            }
+        }
+        if let Some((f, sag, ((m, r, x), (gr, gx)))) = best_here {
+            println!(
+                "{what}: fill_n_s = {f:.1}, sag_per_n = {sag:.6}, offset {:.2} ms, spread \
+                 RMS {:.2} ms, max {:.2} ms (group starts: RMS {:.2} ms, max {:.2} ms)",
+                m * 1e3,
+                r * 1e3,
+                x * 1e3,
+                gr * 1e3,
+                gx * 1e3
+            );
+        }
     }
     Ok(())
 }

@@ -74,7 +74,7 @@ fn bad_model_files_are_refused_clearly() {
         2
     );
 
-    let wrong_version = good.replacen("\"version\": 7", "\"version\": 99", 1);
+    let wrong_version = good.replacen("\"version\": 8", "\"version\": 99", 1);
     let e = refusal(&wrong_version, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 99 }),
@@ -82,7 +82,7 @@ fn bad_model_files_are_refused_clearly() {
     );
     assert!(e.to_string().contains("version 99"));
     // A version-1 file (before the per-engine physics features) is refused by name.
-    let old = good.replacen("\"version\": 7", "\"version\": 1", 1);
+    let old = good.replacen("\"version\": 8", "\"version\": 1", 1);
     let e = refusal(&old, 10_000_000);
     assert!(
         matches!(e, ModelFileError::WrongVersion { found: 1 }),
@@ -104,8 +104,26 @@ fn bad_model_files_are_refused_clearly() {
         serde_json::json!(400.0);
     let e = refusal(&moved.to_string(), 10_000_000);
     assert!(e.to_string().contains("outside the stroke map"), "{e}");
+    // A version-7 file with a priming sag is refused (version 7 had none).
+    let relabelled = good.replacen("\"version\": 8", "\"version\": 7", 1);
+    let e = refusal(&relabelled, 10_000_000);
+    assert!(e.to_string().contains("needs file version 8"), "{e}");
+    // The default model before the priming sag, as committed then (version 7), reads and
+    // runs, its clock with the manifold sag alone.
+    let v7_text = include_str!("data/surrogate-v7.json");
+    let v7 = ModelFile::parse(v7_text).expect("version 7 reads");
+    assert!(v7.model.submodels.iter().all(|s| s
+        .features
+        .valve
+        .and_then(|v| v.ignition)
+        .is_none_or(|c| c.priming_sag_per_n == 0.0)));
+    let mut v7_model = oils_emulator::surrogate::predictor::Predictor::new(&v7.model);
+    for k in 0..200 {
+        let x = v7_model.step(&[600.0 + k as f64, 500.0, 700.0, 650.0, 1.0, 1.0, 1.0, 1.0]);
+        assert!(x.iter().all(|v| v.is_finite()));
+    }
     // A version-6 file with a stroke map is refused (version 6 had none).
-    let relabelled = good.replacen("\"version\": 7", "\"version\": 6", 1);
+    let relabelled = v7_text.replacen("\"version\": 7", "\"version\": 6", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 7"), "{e}");
     // The default model before the stroke map, as committed then (version 6), reads and
@@ -179,12 +197,12 @@ fn bad_model_files_are_refused_clearly() {
         .and_then(|v| v.ignition)
         .is_none_or(|c| c.sag_per_n == 0.0)));
     // A version-3 file naming an ignition clock is refused (version 3 had none).
-    let relabelled = good.replacen("\"version\": 7", "\"version\": 3", 1);
+    let relabelled = good.replacen("\"version\": 8", "\"version\": 3", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 4"), "{e}");
     // Version 2 (before the valve filter) still reads; a version-2 file naming a valve
     // filter is refused (no version-2 writer made one).
-    let relabelled = good.replacen("\"version\": 7", "\"version\": 2", 1);
+    let relabelled = good.replacen("\"version\": 8", "\"version\": 2", 1);
     let e = refusal(&relabelled, 10_000_000);
     assert!(e.to_string().contains("needs file version 3"), "{e}");
     // The default model before the valve filter, as committed then.

@@ -30,12 +30,14 @@ pub const FORMAT: &str = "oils-surrogate";
 /// (feature specs accept unknown fields) and so misread; a version-5 file that sets it
 /// is refused here. Version 7 added the valve's stroke map (`stroke` in a valve filter),
 /// which a version-6 reader would refuse as an unknown field; a version-6 file that names
-/// one is refused here too.
-pub const VERSION: u32 = 7;
+/// one is refused here too. Version 8 added the clock's sag for engines still priming
+/// (`priming_sag_per_n`), which a version-7 reader would refuse as an unknown field; a
+/// version-7 file that sets one is refused here too.
+pub const VERSION: u32 = 8;
 /// The version that added each optional feature, what to call it, and whether a
 /// submodel's features use it (see [`VERSION`]).
 type AddedIn = (u64, &'static str, fn(&FeatureSpec) -> bool);
-const ADDED_IN: [AddedIn; 5] = [
+const ADDED_IN: [AddedIn; 6] = [
     (3, "a valve filter", |f| f.valve.is_some()),
     (4, "an ignition clock", |f| {
         f.valve.is_some_and(|v| v.ignition.is_some())
@@ -49,6 +51,15 @@ const ADDED_IN: [AddedIn; 5] = [
     (7, "a valve stroke map (`stroke`)", |f| {
         f.valve.is_some_and(|v| v.stroke.is_some())
     }),
+    (
+        8,
+        "an ignition clock's priming sag (`priming_sag_per_n`)",
+        |f| {
+            f.valve
+                .and_then(|v| v.ignition)
+                .is_some_and(|c| c.priming_sag_per_n != 0.0)
+        },
+    ),
 ];
 
 /// Oldest version this build reads.

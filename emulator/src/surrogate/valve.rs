@@ -85,6 +85,10 @@ pub struct IgnitionClock {
     /// absent from files before version 5).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub sag_per_n: f64,
+    /// Slower filling per newton of the valve positions of the other engines that are
+    /// still priming (on, dome short of ignition), on top of `sag_per_n`, 1/N (0: none).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub priming_sag_per_n: f64,
 }
 
 /// `since_ignition_s` of an engine that has not ignited.
@@ -111,6 +115,9 @@ impl IgnitionClock {
         }
         if !(self.sag_per_n.is_finite() && self.sag_per_n >= 0.0) {
             return Err("ignition sag_per_n must be finite and not negative".into());
+        }
+        if !(self.priming_sag_per_n.is_finite() && self.priming_sag_per_n >= 0.0) {
+            return Err("ignition priming_sag_per_n must be finite and not negative".into());
         }
         if !(1..=64).contains(&self.knots) {
             return Err("ignition knots must be 1..=64".into());
@@ -190,6 +197,7 @@ impl IgnitionClock {
         valve0_n: f64,
         valve1_n: f64,
         others_n: f64,
+        priming_others_n: f64,
         dt_s: f64,
         drain_root: f64,
         fill: &mut f64,
@@ -199,7 +207,8 @@ impl IgnitionClock {
             let f0 = *fill;
             // Without sag the factor is exactly 1 and the bits are those of the
             // unscaled constant.
-            let fill_n_s = self.fill_n_s * (1.0 + self.sag_per_n * others_n);
+            let fill_n_s = self.fill_n_s
+                * (1.0 + self.sag_per_n * others_n + self.priming_sag_per_n * priming_others_n);
             if f0 >= 1.0 && *since_s != NOT_IGNITED {
                 *since_s += dt_s;
                 // Running with a full dome (the common case) costs no division: the
@@ -562,6 +571,14 @@ impl ValveTrack {
             };
             let on: [bool; ENGINE_COUNT] = std::array::from_fn(|e| input[ENGINE_COUNT + e] > 0.5);
             let total = valve_sum_of(input, &clock_n);
+            let priming: [f64; ENGINE_COUNT] = std::array::from_fn(|e| {
+                if on[e] && s.fill[e] < 1.0 {
+                    clock_n[e]
+                } else {
+                    0.0
+                }
+            });
+            let priming_total = (priming[0] + priming[1]) + (priming[2] + priming[3]);
             for e in 0..ENGINE_COUNT {
                 let drawing = if on[e] { clock_n[e] } else { 0.0 };
                 c.advance(
@@ -569,6 +586,7 @@ impl ValveTrack {
                     clock_before_n[e],
                     clock_n[e],
                     total - drawing,
+                    priming_total - priming[e],
                     dt_s,
                     self.drain_root,
                     &mut s.fill[e],
@@ -731,6 +749,7 @@ mod tests {
             knot_spacing_s: 0.005,
             knots: 4,
             sag_per_n: 0.0,
+            priming_sag_per_n: 0.0,
         };
         let f = ValveFilter {
             time_constant_s: 0.015,
@@ -845,6 +864,41 @@ mod tests {
             .map(|_| alone.advance(&all(true, false)).since_ignition_s[0])
             .collect();
         assert!(since[4].abs() < 1e-12, "{since:?}");
+        // Priming sag: the same 1/6000 per N, for the other engines whose domes are still
+        // filling only. Four engines started together all prime: 62.5 ms, as above ...
+        let priming = ValveFilter {
+            ignition: Some(IgnitionClock {
+                priming_sag_per_n: 1.0 / 6000.0,
+                ..clock
+            }),
+            stroke: None,
+            ..f
+        };
+        let mut together = ValveTrack::new(priming, 0.01);
+        let since: Vec<f64> = (0..7)
+            .map(|_| together.advance(&all(true, true)).since_ignition_s)
+            .map(|s| s[0])
+            .collect();
+        assert_eq!(since[..6], [NOT_IGNITED; 6], "{since:?}");
+        assert!((since[6] - 0.0075).abs() < 1e-12, "{since:?}");
+        // ... but an engine restarted (after a full drain) beside three running engines is
+        // not slowed: 50 ms, the end of the 5th step.
+        let restart = |on: bool| {
+            let mut u = all(true, true);
+            u[ENGINE_COUNT] = f64::from(u8::from(on));
+            u[0] = if on { 500.0 } else { 0.0 };
+            u
+        };
+        for _ in 0..61 {
+            together.advance(&restart(false));
+        }
+        assert_eq!(together.state.fill[0], 0.0);
+        assert!(together.state.fill[1..].iter().all(|&f| f >= 1.0));
+        let since: Vec<f64> = (0..5)
+            .map(|_| together.advance(&restart(true)).since_ignition_s[0])
+            .collect();
+        assert_eq!(since[..4], [NOT_IGNITED; 4], "{since:?}");
+        assert!(since[4].abs() < 1e-12, "{since:?}");
         // Validation names the bad parameter.
         let names = |c: IgnitionClock, name: &str| {
             let err = c.validate().unwrap_err();
@@ -856,6 +910,13 @@ mod tests {
                 ..clock
             },
             "sag_per_n",
+        );
+        names(
+            IgnitionClock {
+                priming_sag_per_n: f64::NAN,
+                ..clock
+            },
+            "priming_sag_per_n",
         );
         names(IgnitionClock { full: 0.9, ..clock }, "full");
         names(IgnitionClock { knots: 0, ..clock }, "knots");

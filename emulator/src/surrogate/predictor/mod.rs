@@ -283,8 +283,8 @@ pub(crate) mod tests {
         stroke: None,
     };
 
-    /// An ignition clock for the test models (with sag, so the engines' clocks depend
-    /// on each other).
+    /// An ignition clock for the test models (with both sags, so the engines' clocks
+    /// depend on each other).
     pub(crate) const TEST_IGNITION: IgnitionClock = IgnitionClock {
         fill_n_s: 20.0,
         drain_time_s: 0.6,
@@ -293,6 +293,7 @@ pub(crate) mod tests {
         knot_spacing_s: 0.005,
         knots: 6,
         sag_per_n: 6e-5,
+        priming_sag_per_n: 8e-5,
     };
 
     /// The valve track of `inputs` for `model` (empty when no submodel reads it).
