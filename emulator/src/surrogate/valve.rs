@@ -62,9 +62,11 @@ pub struct ValveFilter {
 /// The engines share the feed: while others draw, the manifold sags and a dome fills
 /// more slowly, so `fill_n_s` is scaled by `1 + sag_per_n * (valve positions of the
 /// other engines that are on)` (hifi: relative to the clock without sag, a four-engine
-/// cold start ignites some 8 ms later than a single engine's at the same command).
-/// Parameters: `drain_time_s` and `full` are hifi's dome figures, `fill_n_s` and
-/// `sag_per_n` are fitted to hifi's ignition times (`cargo run --release -p
+/// cold start ignites some 8 ms later than a single engine's at the same command), plus
+/// `priming_sag_per_n * (valve positions of the other engines still priming)`: a branch
+/// whose dome is still filling meets no injector and draws far more than a running one.
+/// Parameters: `drain_time_s` and `full` are hifi's dome figures, `fill_n_s`, `sag_per_n`
+/// and `priming_sag_per_n` are fitted to hifi's ignition times (`cargo run --release -p
 /// oils-emulator --example ignition_times`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
