@@ -345,10 +345,10 @@ impl<const LANES: usize> CompiledSub<LANES> {
     #[cold]
     #[inline(never)]
     fn gather_clock(&mut self, phases: &Phases, clock: &Clock) -> u64 {
-        let mut outside = 0;
         let Some(c) = &self.ignition else {
             return 0;
         };
+        let mut outside = 0;
         for g in &self.clock {
             let x = &mut self.x.slots_mut()[g.slot];
             for (e, x) in x.iter_mut().enumerate() {
