@@ -59,6 +59,18 @@ fn refusal(text: &str, bench_step_ns: u64) -> ModelFileError {
     }
 }
 
+/// An earlier default model file, as committed then: it reads, and it runs 200 steps with
+/// every state finite.
+fn reads_and_runs(text: &str) -> ModelFile {
+    let file = ModelFile::parse(text).expect("the earlier default reads");
+    let mut model = oils_emulator::surrogate::predictor::Predictor::new(&file.model);
+    for k in 0..200 {
+        let x = model.step(&[600.0 + k as f64, 500.0, 700.0, 650.0, 1.0, 1.0, 1.0, 1.0]);
+        assert!(x.iter().all(|v| v.is_finite()), "step {k}: {x:?}");
+    }
+    file
+}
+
 #[test]
 fn bad_model_files_are_refused_clearly() {
     let good = DEFAULT_MODEL_JSON;
@@ -111,17 +123,12 @@ fn bad_model_files_are_refused_clearly() {
     // The default model before the priming sag, as committed then (version 7), reads and
     // runs, its clock with the manifold sag alone.
     let v7_text = include_str!("data/surrogate-v7.json");
-    let v7 = ModelFile::parse(v7_text).expect("version 7 reads");
+    let v7 = reads_and_runs(v7_text);
     assert!(v7.model.submodels.iter().all(|s| s
         .features
         .valve
         .and_then(|v| v.ignition)
         .is_none_or(|c| c.priming_sag_per_n == 0.0)));
-    let mut v7_model = oils_emulator::surrogate::predictor::Predictor::new(&v7.model);
-    for k in 0..200 {
-        let x = v7_model.step(&[600.0 + k as f64, 500.0, 700.0, 650.0, 1.0, 1.0, 1.0, 1.0]);
-        assert!(x.iter().all(|v| v.is_finite()));
-    }
     // A version-6 file with a stroke map is refused (version 6 had none).
     let relabelled = v7_text.replacen("\"version\": 7", "\"version\": 6", 1);
     let e = refusal(&relabelled, 10_000_000);
@@ -129,17 +136,12 @@ fn bad_model_files_are_refused_clearly() {
     // The default model before the stroke map, as committed then (version 6), reads and
     // runs, its filter in newtons.
     let v6_text = include_str!("data/surrogate-v6.json");
-    let v6 = ModelFile::parse(v6_text).expect("version 6 reads");
+    let v6 = reads_and_runs(v6_text);
     assert!(v6
         .model
         .submodels
         .iter()
         .all(|s| s.features.valve.is_none_or(|v| v.stroke.is_none())));
-    let mut v6_model = oils_emulator::surrogate::predictor::Predictor::new(&v6.model);
-    for k in 0..200 {
-        let x = v6_model.step(&[600.0 + k as f64, 500.0, 700.0, 650.0, 1.0, 1.0, 1.0, 1.0]);
-        assert!(x.iter().all(|v| v.is_finite()));
-    }
     // A version-5 file with draw changes is refused (version 5 had none). Taking the key
     // out leaves features the model's terms count on: refused, not misread.
     let relabelled = v6_text.replacen("\"version\": 6", "\"version\": 5", 1);
@@ -160,13 +162,8 @@ fn bad_model_files_are_refused_clearly() {
     // The default model before the draw changes, as committed then (version 5), reads
     // and runs.
     let v5_text = include_str!("data/surrogate-v5.json");
-    let v5 = ModelFile::parse(v5_text).expect("version 5 reads");
+    let v5 = reads_and_runs(v5_text);
     assert!(v5.model.submodels.iter().all(|s| !s.features.valve_sum));
-    let mut old_model = oils_emulator::surrogate::predictor::Predictor::new(&v5.model);
-    for k in 0..200 {
-        let x = old_model.step(&[600.0 + k as f64, 500.0, 700.0, 650.0, 1.0, 1.0, 1.0, 1.0]);
-        assert!(x.iter().all(|v| v.is_finite()));
-    }
     // A version-4 file setting the clock's sag is refused (version 4 had none); without
     // the sag it reads, as a clock without sag.
     let relabelled = v5_text.replacen("\"version\": 5", "\"version\": 4", 1);

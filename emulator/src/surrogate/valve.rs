@@ -854,17 +854,23 @@ mod tests {
             stroke: None,
             ..f
         };
-        let mut w = ValveTrack::new(sag_filter, 0.01);
-        let since: Vec<f64> = (0..7)
-            .map(|_| w.advance(&all(true, true)).since_ignition_s)
-            .map(|s| s[0])
-            .collect();
-        assert_eq!(since[..6], [NOT_IGNITED; 6], "{since:?}");
-        assert!((since[6] - 0.0075).abs() < 1e-12, "{since:?}");
-        let mut alone = ValveTrack::new(sag_filter, 0.01);
-        let since: Vec<f64> = (0..5)
-            .map(|_| alone.advance(&all(true, false)).since_ignition_s[0])
-            .collect();
+        // Engine 0's time since ignition after each of `steps` steps of `u`.
+        let engine0 = |track: &mut ValveTrack, u: InputVec, steps: usize| -> Vec<f64> {
+            (0..steps)
+                .map(|_| track.advance(&u).since_ignition_s[0])
+                .collect()
+        };
+        // Ignition 7.5 ms before the end of the 7th step (62.5 ms), not before.
+        let slowed = |since: &[f64]| {
+            assert_eq!(since[..6], [NOT_IGNITED; 6], "{since:?}");
+            assert!((since[6] - 0.0075).abs() < 1e-12, "{since:?}");
+        };
+        slowed(&engine0(
+            &mut ValveTrack::new(sag_filter, 0.01),
+            all(true, true),
+            7,
+        ));
+        let since = engine0(&mut ValveTrack::new(sag_filter, 0.01), all(true, false), 5);
         assert!(since[4].abs() < 1e-12, "{since:?}");
         // Priming sag: the same 1/6000 per N, for the other engines whose domes are still
         // filling only. Four engines started together all prime: 62.5 ms, as above ...
@@ -877,12 +883,7 @@ mod tests {
             ..f
         };
         let mut together = ValveTrack::new(priming, 0.01);
-        let since: Vec<f64> = (0..7)
-            .map(|_| together.advance(&all(true, true)).since_ignition_s)
-            .map(|s| s[0])
-            .collect();
-        assert_eq!(since[..6], [NOT_IGNITED; 6], "{since:?}");
-        assert!((since[6] - 0.0075).abs() < 1e-12, "{since:?}");
+        slowed(&engine0(&mut together, all(true, true), 7));
         // ... but an engine restarted (after a full drain) beside three running engines is
         // not slowed: 50 ms, the end of the 5th step.
         let restart = |on: bool| {
@@ -896,9 +897,7 @@ mod tests {
         }
         assert_eq!(together.state.fill[0], 0.0);
         assert!(together.state.fill[1..].iter().all(|&f| f >= 1.0));
-        let since: Vec<f64> = (0..5)
-            .map(|_| together.advance(&restart(true)).since_ignition_s[0])
-            .collect();
+        let since = engine0(&mut together, restart(true), 5);
         assert_eq!(since[..4], [NOT_IGNITED; 4], "{since:?}");
         assert!(since[4].abs() < 1e-12, "{since:?}");
         // Validation names the bad parameter.

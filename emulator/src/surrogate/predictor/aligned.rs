@@ -46,6 +46,24 @@ impl<const LANES: usize> LaneSlots<LANES> {
     }
 }
 
+/// `slots` regrouped as four-lane slots when `LANES` is 4 (a per-engine submodel, whose
+/// AVX2 paths take one vector per slot), `None` otherwise: the same values, without an
+/// unsafe cast at each use.
+#[inline(always)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+pub(super) fn four_lanes<const LANES: usize>(slots: &[[f64; LANES]]) -> Option<&[[f64; 4]]> {
+    (LANES == 4).then_some(slots.as_flattened().as_chunks::<4>().0)
+}
+
+/// [`four_lanes`], to write.
+#[inline(always)]
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+pub(super) fn four_lanes_mut<const LANES: usize>(
+    slots: &mut [[f64; LANES]],
+) -> Option<&mut [[f64; 4]]> {
+    (LANES == 4).then_some(slots.as_flattened_mut().as_chunks_mut::<4>().0)
+}
+
 /// `len` values from a 32-byte boundary: the history ring's buffer (its records, and
 /// the engines' values within them, are laid out so that each engine vector is a
 /// 32-byte aligned read, see [`super::ring`]) and [`LaneSlots`]' store.
@@ -100,6 +118,19 @@ mod tests {
         let one: Vec<[f64; 1]> = (0..3).map(|i| [i as f64]).collect();
         assert_eq!(LaneSlots::new(&one).slots(), &one[..]);
         assert!(LaneSlots::<4>::new(&[]).slots().is_empty());
+    }
+
+    /// Four-lane slots regroup as themselves (the same values, written through); other
+    /// lane counts do not regroup.
+    #[test]
+    fn only_four_lane_slots_regroup_as_four_lanes() {
+        let mut four: Vec<[f64; 4]> = (0..3).map(|i| [i as f64, 1.0, 2.0, 3.0]).collect();
+        assert_eq!(four_lanes(&four), Some(&four.clone()[..]));
+        four_lanes_mut(&mut four).expect("four lanes")[2][1] = 7.0;
+        assert_eq!(four[2], [2.0, 7.0, 2.0, 3.0]);
+        let mut one: Vec<[f64; 1]> = (0..8).map(|i| [i as f64]).collect();
+        assert!(four_lanes(&one).is_none());
+        assert!(four_lanes_mut(&mut one).is_none());
     }
 
     #[test]

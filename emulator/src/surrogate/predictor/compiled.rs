@@ -2,6 +2,8 @@
 //! from the history window, and its rows' terms evaluated per engine lane.
 
 use super::aligned::LaneSlots;
+#[cfg(target_arch = "x86_64")]
+use super::aligned::{four_lanes, four_lanes_mut};
 use super::dense::{Dense, DENSE_ROWS};
 #[cfg(target_arch = "x86_64")]
 use super::gather::gather_lanes_avx2;
@@ -11,7 +13,6 @@ use super::terms::CompiledRow;
 use crate::surrogate::features::{Layout, Source, StateVec, STATE_MF, STATE_MO};
 use crate::surrogate::model::{Submodel, Target};
 use crate::surrogate::valve::IgnitionClock;
-use oils_shared::ENGINE_COUNT;
 
 /// A submodel compiled for `LANES` evaluations per step: 1 for a MIMO submodel, 4 (one
 /// per engine, evaluated together and vectorised, the same arithmetic per lane as for
@@ -303,16 +304,13 @@ impl<const LANES: usize> CompiledSub<LANES> {
             }
         }
         #[cfg(target_arch = "x86_64")]
-        let lanes_done = if AVX2 && LANES == ENGINE_COUNT {
-            // SAFETY: `[f64; LANES]` is `[f64; 4]` here; the CPU has AVX2 (the caller
-            // checked); reads as above.
-            let x4 = unsafe {
-                std::slice::from_raw_parts_mut(x_rest.as_mut_ptr().cast::<[f64; 4]>(), x_rest.len())
-            };
-            outside |= unsafe { gather_lanes_avx2(&self.lanes, window, x4) };
-            true
-        } else {
-            false
+        let lanes_done = match four_lanes_mut(x_rest) {
+            Some(x4) if AVX2 => {
+                // SAFETY: the CPU has AVX2 (the caller checked); reads as above.
+                outside |= unsafe { gather_lanes_avx2(&self.lanes, window, x4) };
+                true
+            }
+            _ => false,
         };
         #[cfg(not(target_arch = "x86_64"))]
         let lanes_done = false;
@@ -399,18 +397,17 @@ impl<const LANES: usize> CompiledSub<LANES> {
             let row = &self.rows[0];
             let mut y = [row.intercept; LANES];
             #[cfg(target_arch = "x86_64")]
-            let added = if AVX2 && LANES == ENGINE_COUNT {
-                let x = self.x.slots();
-                // SAFETY: `[f64; LANES]` is `[f64; 4]` here; the CPU has AVX2 (the caller
-                // checked); `compile` maps every factor to a slot of `x`.
-                unsafe {
-                    let x4 = std::slice::from_raw_parts(x.as_ptr().cast::<[f64; 4]>(), x.len());
-                    let y4 = &mut *std::ptr::from_mut(&mut y).cast::<[f64; 4]>();
-                    row.terms.add_avx2(x4, y4);
+            let added = match (
+                four_lanes(self.x.slots()),
+                <&mut [f64; 4]>::try_from(&mut y[..]),
+            ) {
+                (Some(x4), Ok(y4)) if AVX2 => {
+                    // SAFETY: the CPU has AVX2 (the caller checked); `compile` maps every
+                    // factor to a slot of `x`.
+                    unsafe { row.terms.add_avx2(x4, y4) };
+                    true
                 }
-                true
-            } else {
-                false
+                _ => false,
             };
             #[cfg(not(target_arch = "x86_64"))]
             let added = false;
