@@ -1,23 +1,14 @@
 //! The stub's command line (`oils-onboard-stub`, and `oils stub` when the bench spawns
 //! it): which run to join and which flight software to fly.
 
-use crate::fsw::FlightSoftware;
+use crate::fsw::{FlightSoftware, FswSpec};
 use crate::gnc::{GncConfig, GncConfigError, ReferenceGnc};
 use crate::playback::ProfilePlayback;
 use crate::runner::{serve, StubError, StubSummary};
 use oils_shared::link::{create_node, LinkError, StubLink, WaitStrategy};
 use oils_shared::profile::{ProfileError, ThrustProfile};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
-
-/// Flight software choice.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum FswKind {
-    /// The reference descent GNC.
-    Gnc,
-    /// Open-loop playback of a thrust-command profile CSV.
-    Playback,
-}
 
 /// Arguments of the onboard stub.
 #[derive(Debug, Clone, clap::Args)]
@@ -25,9 +16,9 @@ pub struct StubArgs {
     /// Run id to join (hex), as printed by the emulator.
     #[arg(long)]
     pub run_id: String,
-    /// Flight software to run.
-    #[arg(long, value_enum, default_value = "gnc")]
-    pub fsw: FswKind,
+    /// Flight software to run: gnc, playback (with --profile) or c:PATH.
+    #[arg(long, default_value = "gnc")]
+    pub fsw: FswSpec,
     /// Thrust-command profile CSV for `--fsw playback`.
     #[arg(long)]
     pub profile: Option<PathBuf>,
@@ -68,12 +59,19 @@ pub enum StubCliError {
 
 /// Builds the flight software asked for (allocation happens here, before tick 0).
 pub fn build_fsw(
-    kind: FswKind,
-    profile: Option<&PathBuf>,
+    spec: &FswSpec,
+    profile: Option<&Path>,
 ) -> Result<Box<dyn FlightSoftware>, StubCliError> {
-    match kind {
-        FswKind::Gnc => Ok(Box::new(ReferenceGnc::new(GncConfig::default())?)),
-        FswKind::Playback => {
+    match spec {
+        FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(GncConfig::default())?)),
+        FswSpec::CLibrary(path) => Err(StubCliError::Argument(format!(
+            "c:{}: C flight software is not supported yet",
+            path.display()
+        ))),
+        FswSpec::External => Err(StubCliError::Argument(
+            "--fsw external is flown by a client started by hand, not by this stub".into(),
+        )),
+        FswSpec::Playback => {
             let path = profile.ok_or_else(|| {
                 StubCliError::Argument("--fsw playback needs --profile CSV".into())
             })?;
@@ -100,7 +98,7 @@ pub fn run_stub(args: &StubArgs, stop: &AtomicBool) -> Result<StubSummary, StubC
             ))
         })?;
     }
-    let mut fsw = build_fsw(args.fsw, args.profile.as_ref())?;
+    let mut fsw = build_fsw(&args.fsw, args.profile.as_deref())?;
     let node = create_node("oils-onboard-stub")?;
     let link = StubLink::open(&node, run_id, wait, args.startup_timeout_ms, stop)?;
     Ok(serve(&link, fsw.as_mut(), args.timeout_ms, stop)?)

@@ -1,6 +1,11 @@
-//! The flight-software interface: one telemetry packet in, one command out.
+//! The flight-software interface (one telemetry packet in, one command out) and the
+//! plain value that names which flight software flies a run.
 
 use oils_shared::{Command, Telemetry};
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::PathBuf;
+use std::str::FromStr;
 
 /// Flight software the stub can run in the loop.
 ///
@@ -13,4 +18,86 @@ pub trait FlightSoftware {
     fn name(&self) -> &'static str;
     /// Answers one telemetry packet.
     fn step(&mut self, tlm: &Telemetry) -> Command;
+}
+
+/// Which flight software flies a run, as written on the command line and in a run
+/// configuration: `gnc`, `playback` (needs a profile), `c:PATH` (a shared library with
+/// the C ABI of `oils.h`) or `external` (a client started by hand on the run's services).
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum FswSpec {
+    /// The reference descent GNC.
+    #[default]
+    Gnc,
+    /// Open-loop playback of a thrust-command profile CSV.
+    Playback,
+    /// Flight code in a shared library with the C ABI of `oils.h`.
+    CLibrary(PathBuf),
+    /// A client of the run's services started outside the bench (C, Python, ...).
+    External,
+}
+
+impl FswSpec {
+    /// Short name for reports: `gnc`, `playback`, `c`, `external`.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            FswSpec::Gnc => "gnc",
+            FswSpec::Playback => "playback",
+            FswSpec::CLibrary(_) => "c",
+            FswSpec::External => "external",
+        }
+    }
+}
+
+impl fmt::Display for FswSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FswSpec::CLibrary(p) => write!(f, "c:{}", p.display()),
+            other => f.write_str(other.kind_name()),
+        }
+    }
+}
+
+impl FromStr for FswSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "gnc" => Ok(FswSpec::Gnc),
+            "playback" => Ok(FswSpec::Playback),
+            "external" => Ok(FswSpec::External),
+            _ => match s.strip_prefix("c:") {
+                Some(path) if !path.is_empty() => Ok(FswSpec::CLibrary(PathBuf::from(path))),
+                _ => Err(format!(
+                    "unknown flight software `{s}` (expected gnc, playback, c:PATH or external)"
+                )),
+            },
+        }
+    }
+}
+
+impl TryFrom<String> for FswSpec {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        s.parse()
+    }
+}
+
+impl From<FswSpec> for String {
+    fn from(f: FswSpec) -> String {
+        f.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spec_round_trips_through_its_text() {
+        for s in ["gnc", "playback", "external", "c:/tmp/libfsw.so"] {
+            assert_eq!(s.parse::<FswSpec>().unwrap().to_string(), s);
+        }
+        assert!("c:".parse::<FswSpec>().is_err());
+        assert!("python".parse::<FswSpec>().is_err());
+    }
 }
