@@ -216,6 +216,13 @@ fn bad_command_line_input_is_a_clear_error() {
         ),
         (&["run", "--fsw", "playback"], "--profile"),
         (&["run", "--propulsion", "warp"], "warp"),
+        (&["run", "--link", "carrier-pigeon"], "--link"),
+        (&["run", "--config", "/nonexistent/run.toml"], "run.toml"),
+        (&["run", "--max-wake-p99-us", "nan"], "max-wake-p99-us"),
+        (
+            &["run", "--link-timeout-ms", "18446744073709551615"],
+            "link-timeout-ms",
+        ),
         (&["run", "--miss-policy", "abort:0"], "miss-policy"),
         (&["run", "--speed=-1"], "speed"),
         (&["run", "--wait", "sometimes"], "--wait"),

@@ -1,8 +1,8 @@
 //! Hot-loop hygiene, proven: our step paths (emulator and stub) do not allocate.
 //!
-//! Both sides run in this process (the stub on a thread, over real iceoryx2 services),
-//! through the real scheduler, link, sanitiser, plant, propulsion, digest, recorder and
-//! reference GNC. A counting global allocator counts every allocation on every thread.
+//! Both sides run in this process (the stub on a thread, over real iceoryx2 services;
+//! then the in-process link), through the real scheduler, link, sanitiser, plant,
+//! propulsion, digest, recorder (with the true state) and reference GNC. A counting global allocator counts every allocation on every thread.
 //!
 //! One allocation per step is not ours and cannot be avoided from outside: iceoryx2 0.10's
 //! `Publisher::loan_uninit` (and so `send_copy`) puts a 48-byte shared-state handle for
@@ -15,11 +15,13 @@
 //! packet, two packets per step. Any allocation of ours breaks the equation. The snapshot
 //! is clean because in lockstep, after step k, the stub has sent Command(k) and waits.
 
+use oils_emulator::clock::LockstepClock;
 use oils_emulator::config::{NavNoiseConfig, ScenarioConfig};
+use oils_emulator::link::{InProcLink, Link};
 use oils_emulator::plant::Plant;
 use oils_emulator::propulsion::{build, PropulsionKind};
 use oils_emulator::recorder::Recorder;
-use oils_emulator::scheduler::{run_observed, MissPolicy, Mode, Outcome, SchedulerConfig};
+use oils_emulator::scheduler::{run_observed, MissPolicy, Outcome, SchedulerConfig};
 use oils_emulator::timing::TimingThresholds;
 use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
 use oils_onboard_stub::runner::serve;
@@ -47,20 +49,24 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static GLOBAL: Counting = Counting;
 
-/// Runs a whole lockstep descent; returns (allocations after step `from`, allocations
-/// after the last step, last step index, outcome).
-fn allocations_through_descent(
-    run_id: u64,
-    wait: WaitStrategy,
-    from: u64,
-) -> (u64, u64, u64, Outcome) {
-    let scenario = ScenarioConfig {
+fn scenario() -> ScenarioConfig {
+    ScenarioConfig {
         nav_noise: NavNoiseConfig {
             enabled: true,
             ..Default::default()
         },
         ..Default::default()
-    };
+    }
+}
+
+/// Runs a whole lockstep descent over `link` with a log; returns (allocations after
+/// step `from`, allocations after the last step, last step index, outcome).
+fn allocations_over<L: Link + ?Sized>(
+    link: &mut L,
+    run_id: u64,
+    from: u64,
+) -> (u64, u64, u64, Outcome) {
+    let scenario = scenario();
     let mut plant = Plant::new(
         &scenario,
         build(PropulsionKind::Ideal, &scenario.propulsion),
@@ -68,29 +74,15 @@ fn allocations_through_descent(
     )
     .unwrap();
     let stop = AtomicBool::new(false);
-    let node = create_node("no-alloc-emulator").unwrap();
-    let link = EmulatorLink::create(&node, run_id, wait).unwrap();
     let log = std::env::temp_dir().join(format!("oils-noalloc-{run_id:x}.oilslog"));
     let recorder = Recorder::create(&log, "{}").unwrap();
-    let stub = std::thread::spawn(move || {
-        let stop = AtomicBool::new(false);
-        let node = create_node("no-alloc-stub").unwrap();
-        let link = StubLink::open(&node, run_id, None, 10_000, &stop).unwrap();
-        let mut gnc = ReferenceGnc::new(GncConfig::default()).unwrap();
-        serve(&link, &mut gnc, 10_000, &stop).unwrap()
-    });
-    link.wait_for_peer(10_000, &stop).unwrap();
     let cfg = SchedulerConfig {
-        mode: Mode::Lockstep,
-        speed: 1.0,
         dt_ns: 10_000_000,
         max_duration_ns: 2_000_000_000_000,
         run_id,
-        deadline_frac: 0.5,
         miss_policy: MissPolicy::Hold,
         link_timeout_ms: 10_000,
-        startup_timeout_ms: 10_000,
-        wake_spin_ns: 0,
+        max_thrust_n: scenario.propulsion.max_thrust_n,
         thresholds: TimingThresholds::default(),
     };
     let (mut at_from, mut at_last, mut last) = (0u64, 0u64, 0u64);
@@ -104,18 +96,39 @@ fn allocations_through_descent(
     };
     let summary = run_observed(
         &cfg,
-        &scenario,
         &mut plant,
-        &link,
+        link,
+        &mut LockstepClock::new(10_000),
         Some(&recorder),
         &stop,
         Some(&mut observe),
     )
     .unwrap();
-    stub.join().unwrap();
     recorder.finish().unwrap();
     std::fs::remove_file(&log).ok();
     (at_from, at_last, last, summary.outcome)
+}
+
+/// A whole descent over iceoryx2 with the stub on a thread of this process.
+fn allocations_through_descent(
+    run_id: u64,
+    wait: WaitStrategy,
+    from: u64,
+) -> (u64, u64, u64, Outcome) {
+    let stop = AtomicBool::new(false);
+    let node = create_node("no-alloc-emulator").unwrap();
+    let mut link = EmulatorLink::create(&node, run_id, wait).unwrap();
+    let stub = std::thread::spawn(move || {
+        let stop = AtomicBool::new(false);
+        let node = create_node("no-alloc-stub").unwrap();
+        let link = StubLink::open(&node, run_id, None, 10_000, &stop).unwrap();
+        let mut gnc = ReferenceGnc::new(GncConfig::default()).unwrap();
+        serve(&link, &mut gnc, 10_000, &stop).unwrap()
+    });
+    link.wait_for_peer(10_000, &stop).unwrap();
+    let out = allocations_over(&mut link, run_id, from);
+    stub.join().unwrap();
+    out
 }
 
 /// Allocations of one `publish` and of one `try_receive`, measured on a live link with
@@ -188,4 +201,14 @@ fn step_paths_do_not_allocate() {
             2 * per_publish * steps
         );
     }
+    // In process there is no iceoryx2 loan: not a single allocation per step.
+    let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()));
+    let (at_from, at_last, last, outcome) = allocations_over(&mut link, base + 7, FROM);
+    assert_eq!(outcome, Outcome::Landed);
+    assert!(last > 50_000, "{last} steps");
+    assert_eq!(
+        at_last - at_from,
+        0,
+        "in-process steps {FROM}..{last} allocated"
+    );
 }

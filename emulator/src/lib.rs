@@ -2,19 +2,25 @@
 //! lunar lander (rigid body plus propulsion) that exchanges telemetry and commands with
 //! an onboard computer over iceoryx2.
 //!
-//! Modules by responsibility: [`config`] (scenario numbers), [`plant`] (rigid body,
-//! gravity, contact), [`propulsion`] (models behind one trait), [`sanitize`] (the link's
-//! guard), [`scheduler`] (the step loop), [`timing`], [`digest`], [`recorder`],
-//! [`report`], and [`session`] (one run, from arguments to report).
+//! Modules by responsibility: [`run_config`] (a run as a plain value), [`config`]
+//! (scenario numbers), [`plant`] (rigid body, gravity, contact), [`propulsion`] (models
+//! behind one trait), [`surrogate`] (the learned model: runtime and training),
+//! [`sanitize`] (the link's guard), [`link`] (the exchange: iceoryx2, in-process,
+//! replay), [`clock`] (lockstep, realtime, replay pacing), [`scheduler`] (the one step
+//! loop), [`timing`], [`digest`], [`recorder`], [`report`], and [`session`] (one run,
+//! from a `RunConfig` to a report).
 #![warn(missing_docs)]
 
+pub mod clock;
 pub mod config;
 pub mod digest;
+pub mod link;
 pub mod plant;
 pub mod plot;
 pub mod propulsion;
 pub mod recorder;
 pub mod report;
+pub mod run_config;
 pub mod sanitize;
 pub mod scheduler;
 pub mod session;

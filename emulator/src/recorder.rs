@@ -1,34 +1,106 @@
-//! The recorder: every step's telemetry and command go to a log file, written by a
-//! thread of its own so the stepping thread never touches the disk.
+//! The recorder: every step's wire packets, the command the plant applied and the
+//! plant's true state go to a log file, written by a thread of its own so the stepping
+//! thread never touches the disk.
 //!
 //! File layout (little-endian):
 //! ```text
-//! magic      8 bytes  "OILSLOG1"
+//! magic      8 bytes  "OILSLOG2"
 //! header_len u32      length of the JSON header that follows
-//! header     JSON     run configuration (scenario, mode, seed, protocol version...)
+//! header     JSON     the run's whole configuration (RunConfig), run id, protocol version
 //! records    RECORD_SIZE bytes each, until the end of the file:
-//!            flags u32 | reserved u32 | Telemetry (304 bytes) | Command (120 bytes)
+//!            flags u32 | crc32 u32 | Telemetry (304 bytes) | Command (120 bytes)
+//!            | applied command and true state: TRUTH_VALUES f64s (see TRUTH_COLUMNS)
 //! ```
+//! The CRC-32 covers the flags and everything after the CRC, so a damaged record is
+//! found and named by its position, never read as data.
+//!
 //! The stepping thread hands each record to a bounded crossbeam channel (a copy, no
 //! allocation). The writer thread drains it, and flushes to the OS whenever the channel
 //! runs dry, so a crash of either process loses at most the records still in flight.
 //! [`Recorder::finish`] (or dropping the recorder, on any error path) closes the channel,
 //! writes the rest, flushes and `fsync`s.
 
+use crate::plant::{ActuatorCommand, TruthState};
+use crate::propulsion::{PropulsionInternals, PropulsionOutput};
 use crossbeam::channel::{bounded, Receiver, Sender};
-use oils_shared::{AsBytes, Command, Telemetry};
+use oils_shared::{AsBytes, Command, Telemetry, ENGINE_COUNT};
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
 use thiserror::Error;
 
-/// File magic.
-pub const MAGIC: &[u8; 8] = b"OILSLOG1";
+/// File magic of this format.
+pub const MAGIC: &[u8; 8] = b"OILSLOG2";
+/// Magic of the first format (wire packets only), refused with a clear message.
+const MAGIC_V1: &[u8; 8] = b"OILSLOG1";
+/// Columns of the applied command and the true state, in record order, with units.
+pub const TRUTH_COLUMNS: [&str; TRUTH_VALUES] = [
+    "applied_thrust1_n",
+    "applied_thrust2_n",
+    "applied_thrust3_n",
+    "applied_thrust4_n",
+    "applied_on1",
+    "applied_on2",
+    "applied_on3",
+    "applied_on4",
+    "applied_torque_x_nm",
+    "applied_torque_y_nm",
+    "applied_torque_z_nm",
+    "true_pos_x_m",
+    "true_pos_y_m",
+    "true_pos_z_m",
+    "true_vel_x_m_s",
+    "true_vel_y_m_s",
+    "true_vel_z_m_s",
+    "true_q_w",
+    "true_q_x",
+    "true_q_y",
+    "true_q_z",
+    "true_rate_x_rad_s",
+    "true_rate_y_rad_s",
+    "true_rate_z_rad_s",
+    "true_mass_kg",
+    "true_altitude_m",
+    "true_contact",
+    "true_thrust1_n",
+    "true_thrust2_n",
+    "true_thrust3_n",
+    "true_thrust4_n",
+    "true_mean_thrust1_n",
+    "true_mean_thrust2_n",
+    "true_mean_thrust3_n",
+    "true_mean_thrust4_n",
+    "true_chamber_pressure1_pa",
+    "true_chamber_pressure2_pa",
+    "true_chamber_pressure3_pa",
+    "true_chamber_pressure4_pa",
+    "true_gas_pressure_pa",
+    "true_fuel_tank_pressure_pa",
+    "true_ox_tank_pressure_pa",
+    "true_ejected_fuel_kg",
+    "true_ejected_ox_kg",
+    "true_fuel_flow_kg_s",
+    "true_ox_flow_kg_s",
+    "true_regulator_outlet_pa",
+    "true_fuel_manifold_pressure_pa",
+    "true_ox_manifold_pressure_pa",
+    "true_fuel_valve1",
+    "true_ox_valve1",
+    "true_fuel_valve2",
+    "true_ox_valve2",
+    "true_fuel_valve3",
+    "true_ox_valve3",
+    "true_fuel_valve4",
+    "true_ox_valve4",
+];
+/// Number of f64 values after the packets in a record.
+pub const TRUTH_VALUES: usize = 57;
+const TLM_SIZE: usize = core::mem::size_of::<Telemetry>();
+const CMD_SIZE: usize = core::mem::size_of::<Command>();
 /// Bytes per record.
-pub const RECORD_SIZE: usize =
-    8 + core::mem::size_of::<Telemetry>() + core::mem::size_of::<Command>();
-/// Record flag: the command field holds a command received from the stub.
+pub const RECORD_SIZE: usize = 8 + TLM_SIZE + CMD_SIZE + 8 * TRUTH_VALUES;
+/// Record flag: the command field holds a command received from the flight software.
 pub const REC_COMMAND_RECEIVED: u32 = 1 << 0;
 /// Record flag: the command missed its deadline; the miss policy was applied.
 pub const REC_DEADLINE_MISS: u32 = 1 << 1;
@@ -45,32 +117,166 @@ const CHANNEL_CAPACITY: usize = 8192;
 pub struct Record {
     /// `REC_*` bits.
     pub flags: u32,
-    /// Telemetry(k).
+    /// Telemetry(k), as published.
     pub telemetry: Telemetry,
     /// Command(k) as received (zeroed when none arrived).
     pub command: Command,
+    /// What the plant was given over `[t_k, t_k+1)` (after sanitising and the miss policy).
+    pub applied: ActuatorCommand,
+    /// The true state at `t_k`, the instant Telemetry(k) describes.
+    pub truth: TruthState,
 }
 
 impl Record {
-    fn encode(&self, out: &mut [u8; RECORD_SIZE]) {
-        let t = core::mem::size_of::<Telemetry>();
-        out[0..4].copy_from_slice(&self.flags.to_le_bytes());
-        out[4..8].copy_from_slice(&0u32.to_le_bytes());
-        out[8..8 + t].copy_from_slice(self.telemetry.as_bytes());
-        out[8 + t..].copy_from_slice(self.command.as_bytes());
+    /// The applied command and true state as the log's f64 values ([`TRUTH_COLUMNS`]).
+    pub fn truth_values(&self) -> [f64; TRUTH_VALUES] {
+        let a = &self.applied;
+        let t = &self.truth;
+        let p = &t.propulsion;
+        let i = &t.internals;
+        let mut v = [0.0; TRUTH_VALUES];
+        let mut n = 0;
+        let mut put = |xs: &[f64]| {
+            v[n..n + xs.len()].copy_from_slice(xs);
+            n += xs.len();
+        };
+        put(&a.engines.thrust_cmd_n);
+        put(&a.engines.on.map(f64::from));
+        put(&a.torque_cmd_body_nm);
+        put(&t.pos_mci_m);
+        put(&t.vel_mci_m_s);
+        put(&t.q_mci_from_body);
+        put(&t.rate_body_rad_s);
+        put(&[t.mass_kg, t.altitude_m, f64::from(t.contact)]);
+        put(&p.thrust_n);
+        put(&p.mean_thrust_n);
+        put(&p.chamber_pressure_pa);
+        put(&[
+            p.gas_pressure_pa,
+            p.fuel_tank_pressure_pa,
+            p.ox_tank_pressure_pa,
+            p.ejected_fuel_kg,
+            p.ejected_ox_kg,
+            p.fuel_flow_kg_s,
+            p.ox_flow_kg_s,
+            i.regulator_outlet_pa,
+        ]);
+        put(&i.manifold_pressure_pa);
+        for valves in &i.valve_position {
+            put(valves);
+        }
+        debug_assert_eq!(n, TRUTH_VALUES);
+        v
     }
 
+    /// Fills the applied command and true state from the log's f64 values.
+    fn set_truth_values(&mut self, v: &[f64; TRUTH_VALUES]) {
+        let mut n = 0;
+        let mut take = |len: usize| {
+            let s = &v[n..n + len];
+            n += len;
+            s
+        };
+        let arr4 = |s: &[f64]| [s[0], s[1], s[2], s[3]];
+        let arr3 = |s: &[f64]| [s[0], s[1], s[2]];
+        let mut applied = ActuatorCommand::default();
+        applied.engines.thrust_cmd_n = arr4(take(ENGINE_COUNT));
+        applied.engines.on = arr4(take(ENGINE_COUNT)).map(|x| x != 0.0);
+        applied.torque_cmd_body_nm = arr3(take(3));
+        let pos_mci_m = arr3(take(3));
+        let vel_mci_m_s = arr3(take(3));
+        let q_mci_from_body = arr4(take(4));
+        let rate_body_rad_s = arr3(take(3));
+        let scalars = arr3(take(3));
+        let thrust_n = arr4(take(ENGINE_COUNT));
+        let mean_thrust_n = arr4(take(ENGINE_COUNT));
+        let chamber_pressure_pa = arr4(take(ENGINE_COUNT));
+        let p = take(8);
+        let propulsion = PropulsionOutput {
+            thrust_n,
+            mean_thrust_n,
+            chamber_pressure_pa,
+            gas_pressure_pa: p[0],
+            fuel_tank_pressure_pa: p[1],
+            ox_tank_pressure_pa: p[2],
+            ejected_fuel_kg: p[3],
+            ejected_ox_kg: p[4],
+            fuel_flow_kg_s: p[5],
+            ox_flow_kg_s: p[6],
+        };
+        let regulator_outlet_pa = p[7];
+        let manifold = take(2);
+        let mut valve_position = [[0.0; 2]; ENGINE_COUNT];
+        for valves in &mut valve_position {
+            let s = take(2);
+            *valves = [s[0], s[1]];
+        }
+        self.applied = applied;
+        self.truth = TruthState {
+            pos_mci_m,
+            vel_mci_m_s,
+            q_mci_from_body,
+            rate_body_rad_s,
+            mass_kg: scalars[0],
+            altitude_m: scalars[1],
+            contact: scalars[2] != 0.0,
+            propulsion,
+            internals: PropulsionInternals {
+                regulator_outlet_pa,
+                manifold_pressure_pa: [manifold[0], manifold[1]],
+                valve_position,
+            },
+        };
+    }
+
+    fn encode(&self, out: &mut [u8; RECORD_SIZE]) {
+        out[0..4].copy_from_slice(&self.flags.to_le_bytes());
+        out[8..8 + TLM_SIZE].copy_from_slice(self.telemetry.as_bytes());
+        out[8 + TLM_SIZE..8 + TLM_SIZE + CMD_SIZE].copy_from_slice(self.command.as_bytes());
+        let values = self.truth_values();
+        for (chunk, v) in out[8 + TLM_SIZE + CMD_SIZE..]
+            .chunks_exact_mut(8)
+            .zip(values)
+        {
+            chunk.copy_from_slice(&v.to_le_bytes());
+        }
+        let crc = record_crc(out);
+        out[4..8].copy_from_slice(&crc.to_le_bytes());
+    }
+
+    /// Decodes one record; `None` when its CRC does not match (damaged).
     fn decode(bytes: &[u8]) -> Option<Self> {
         if bytes.len() != RECORD_SIZE {
             return None;
         }
-        let t = core::mem::size_of::<Telemetry>();
-        Some(Self {
+        let stored = u32::from_le_bytes(bytes[4..8].try_into().ok()?);
+        if stored != record_crc(bytes) {
+            return None;
+        }
+        let mut rec = Self {
             flags: u32::from_le_bytes(bytes[0..4].try_into().ok()?),
-            telemetry: Telemetry::from_bytes(&bytes[8..8 + t])?,
-            command: Command::from_bytes(&bytes[8 + t..])?,
-        })
+            telemetry: Telemetry::from_bytes(&bytes[8..8 + TLM_SIZE])?,
+            command: Command::from_bytes(&bytes[8 + TLM_SIZE..8 + TLM_SIZE + CMD_SIZE])?,
+            ..Default::default()
+        };
+        let mut values = [0.0; TRUTH_VALUES];
+        for (v, chunk) in values
+            .iter_mut()
+            .zip(bytes[8 + TLM_SIZE + CMD_SIZE..].chunks_exact(8))
+        {
+            *v = f64::from_le_bytes(chunk.try_into().ok()?);
+        }
+        rec.set_truth_values(&values);
+        Some(rec)
     }
+}
+
+/// CRC-32 of a record's flags and body (everything but the CRC field itself).
+fn record_crc(bytes: &[u8]) -> u32 {
+    let mut h = crc32fast::Hasher::new();
+    h.update(&bytes[0..4]);
+    h.update(&bytes[8..]);
+    h.finalize()
 }
 
 /// Log file errors.
@@ -203,8 +409,10 @@ fn write_records(
 pub struct Log {
     /// The JSON header.
     pub header_json: String,
-    /// The records.
+    /// The records whose CRC matched, in file order.
     pub records: Vec<Record>,
+    /// Positions (0-based, in file order) of records whose CRC did not match.
+    pub damaged_records: Vec<u64>,
     /// Bytes after the last whole record (a crash mid-write leaves some).
     pub trailing_bytes: usize,
 }
@@ -224,8 +432,13 @@ pub fn read_log(path: &Path) -> Result<Log, RecorderError> {
         .map_err(io)?
         .read_to_end(&mut bytes)
         .map_err(io)?;
+    if bytes.len() >= 8 && &bytes[..8] == MAGIC_V1 {
+        return Err(not_log(
+            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG2 log",
+        ));
+    }
     if bytes.len() < 12 || &bytes[..8] != MAGIC {
-        return Err(not_log("missing OILSLOG1 magic"));
+        return Err(not_log("missing OILSLOG2 magic"));
     }
     let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
     let body_start = 12usize
@@ -235,13 +448,18 @@ pub fn read_log(path: &Path) -> Result<Log, RecorderError> {
     let header_json = String::from_utf8(bytes[12..body_start].to_vec())
         .map_err(|_| not_log("header is not UTF-8"))?;
     let body = &bytes[body_start..];
-    let records = body
-        .chunks_exact(RECORD_SIZE)
-        .filter_map(Record::decode)
-        .collect();
+    let mut records = Vec::with_capacity(body.len() / RECORD_SIZE);
+    let mut damaged_records = Vec::new();
+    for (i, chunk) in body.chunks_exact(RECORD_SIZE).enumerate() {
+        match Record::decode(chunk) {
+            Some(r) => records.push(r),
+            None => damaged_records.push(i as u64),
+        }
+    }
     Ok(Log {
         header_json,
         records,
+        damaged_records,
         trailing_bytes: body.len() % RECORD_SIZE,
     })
 }
@@ -260,7 +478,11 @@ pub fn export_csv(log: &Log, out: &mut impl Write) -> std::io::Result<()> {
     for e in 1..=4 {
         write!(out, ",cmd{e}_n,on{e}")?;
     }
-    writeln!(out, ",torque_x_nm,torque_y_nm,torque_z_nm,stub_compute_ns")?;
+    write!(out, ",torque_x_nm,torque_y_nm,torque_z_nm,stub_compute_ns")?;
+    for name in TRUTH_COLUMNS {
+        write!(out, ",{name}")?;
+    }
+    writeln!(out)?;
     for r in &log.records {
         let t = &r.telemetry;
         let n = &t.nav;
@@ -299,7 +521,11 @@ pub fn export_csv(log: &Log, out: &mut impl Write) -> std::io::Result<()> {
             write!(out, ",{},{}", c.thrust_cmd_n[e], c.engine_on[e])?;
         }
         let q = &c.torque_cmd_body_nm;
-        writeln!(out, ",{},{},{},{}", q[0], q[1], q[2], c.stub_compute_ns)?;
+        write!(out, ",{},{},{},{}", q[0], q[1], q[2], c.stub_compute_ns)?;
+        for v in r.truth_values() {
+            write!(out, ",{v}")?;
+        }
+        writeln!(out)?;
     }
     out.flush()
 }
@@ -365,7 +591,7 @@ mod tests {
             read_log(&path),
             Err(RecorderError::NotALog { .. })
         ));
-        std::fs::write(&path, b"OILSLOG1\xff\xff\xff\x00").unwrap();
+        std::fs::write(&path, b"OILSLOG2\xff\xff\xff\x00").unwrap();
         assert!(matches!(
             read_log(&path),
             Err(RecorderError::NotALog { .. })
@@ -430,6 +656,7 @@ mod profile_tests {
         let log = Log {
             header_json: "{}".into(),
             records,
+            damaged_records: Vec::new(),
             trailing_bytes: 0,
         };
         let p = commands_as_profile(&log, 5, 800.0).unwrap();

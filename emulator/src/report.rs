@@ -1,8 +1,10 @@
 //! The run report: the JSON written with `--report PATH` and the compact table printed
 //! at the end of every run.
 
+use crate::run_config::RunConfig;
 use crate::scheduler::{Mode, RunSummary};
 use crate::timing::Percentiles;
+use oils_shared::link::WaitStrategy;
 use serde::Serialize;
 use std::fmt::Write as _;
 
@@ -21,20 +23,50 @@ pub struct RunReport {
     pub seed: u64,
     /// Propulsion model.
     pub propulsion: String,
-    /// Flight software the stub ran (as asked; a hand-started stub may differ).
+    /// Flight software that flew: `gnc`, `playback`, `c` or `external` (a client
+    /// started outside the bench).
     pub fsw: String,
-    /// Wait strategy of the emulator.
+    /// Link: `iceoryx2` or `inproc`.
+    pub link: String,
+    /// Wait strategy of the emulator (`none` in process).
     pub wait: String,
     /// Protocol version.
     pub protocol_version: u32,
     /// Log file, if any.
     pub log: Option<String>,
+    /// The whole run configuration: `oils run --config-from REPORT.json` repeats the run.
+    pub config: RunConfig,
     /// The run's figures.
     #[serde(flatten)]
     pub summary: RunSummary,
 }
 
 impl RunReport {
+    /// The report of a finished run.
+    pub fn new(
+        cfg: &RunConfig,
+        run_id: u64,
+        wait: Option<WaitStrategy>,
+        log: Option<std::path::PathBuf>,
+        summary: RunSummary,
+    ) -> Self {
+        Self {
+            run_id: format!("{run_id:016x}"),
+            mode: cfg.mode,
+            speed: cfg.speed,
+            dt_ms: cfg.dt_ms as f64,
+            seed: cfg.seed,
+            propulsion: cfg.propulsion.as_str().into(),
+            fsw: cfg.fsw.kind_name().into(),
+            link: cfg.link.as_str().into(),
+            wait: wait.map_or("none", |w| w.as_str()).into(),
+            protocol_version: oils_shared::PROTOCOL_VERSION,
+            log: log.map(|p| p.display().to_string()),
+            config: cfg.clone(),
+            summary,
+        }
+    }
+
     /// Pretty JSON.
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"))
@@ -46,8 +78,15 @@ impl RunReport {
         let mut out = String::new();
         let _ = writeln!(
             out,
-            "oils run {}  mode {:?}  dt {} ms  propulsion {}  fsw {}  wait {}  seed {}",
-            self.run_id, self.mode, self.dt_ms, self.propulsion, self.fsw, self.wait, self.seed
+            "oils run {}  link {}  mode {:?}  dt {} ms  propulsion {}  fsw {}  wait {}  seed {}",
+            self.run_id,
+            self.link,
+            self.mode,
+            self.dt_ms,
+            self.propulsion,
+            self.fsw,
+            self.wait,
+            self.seed
         );
         let outcome = format!("{:?}", s.outcome).to_uppercase();
         match &s.touchdown {

@@ -1,32 +1,35 @@
 //! The fixed-step scheduler: one loop that publishes Telemetry(k), waits for Command(k),
 //! holds it over `[t_k, t_k+1)` while the plant integrates, and repeats.
 //!
-//! * `lockstep` waits for every command (deterministic, as fast as both processes go);
-//!   a stub silent for `link_timeout_ms` ends the run with an error.
-//! * `realtime` paces step starts against absolute monotonic deadlines (`t0 + k dt /
-//!   speed`); a command not received `deadline_frac` of a period after its step started
-//!   is a deadline miss, handled by the [`MissPolicy`].
+//! The loop is generic over the [`Link`] (iceoryx2 across processes, in-process, replay)
+//! and the [`StepClock`] (lockstep, realtime, replay), so every way of running a run is
+//! this one loop:
+//! * lockstep waits for every command; a flight software silent for the link timeout
+//!   ends the run with an error;
+//! * realtime paces step starts against absolute monotonic deadlines; a command not in
+//!   by its deadline is a deadline miss, handled by the [`MissPolicy`].
 //!
 //! The step path (everything inside the loop) does no heap allocation, locking or
 //! logging: the plant and propulsion are built before tick 0, the link's ports exist,
 //! the recorder takes a copy through a bounded channel, the histograms are preallocated.
 
-use crate::config::ScenarioConfig;
+use crate::clock::StepClock;
 use crate::digest::RunDigest;
+use crate::link::{ExchangeError, Link};
 use crate::plant::{ActuatorCommand, Plant, PlantStatus, TouchdownState};
 use crate::recorder::{
     Record, Recorder, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN, REC_REJECTED_VALUES,
 };
 use crate::sanitize::sanitize;
 use crate::timing::{TimingMonitor, TimingThresholds};
-use oils_shared::clock::{monotonic_ns, sleep_until_ns};
-use oils_shared::link::{EmulatorLink, LinkError};
+use oils_shared::clock::monotonic_ns;
+use oils_shared::link::LinkError;
 use oils_shared::{Command, PacketHeader, TLM_FLAG_END_OF_RUN};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// How steps are paced.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Mode {
     /// Wait for every command; as fast as possible; deterministic.
@@ -35,8 +38,23 @@ pub enum Mode {
     Realtime,
 }
 
-/// What to do when a command misses its deadline (realtime).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+impl std::str::FromStr for Mode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "lockstep" => Ok(Mode::Lockstep),
+            "realtime" => Ok(Mode::Realtime),
+            other => Err(format!(
+                "unknown mode `{other}` (expected lockstep or realtime)"
+            )),
+        }
+    }
+}
+
+/// What to do when a command misses its deadline (realtime). Written `hold`, `zero` or
+/// `abort:N` on the command line and in configuration files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
 pub enum MissPolicy {
     /// Hold the last command applied.
     Hold,
@@ -47,6 +65,44 @@ pub enum MissPolicy {
         /// Misses tolerated before aborting (the N-th aborts).
         after: u64,
     },
+}
+
+impl std::str::FromStr for MissPolicy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let bad = || format!("miss policy `{s}`: expected hold, zero or abort:N with N >= 1");
+        match s {
+            "hold" => Ok(MissPolicy::Hold),
+            "zero" => Ok(MissPolicy::Zero),
+            _ => {
+                let after: u64 = s
+                    .strip_prefix("abort:")
+                    .and_then(|n| n.parse().ok())
+                    .ok_or_else(bad)?;
+                if after == 0 {
+                    return Err(bad());
+                }
+                Ok(MissPolicy::Abort { after })
+            }
+        }
+    }
+}
+
+impl TryFrom<String> for MissPolicy {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        s.parse()
+    }
+}
+
+impl From<MissPolicy> for String {
+    fn from(p: MissPolicy) -> String {
+        match p {
+            MissPolicy::Hold => "hold".into(),
+            MissPolicy::Zero => "zero".into(),
+            MissPolicy::Abort { after } => format!("abort:{after}"),
+        }
+    }
 }
 
 /// How a run ended.
@@ -63,30 +119,21 @@ pub enum Outcome {
     Completed,
 }
 
-/// Loop settings (everything but the physics).
+/// Loop settings (everything but the physics and the pacing, which is the clock's).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SchedulerConfig {
-    /// Pacing mode.
-    pub mode: Mode,
-    /// Realtime speed factor (2.0 = twice as fast as real time).
-    pub speed: f64,
     /// Step, nanoseconds.
     pub dt_ns: u64,
     /// Longest simulated time before the run ends as `completed`, nanoseconds.
     pub max_duration_ns: i64,
     /// Run id stamped on every packet.
     pub run_id: u64,
-    /// Realtime: fraction of a period after a step's start by which its command must
-    /// have arrived.
-    pub deadline_frac: f64,
     /// Realtime: what a miss does.
     pub miss_policy: MissPolicy,
-    /// No command for this long means the stub is gone, milliseconds.
+    /// Realtime: no command for this long means the flight software is gone, ms.
     pub link_timeout_ms: u64,
-    /// How long to wait for a stub to connect, milliseconds.
-    pub startup_timeout_ms: u64,
-    /// Realtime: spin this long before each step start instead of sleeping.
-    pub wake_spin_ns: u64,
+    /// Rated thrust of one engine, newtons: the sanitiser's clamp.
+    pub max_thrust_n: f64,
     /// Timing bounds; a broken one fails the run.
     pub thresholds: TimingThresholds,
 }
@@ -128,39 +175,10 @@ pub struct RunSummary {
 pub enum SchedulerError {
     /// The link failed.
     #[error(transparent)]
-    Link(#[from] LinkError),
+    Link(#[from] ExchangeError),
     /// The log failed.
     #[error(transparent)]
     Recorder(#[from] crate::recorder::RecorderError),
-    /// A loop setting is invalid.
-    #[error("invalid run setting: {0}")]
-    Config(String),
-}
-
-impl SchedulerConfig {
-    /// Checks the settings before tick 0.
-    pub fn validate(&self) -> Result<(), SchedulerError> {
-        let bad = |s: String| Err(SchedulerError::Config(s));
-        if !(1_000_000..=100_000_000).contains(&self.dt_ns) {
-            return bad(format!("step {} ns is outside 1-100 ms", self.dt_ns));
-        }
-        if !(self.speed.is_finite() && self.speed > 0.0 && self.speed <= 1e6) {
-            return bad(format!("speed {} must be in (0, 1e6]", self.speed));
-        }
-        if !(self.deadline_frac > 0.0 && self.deadline_frac <= 1.0) {
-            return bad(format!(
-                "deadline fraction {} must be in (0, 1]",
-                self.deadline_frac
-            ));
-        }
-        if self.max_duration_ns <= 0 {
-            return bad("duration must be positive".into());
-        }
-        if let MissPolicy::Abort { after: 0 } = self.miss_policy {
-            return bad("abort-after must be at least 1".into());
-        }
-        Ok(())
-    }
 }
 
 /// Why the loop stopped early.
@@ -169,6 +187,7 @@ enum Abort {
     StubSilent { step: u64, waited_ms: u64 },
     Protocol(String),
     TooManyMisses(u64),
+    NotFinite { step: u64, what: &'static str },
 }
 
 impl Abort {
@@ -180,6 +199,9 @@ impl Abort {
             ),
             Abort::Protocol(m) => m.clone(),
             Abort::TooManyMisses(n) => format!("aborted after {n} deadline misses (miss policy)"),
+            Abort::NotFinite { step, what } => format!(
+                "the plant's {what} is not finite after step {step}; the physics broke down (check the scenario and model parameters)"
+            ),
         }
     }
 }
@@ -188,49 +210,45 @@ impl Abort {
 /// (the allocation proof samples its counter here). Must not allocate or block.
 pub type StepObserver<'a> = &'a mut dyn FnMut(u64);
 
-/// Runs one bench run over an established link. The plant is built, the stub connected.
-pub fn run(
+/// Runs one bench run over an established link with the flight software connected,
+/// the plant built.
+pub fn run<L: Link + ?Sized, C: StepClock + ?Sized>(
     cfg: &SchedulerConfig,
-    scenario: &ScenarioConfig,
     plant: &mut Plant,
-    link: &EmulatorLink,
+    link: &mut L,
+    clock: &mut C,
     recorder: Option<&Recorder>,
     stop: &AtomicBool,
 ) -> Result<RunSummary, SchedulerError> {
-    run_observed(cfg, scenario, plant, link, recorder, stop, None)
+    run_observed(cfg, plant, link, clock, recorder, stop, None)
 }
 
 /// [`run`], calling `observer` after every integrated step.
-pub fn run_observed(
+pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     cfg: &SchedulerConfig,
-    scenario: &ScenarioConfig,
     plant: &mut Plant,
-    link: &EmulatorLink,
+    link: &mut L,
+    clock: &mut C,
     recorder: Option<&Recorder>,
     stop: &AtomicBool,
     mut observer: Option<StepObserver<'_>>,
 ) -> Result<RunSummary, SchedulerError> {
-    cfg.validate()?;
-    let max_thrust_n = scenario.propulsion.max_thrust_n;
     let mut timing = TimingMonitor::new();
     let mut digest = RunDigest::new();
-    let period_ns = ((cfg.dt_ns as f64) / cfg.speed).round().max(1.0) as u64;
-    let realtime = cfg.mode == Mode::Realtime;
+    let with_transport = link.has_transport();
     let mut applied = ActuatorCommand::default();
     let mut status = PlantStatus::Flying;
     let mut rejected_commands = 0u64;
     let mut rejected_values = 0u64;
     let mut abort: Option<Abort> = None;
     let mut steps = 0u64;
+    clock.start();
     let mut last_command_ns = monotonic_ns();
-    let t0 = monotonic_ns() + if realtime { period_ns } else { 0 };
     let mut k: u64 = 0;
 
     loop {
-        let scheduled_ns = t0 + k * period_ns;
-        if realtime {
-            sleep_until_ns(scheduled_ns, cfg.wake_spin_ns);
-            timing.record_wake_error(monotonic_ns().saturating_sub(scheduled_ns));
+        if let Some(late_ns) = clock.wait_for_step(k, stop) {
+            timing.record_wake_error(late_ns);
         }
         let t_ns = plant.time_ns();
         if abort.is_none() && stop.load(Ordering::Relaxed) {
@@ -242,7 +260,7 @@ pub fn run_observed(
             || t_ns >= cfg.max_duration_ns;
         if finished {
             tlm.header.flags |= TLM_FLAG_END_OF_RUN;
-            // Best effort: the stub may be gone already.
+            // Best effort: the flight software may be gone already.
             let _ = link.publish(&tlm);
             digest.add_telemetry(&tlm);
             if let Some(r) = recorder {
@@ -250,6 +268,8 @@ pub fn run_observed(
                     flags: REC_END_OF_RUN,
                     telemetry: tlm,
                     command: Command::default(),
+                    applied: ActuatorCommand::default(),
+                    truth: plant.truth(),
                 })?;
             }
             break;
@@ -259,16 +279,12 @@ pub fn run_observed(
         link.publish(&tlm)?;
         digest.add_telemetry(&tlm);
 
-        let deadline_ns = if realtime {
-            scheduled_ns + (cfg.deadline_frac * period_ns as f64) as u64
-        } else {
-            published_ns + cfg.link_timeout_ms * 1_000_000
-        };
+        let deadline_ns = clock.command_deadline_ns(k, published_ns);
         let received = loop {
             match link.receive_until(deadline_ns, stop) {
                 Ok(Some(c)) if c.header.step < k => timing.record_late_command(),
                 Ok(other) => break other,
-                Err(LinkError::Interrupted) => {
+                Err(ExchangeError::Link(LinkError::Interrupted)) => {
                     abort = Some(Abort::Interrupted);
                     break None;
                 }
@@ -296,9 +312,14 @@ pub fn run_observed(
                     continue;
                 }
                 last_command_ns = received_ns;
-                timing.record_exchange(received_ns - published_ns, cmd.stub_compute_ns);
+                let round_trip_ns = received_ns - published_ns;
+                if with_transport {
+                    timing.record_exchange(round_trip_ns, cmd.stub_compute_ns);
+                } else {
+                    timing.record_in_process(round_trip_ns, cmd.stub_compute_ns);
+                }
                 digest.add_command(&cmd);
-                let (safe, rejected) = sanitize(&cmd, max_thrust_n);
+                let (safe, rejected) = sanitize(&cmd, cfg.max_thrust_n);
                 if rejected > 0 {
                     rejected_commands += 1;
                     rejected_values += rejected as u64;
@@ -308,7 +329,7 @@ pub fn run_observed(
                 flags |= REC_COMMAND_RECEIVED;
                 logged_cmd = cmd;
             }
-            None if !realtime => {
+            None if !clock.misses_allowed() => {
                 abort = Some(Abort::StubSilent {
                     step: k,
                     waited_ms: (received_ns - published_ns) / 1_000_000,
@@ -343,9 +364,14 @@ pub fn run_observed(
                 flags,
                 telemetry: tlm,
                 command: logged_cmd,
+                applied,
+                truth: plant.truth(),
             })?;
         }
         status = plant.step(&applied, cfg.dt_ns);
+        if let Some(what) = plant.first_non_finite() {
+            abort = Some(Abort::NotFinite { step: k, what });
+        }
         if let Some(observe) = observer.as_mut() {
             observe(k);
         }
@@ -353,7 +379,7 @@ pub fn run_observed(
         k += 1;
     }
 
-    let wall_s = (monotonic_ns().saturating_sub(t0.min(monotonic_ns()))) as f64 * 1e-9;
+    let wall_s = monotonic_ns().saturating_sub(clock.started_ns()) as f64 * 1e-9;
     let sim_time_s = plant.time_ns() as f64 * 1e-9;
     let timing = timing.summary(wall_s, sim_time_s);
     let (outcome, touchdown) = match (&abort, status) {

@@ -1,154 +1,32 @@
-//! One bench run from the emulator's side: command-line arguments in, report out.
-//! Builds everything before tick 0 (scenario, propulsion, plant, node, link, recorder),
-//! waits for the onboard computer, runs the scheduler, and closes the log.
+//! One bench run from a [`RunConfig`] to a [`RunReport`]: builds everything before
+//! tick 0 (plant, propulsion, log, link, flight software), runs the scheduler over the
+//! configured link and clock, and closes the log. Also replays a recorded log through
+//! the same loop. No command-line types here: binaries build the `RunConfig`.
 
-use crate::config::{ConfigError, ScenarioConfig};
+use crate::clock::{LockstepClock, RealtimeClock, ReplayClock, StepClock};
+use crate::link::{InProcLink, Link, ReplayLink};
 use crate::plant::Plant;
-use crate::propulsion::{build_for_bench, ModelFiles, PropulsionKind};
-use crate::recorder::{Recorder, RecorderError};
+use crate::propulsion::build_configured;
+use crate::propulsion::hifi::HifiParams;
+use crate::recorder::{read_log, Recorder, RecorderError};
 use crate::report::RunReport;
-use crate::scheduler::{self, MissPolicy, Mode, SchedulerConfig, SchedulerError};
-use crate::timing::TimingThresholds;
+use crate::run_config::{LinkKind, RunConfig, RunConfigError};
+use crate::scheduler::{self, Mode, SchedulerConfig, SchedulerError};
+use oils_onboard_stub::cli::{build_fsw, StubCliError};
 use oils_shared::link::{create_node, EmulatorLink, LinkError, WaitStrategy};
 use oils_shared::PROTOCOL_VERSION;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
-/// Pacing mode on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum ModeArg {
-    /// Wait for every command (deterministic, as fast as possible).
-    Lockstep,
-    /// Pace against the wall clock times `--speed`.
-    Realtime,
-}
-
-/// Flight software the spawned stub runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum FswArg {
-    /// The reference descent GNC.
-    Gnc,
-    /// Open-loop playback of `--profile`.
-    Playback,
-}
-
-/// Navigation noise switch.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum OnOff {
-    /// Enabled.
-    On,
-    /// Disabled.
-    Off,
-}
-
-/// Arguments of a bench run (`oils run`, `oils-emulator`).
-#[derive(Debug, Clone, clap::Args)]
-pub struct RunArgs {
-    /// lockstep: wait for each command (deterministic); realtime: pace against the clock.
-    #[arg(long, value_enum, default_value = "lockstep")]
-    pub mode: ModeArg,
-    /// Realtime speed factor (2 = twice real time).
-    #[arg(long, default_value_t = 1.0)]
-    pub speed: f64,
-    /// Step in milliseconds (1-100).
-    #[arg(long, default_value_t = 10, value_parser = clap::value_parser!(u64).range(1..=100))]
-    pub dt_ms: u64,
-    /// Longest simulated time, seconds; the run ends `completed` if still flying.
-    #[arg(long, default_value_t = 2000.0)]
-    pub duration: f64,
-    /// Propulsion model: ideal (first-order lag), hifi (physics, the truth model),
-    /// surrogate (the learned model) or shadow (hifi drives, the surrogate runs beside
-    /// it; their divergence goes in the report).
-    #[arg(long, default_value = "ideal")]
-    pub propulsion: String,
-    /// Hifi parameter TOML for `--propulsion hifi|shadow` (default: emulator/config/hifi.toml's values).
-    #[arg(long)]
-    pub hifi_params: Option<PathBuf>,
-    /// Surrogate model file for `--propulsion surrogate|shadow` (default: the committed model).
-    #[arg(long)]
-    pub model: Option<PathBuf>,
-    /// Flight software of the spawned stub.
-    #[arg(long, value_enum, default_value = "gnc")]
-    pub fsw: FswArg,
-    /// Thrust-command profile CSV for `--fsw playback`.
-    #[arg(long)]
-    pub profile: Option<PathBuf>,
-    /// Seed of every random stream (navigation noise, ...).
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Seeded navigation noise on the telemetry.
-    #[arg(long, value_enum, default_value = "on")]
-    pub nav_noise: OnOff,
-    /// Scenario TOML overriding any default (template: emulator/config/scenario.toml).
-    #[arg(long)]
-    pub scenario: Option<PathBuf>,
-    /// Write the JSON report here.
-    #[arg(long)]
-    pub report: Option<PathBuf>,
-    /// Log file (default: oils-out/<run id>.oilslog).
-    #[arg(long)]
-    pub log: Option<PathBuf>,
-    /// Do not write a log.
-    #[arg(long, conflicts_with = "log")]
-    pub no_log: bool,
-    /// How the emulator waits for commands: busy, event or hybrid (default: busy in
-    /// lockstep, hybrid in realtime).
-    #[arg(long)]
-    pub wait: Option<String>,
-    /// Realtime deadline-miss policy: hold, zero or abort:N.
-    #[arg(long, default_value = "hold")]
-    pub miss_policy: String,
-    /// Realtime: a command must arrive within this fraction of a period.
-    #[arg(long, default_value_t = 0.5)]
-    pub deadline_frac: f64,
-    /// Realtime: spin this many microseconds before each step start.
-    #[arg(long, default_value_t = 200)]
-    pub wake_spin_us: u64,
-    /// The stub is declared dead after this long without a command, milliseconds.
-    #[arg(long, default_value_t = 2000)]
-    pub link_timeout_ms: u64,
-    /// How long to wait for the stub to connect, milliseconds.
-    #[arg(long, default_value_t = 10000)]
-    pub startup_timeout_ms: u64,
-    /// Run the emulator (and the stub it spawns) under SCHED_FIFO at this priority (1-99)
-    /// with memory locked: the way to a tight realtime wake error on a busy machine.
-    /// Needs root or CAP_SYS_NICE.
-    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
-    pub rt_priority: Option<i32>,
-    /// Run id (hex); default: a fresh one. It names the run's iceoryx2 services.
-    #[arg(long)]
-    pub run_id: Option<String>,
-    /// Fail the run if the p99 wake error exceeds this, microseconds.
-    #[arg(long)]
-    pub max_wake_p99_us: Option<f64>,
-    /// Fail the run if the p99 round trip exceeds this, microseconds.
-    #[arg(long)]
-    pub max_round_trip_p99_us: Option<f64>,
-    /// Fail the run if the p99 transport exceeds this, microseconds.
-    #[arg(long)]
-    pub max_transport_p99_us: Option<f64>,
-    /// Fail the run if there are more deadline misses than this.
-    #[arg(long)]
-    pub max_deadline_misses: Option<u64>,
-}
-
-/// Why a session could not run.
+/// Why a run could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
-    /// Bad argument.
-    #[error("{0}")]
-    Argument(String),
-    /// Scenario file unreadable or invalid.
-    #[error("scenario {path}: {why}")]
-    ScenarioFile {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        why: String,
-    },
-    /// Invalid configuration value.
+    /// The run configuration is invalid.
     #[error(transparent)]
-    Config(#[from] ConfigError),
+    Config(#[from] RunConfigError),
+    /// The scenario is invalid.
+    #[error(transparent)]
+    Scenario(#[from] crate::config::ConfigError),
     /// Link failure.
     #[error(transparent)]
     Link(#[from] LinkError),
@@ -159,7 +37,7 @@ pub enum SessionError {
     #[error(transparent)]
     Scheduler(#[from] SchedulerError),
     /// Real-time priority refused by the OS.
-    #[error("--rt-priority {priority} (needs root or CAP_SYS_NICE)")]
+    #[error("rt_priority {priority} (needs root or CAP_SYS_NICE)")]
     RealtimePriority {
         /// The priority asked for.
         priority: i32,
@@ -170,6 +48,29 @@ pub enum SessionError {
     /// Propulsion model could not be built.
     #[error("propulsion")]
     Propulsion(#[from] crate::propulsion::BuildError),
+    /// The in-process flight software could not be built.
+    #[error("flight software")]
+    Fsw(#[from] StubCliError),
+    /// Starting the onboard process failed.
+    #[error("starting the onboard process: {0}")]
+    Launch(String),
+    /// A log to replay is unusable.
+    #[error("replay of {path}: {why}")]
+    Replay {
+        /// The log.
+        path: PathBuf,
+        /// What is wrong.
+        why: String,
+    },
+}
+
+/// What an onboard process needs to join an iceoryx2 run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StubLaunch {
+    /// The run id naming the services.
+    pub run_id: u64,
+    /// The emulator's wait strategy (announced on the services too).
+    pub wait: WaitStrategy,
 }
 
 /// A fresh run id: process id and monotonic time mixed (naming only; never enters the
@@ -182,216 +83,217 @@ pub fn fresh_run_id() -> u64 {
     x ^ (x >> 31)
 }
 
-impl RunArgs {
-    /// The run id asked for, or a fresh one.
-    pub fn run_id(&self) -> Result<u64, SessionError> {
-        match &self.run_id {
-            Some(s) => u64::from_str_radix(s.trim_start_matches("0x"), 16)
-                .map_err(|_| SessionError::Argument(format!("--run-id {s}: not a hex number"))),
-            None => Ok(fresh_run_id()),
+/// The plant a configuration describes, with its propulsion model (built before tick 0).
+pub fn build_plant(cfg: &RunConfig) -> Result<Plant, SessionError> {
+    let default_hifi;
+    let hifi = match &cfg.hifi {
+        Some(h) => h,
+        None => {
+            default_hifi = HifiParams::default();
+            &default_hifi
         }
-    }
-
-    /// The wait strategy: as asked, else busy-poll in lockstep (fastest; two processes
-    /// on two cores, and the recorder thread mostly sleeps) and hybrid in realtime
-    /// (spin briefly, then sleep on the event: leaves the core free between steps).
-    pub fn wait_strategy(&self) -> Result<WaitStrategy, SessionError> {
-        match &self.wait {
-            Some(w) => w.parse().map_err(|_| {
-                SessionError::Argument(format!("--wait {w}: expected busy, event or hybrid"))
-            }),
-            None => Ok(match self.mode {
-                ModeArg::Lockstep => WaitStrategy::BusyPoll,
-                ModeArg::Realtime => WaitStrategy::Hybrid {
-                    spin_ns: WaitStrategy::DEFAULT_SPIN_NS,
-                },
-            }),
-        }
-    }
-
-    fn miss_policy(&self) -> Result<MissPolicy, SessionError> {
-        let bad = || {
-            SessionError::Argument(format!(
-                "--miss-policy {}: expected hold, zero or abort:N",
-                self.miss_policy
-            ))
-        };
-        match self.miss_policy.as_str() {
-            "hold" => Ok(MissPolicy::Hold),
-            "zero" => Ok(MissPolicy::Zero),
-            s => {
-                let n = s.strip_prefix("abort:").ok_or_else(bad)?;
-                let after: u64 = n.parse().map_err(|_| bad())?;
-                if after == 0 {
-                    return Err(bad());
-                }
-                Ok(MissPolicy::Abort { after })
-            }
-        }
-    }
-
-    /// The propulsion model asked for.
-    pub fn propulsion_kind(&self) -> Result<PropulsionKind, SessionError> {
-        self.propulsion.parse().map_err(SessionError::Argument)
-    }
-
-    /// The scenario: defaults, overridden by `--scenario`, then by flags; validated.
-    pub fn scenario(&self) -> Result<ScenarioConfig, SessionError> {
-        let mut s = match &self.scenario {
-            Some(path) => load_scenario(path)?,
-            None => ScenarioConfig::default(),
-        };
-        s.nav_noise.enabled = self.nav_noise == OnOff::On;
-        s.validate()?;
-        Ok(s)
-    }
-
-    /// Scheduler settings.
-    pub fn scheduler_config(&self, run_id: u64) -> Result<SchedulerConfig, SessionError> {
-        if !(self.duration.is_finite() && self.duration > 0.0 && self.duration <= 1e6) {
-            return Err(SessionError::Argument(format!(
-                "--duration {}: expected (0, 1e6] seconds",
-                self.duration
-            )));
-        }
-        let us = |v: Option<f64>| v.map(|x| (x.max(0.0) * 1000.0) as u64);
-        let cfg = SchedulerConfig {
-            mode: match self.mode {
-                ModeArg::Lockstep => Mode::Lockstep,
-                ModeArg::Realtime => Mode::Realtime,
-            },
-            speed: self.speed,
-            dt_ns: self.dt_ms * 1_000_000,
-            max_duration_ns: (self.duration * 1e9) as i64,
-            run_id,
-            deadline_frac: self.deadline_frac,
-            miss_policy: self.miss_policy()?,
-            link_timeout_ms: self.link_timeout_ms,
-            startup_timeout_ms: self.startup_timeout_ms,
-            wake_spin_ns: self.wake_spin_us * 1000,
-            thresholds: TimingThresholds {
-                wake_error_p99_ns: us(self.max_wake_p99_us),
-                round_trip_p99_ns: us(self.max_round_trip_p99_us),
-                transport_p99_ns: us(self.max_transport_p99_us),
-                deadline_misses: self.max_deadline_misses,
-            },
-        };
-        cfg.validate()?;
-        Ok(cfg)
-    }
-
-    /// Checks everything that can be checked before any resource is taken.
-    pub fn validate(&self) -> Result<(), SessionError> {
-        self.scenario()?;
-        self.scheduler_config(0)?;
-        self.wait_strategy()?;
-        self.propulsion_kind()?;
-        if self.fsw == FswArg::Playback && self.profile.is_none() {
-            return Err(SessionError::Argument(
-                "--fsw playback needs --profile CSV".into(),
-            ));
-        }
-        if let Some(path) = &self.profile {
-            // Fail here, before any process or service exists, not in the spawned stub.
-            oils_shared::profile::ThrustProfile::load(path)
-                .map_err(|e| SessionError::Argument(format!("{}: {e}", path.display())))?;
-        }
-        Ok(())
-    }
-}
-
-/// Reads a scenario TOML file.
-pub fn load_scenario(path: &Path) -> Result<ScenarioConfig, SessionError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SessionError::ScenarioFile {
-        path: path.to_path_buf(),
-        why: e.to_string(),
-    })?;
-    toml::from_str(&text).map_err(|e| SessionError::ScenarioFile {
-        path: path.to_path_buf(),
-        why: e.to_string(),
-    })
-}
-
-/// Runs one session. `spawn_stub(run_id, wait)` is called once the services exist (the
-/// `oils` binary starts the stub process there; `oils-emulator` prints how to start one).
-pub fn run_session(
-    args: &RunArgs,
-    stop: &AtomicBool,
-    spawn_stub: &mut dyn FnMut(u64, WaitStrategy) -> Result<(), SessionError>,
-) -> Result<RunReport, SessionError> {
-    args.validate()?;
-    let run_id = args.run_id()?;
-    let scenario = args.scenario()?;
-    let sched = args.scheduler_config(run_id)?;
-    let wait = args.wait_strategy()?;
-    let kind = args.propulsion_kind()?;
-    let files = ModelFiles {
-        surrogate_model: args.model.clone(),
-        hifi_params: args.hifi_params.clone(),
     };
-    let propulsion = build_for_bench(kind, &scenario.propulsion, &files, sched.dt_ns)?;
-    let mut plant = Plant::new(&scenario, propulsion, args.seed)?;
+    let propulsion = build_configured(
+        cfg.propulsion,
+        &cfg.scenario.propulsion,
+        cfg.model.as_deref(),
+        hifi,
+        cfg.dt_ns(),
+    )?;
+    Ok(Plant::new(&cfg.scenario, propulsion, cfg.seed)?)
+}
 
-    if let Some(priority) = args.rt_priority {
+fn scheduler_config(cfg: &RunConfig, run_id: u64) -> SchedulerConfig {
+    SchedulerConfig {
+        dt_ns: cfg.dt_ns(),
+        max_duration_ns: (cfg.duration_s * 1e9) as i64,
+        run_id,
+        miss_policy: cfg.miss_policy,
+        link_timeout_ms: cfg.link_timeout_ms,
+        max_thrust_n: cfg.scenario.propulsion.max_thrust_n,
+        thresholds: cfg.thresholds.to_thresholds(),
+    }
+}
+
+fn step_clock(cfg: &RunConfig) -> Box<dyn StepClock> {
+    match cfg.mode {
+        Mode::Lockstep => Box::new(LockstepClock::new(cfg.link_timeout_ms)),
+        Mode::Realtime => Box::new(RealtimeClock::new(
+            cfg.dt_ns(),
+            cfg.speed,
+            cfg.deadline_frac,
+            cfg.wake_spin_us * 1000,
+        )),
+    }
+}
+
+/// The log header: the whole run configuration, so a log can be replayed or re-run.
+fn log_header(cfg: &RunConfig, run_id: u64) -> String {
+    serde_json::json!({
+        "protocol_version": PROTOCOL_VERSION,
+        "run_id": format!("{run_id:016x}"),
+        "config": cfg,
+    })
+    .to_string()
+}
+
+fn open_recorder(cfg: &RunConfig, run_id: u64) -> Result<Option<Recorder>, SessionError> {
+    if !cfg.log.enabled {
+        return Ok(None);
+    }
+    let path = cfg
+        .log
+        .path
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("oils-out/{run_id:016x}.oilslog")));
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|source| RecorderError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?;
+    }
+    Ok(Some(Recorder::create(&path, &log_header(cfg, run_id))?))
+}
+
+/// Runs one bench run. `run_id`: `None` for a fresh one. `launch` is called once the
+/// iceoryx2 services exist (the `oils` binary starts the onboard process there, or
+/// prints how to start one); it is not called for in-process runs.
+pub fn run(
+    cfg: &RunConfig,
+    run_id: Option<u64>,
+    stop: &AtomicBool,
+    launch: &mut dyn FnMut(&StubLaunch) -> Result<(), SessionError>,
+) -> Result<RunReport, SessionError> {
+    cfg.validate()?;
+    let run_id = run_id.unwrap_or_else(fresh_run_id);
+    let mut plant = build_plant(cfg)?;
+    let sched = scheduler_config(cfg, run_id);
+    let mut clock = step_clock(cfg);
+
+    if let Some(priority) = cfg.rt_priority {
         oils_shared::clock::set_realtime_priority(priority)
             .map_err(|source| SessionError::RealtimePriority { priority, source })?;
     }
-    let node = create_node("oils-emulator")?;
-    let link = EmulatorLink::create(&node, run_id, wait)?;
-    let log_path = if args.no_log {
-        None
-    } else {
-        Some(
-            args.log
-                .clone()
-                .unwrap_or_else(|| PathBuf::from(format!("oils-out/{run_id:016x}.oilslog"))),
-        )
-    };
-    let recorder = match &log_path {
-        Some(p) => {
-            if let Some(dir) = p.parent().filter(|d| !d.as_os_str().is_empty()) {
-                std::fs::create_dir_all(dir).map_err(|source| RecorderError::Io {
-                    path: dir.to_path_buf(),
-                    source,
+    let (summary, log_path, wait) = match cfg.link {
+        LinkKind::Inproc => {
+            let fsw = build_fsw(&cfg.fsw, cfg.profile.as_deref())?;
+            let mut link = InProcLink::new(fsw);
+            let recorder = open_recorder(cfg, run_id)?;
+            let summary = run_and_close(
+                &sched,
+                &mut plant,
+                &mut link,
+                clock.as_mut(),
+                recorder,
+                stop,
+            )?;
+            (summary.0, summary.1, None)
+        }
+        LinkKind::Iceoryx2 => {
+            if let Some(profile) = &cfg.profile {
+                // Fail here, before any process or service exists, not in the spawned stub.
+                oils_shared::profile::ThrustProfile::load(profile).map_err(|e| {
+                    RunConfigError::File {
+                        path: profile.clone(),
+                        why: e.to_string(),
+                    }
                 })?;
             }
-            let header = serde_json::json!({
-                "protocol_version": PROTOCOL_VERSION,
-                "run_id": format!("{run_id:016x}"),
-                "mode": format!("{:?}", sched.mode).to_lowercase(),
-                "dt_ns": sched.dt_ns,
-                "seed": args.seed,
-                "propulsion": kind.as_str(),
-                "scenario": scenario,
-            });
-            Some(Recorder::create(p, &header.to_string())?)
+            let wait = cfg.wait_strategy();
+            let node = create_node("oils-emulator")?;
+            let mut link = EmulatorLink::create(&node, run_id, wait)?;
+            let recorder = open_recorder(cfg, run_id)?;
+            launch(&StubLaunch { run_id, wait })?;
+            link.wait_for_peer(cfg.startup_timeout_ms, stop)?;
+            let summary = run_and_close(
+                &sched,
+                &mut plant,
+                &mut link,
+                clock.as_mut(),
+                recorder,
+                stop,
+            )?;
+            (summary.0, summary.1, Some(wait))
         }
-        None => None,
     };
-    spawn_stub(run_id, wait)?;
-    link.wait_for_peer(sched.startup_timeout_ms, stop)?;
-    let mut summary = scheduler::run(
-        &sched,
-        &scenario,
-        &mut plant,
-        &link,
-        recorder.as_ref(),
-        stop,
-    )?;
+    Ok(RunReport::new(cfg, run_id, wait, log_path, summary))
+}
+
+/// Runs the scheduler and closes the log (on every path: dropping the recorder syncs).
+fn run_and_close<L: Link + ?Sized>(
+    sched: &SchedulerConfig,
+    plant: &mut Plant,
+    link: &mut L,
+    clock: &mut dyn StepClock,
+    recorder: Option<Recorder>,
+    stop: &AtomicBool,
+) -> Result<(scheduler::RunSummary, Option<PathBuf>), SessionError> {
+    let mut summary = scheduler::run(sched, plant, link, clock, recorder.as_ref(), stop)?;
+    let path = recorder.as_ref().map(|r| r.path().to_path_buf());
     if let Some(r) = recorder {
         summary.log_records = r.finish()?;
     }
-    Ok(RunReport {
-        run_id: format!("{run_id:016x}"),
-        mode: sched.mode,
-        speed: sched.speed,
-        dt_ms: args.dt_ms as f64,
-        seed: args.seed,
-        propulsion: kind.as_str().into(),
-        fsw: format!("{:?}", args.fsw).to_lowercase(),
-        wait: wait.as_str().into(),
-        protocol_version: PROTOCOL_VERSION,
-        log: log_path.map(|p| p.display().to_string()),
-        summary,
+    Ok((summary, path))
+}
+
+/// What a replay found.
+#[derive(Debug, Clone)]
+pub struct Replay {
+    /// The run configuration read from the log's header.
+    pub config: RunConfig,
+    /// The replayed run (its digest is the recorded run's when the replay holds).
+    pub report: RunReport,
+    /// Records replayed.
+    pub records: usize,
+}
+
+/// Replays a recorded log through the same plant and loop: each recorded command is
+/// fed back in, and each telemetry the emulator publishes must equal the recorded one
+/// (else the replay stops with the first step that differs). The digest comes out the
+/// recorded run's: record == replay.
+pub fn replay(log_path: &Path, stop: &AtomicBool) -> Result<Replay, SessionError> {
+    let bad = |why: String| SessionError::Replay {
+        path: log_path.to_path_buf(),
+        why,
+    };
+    let log = read_log(log_path)?;
+    if !log.damaged_records.is_empty() {
+        return Err(bad(format!(
+            "{} damaged records (first at position {})",
+            log.damaged_records.len(),
+            log.damaged_records[0]
+        )));
+    }
+    let header: serde_json::Value = serde_json::from_str(&log.header_json)
+        .map_err(|e| bad(format!("header is not JSON: {e}")))?;
+    let config: RunConfig = serde_json::from_value(header["config"].clone())
+        .map_err(|e| bad(format!("header has no usable run configuration: {e}")))?;
+    let run_id = header["run_id"]
+        .as_str()
+        .and_then(|s| u64::from_str_radix(s, 16).ok())
+        .ok_or_else(|| bad("header has no run id".into()))?;
+    config.validate()?;
+    let mut plant = build_plant(&config)?;
+    let sched = scheduler_config(&config, run_id);
+    let recorded = log.records.len();
+    let mut link = ReplayLink::new(log);
+    let mut clock = ReplayClock::default();
+    let summary = scheduler::run(&sched, &mut plant, &mut link, &mut clock, None, stop)?;
+    let records = link.replayed();
+    if records != recorded {
+        return Err(bad(format!(
+            "replayed {records} of {recorded} records: the run ended differently"
+        )));
+    }
+    let mut replay_cfg = config.clone();
+    replay_cfg.log.enabled = false;
+    let report = RunReport::new(&replay_cfg, run_id, None, None, summary);
+    if let Some(e) = &report.summary.error {
+        return Err(bad(e.clone()));
+    }
+    Ok(Replay {
+        config,
+        report,
+        records,
     })
 }

@@ -90,12 +90,18 @@ impl TimingMonitor {
         self.wake_error.saturating_record(late_ns);
     }
 
-    /// Records one telemetry-command exchange.
+    /// Records one telemetry-command exchange over a link with a transport.
     pub fn record_exchange(&mut self, round_trip_ns: u64, stub_compute_ns: u64) {
-        self.round_trip.saturating_record(round_trip_ns);
-        self.stub_compute.saturating_record(stub_compute_ns);
+        self.record_in_process(round_trip_ns, stub_compute_ns);
         self.transport
             .saturating_record(round_trip_ns.saturating_sub(stub_compute_ns));
+    }
+
+    /// Records one exchange with the flight software in the emulator's thread: there is
+    /// no transport, so none is recorded (the figure stays absent, not zero-filled).
+    pub fn record_in_process(&mut self, round_trip_ns: u64, stub_compute_ns: u64) {
+        self.round_trip.saturating_record(round_trip_ns);
+        self.stub_compute.saturating_record(stub_compute_ns);
     }
 
     /// Counts a step whose command missed its deadline.

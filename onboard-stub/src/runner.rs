@@ -7,7 +7,7 @@
 use crate::fsw::FlightSoftware;
 use oils_shared::clock::monotonic_ns;
 use oils_shared::link::{LinkError, StubLink};
-use oils_shared::{PacketHeader, TLM_FLAG_END_OF_RUN};
+use oils_shared::{Command, PacketHeader, Telemetry, TLM_FLAG_END_OF_RUN};
 use std::sync::atomic::AtomicBool;
 
 /// How the stub's loop ended well.
@@ -38,6 +38,20 @@ pub enum StubError {
     Protocol(#[from] oils_shared::ProtocolMismatch),
 }
 
+/// Runs the flight software on Telemetry(k) and returns Command(k) stamped as the wire
+/// wants it: the header echoes the telemetry's run, step and time, and
+/// `stub_compute_ns` holds the flight software's own step time (monotonic clock; the
+/// digest ignores it). Every link uses this, so a command is the same whichever link
+/// carries it.
+pub fn answer<F: FlightSoftware + ?Sized>(fsw: &mut F, tlm: &Telemetry) -> Command {
+    let started_ns = monotonic_ns();
+    let mut cmd = fsw.step(tlm);
+    let compute_ns = monotonic_ns().saturating_sub(started_ns);
+    cmd.header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
+    cmd.stub_compute_ns = compute_ns;
+    cmd
+}
+
 /// Serves one run until the emulator sends its end-of-run telemetry.
 pub fn serve(
     link: &StubLink,
@@ -64,11 +78,7 @@ pub fn serve(
         if tlm.header.flags & TLM_FLAG_END_OF_RUN != 0 {
             return Ok(summary);
         }
-        let started_ns = monotonic_ns();
-        let mut cmd = fsw.step(&tlm);
-        let compute_ns = monotonic_ns() - started_ns;
-        cmd.header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
-        cmd.stub_compute_ns = compute_ns;
+        let cmd = answer(fsw, &tlm);
         link.publish(&cmd)?;
         summary.commands += 1;
         summary.last_step = tlm.header.step;

@@ -426,4 +426,78 @@ impl Plant {
     pub fn touchdown(&self) -> Option<TouchdownState> {
         self.touchdown
     }
+
+    /// The first state quantity that is not finite, by name; `None` while all are. A
+    /// handful of comparisons a step: the scheduler ends the run on the first bad one,
+    /// so a NaN never flies on silently.
+    pub fn first_non_finite(&self) -> Option<&'static str> {
+        let s = &self.state;
+        let p = &self.prop_out;
+        let finite = |xs: &[f64]| xs.iter().all(|x| x.is_finite());
+        if !finite(s.pos_mci_m.as_slice()) {
+            Some("position")
+        } else if !finite(s.vel_mci_m_s.as_slice()) {
+            Some("velocity")
+        } else if !finite(s.q_mci_from_body.coords.as_slice()) {
+            Some("attitude")
+        } else if !finite(s.rate_body_rad_s.as_slice()) {
+            Some("body rate")
+        } else if !s.mass_kg.is_finite() {
+            Some("mass")
+        } else if !finite(&p.thrust_n) || !finite(&p.mean_thrust_n) {
+            Some("engine thrust")
+        } else if !finite(&[
+            p.gas_pressure_pa,
+            p.fuel_tank_pressure_pa,
+            p.ox_tank_pressure_pa,
+        ]) || !finite(&p.chamber_pressure_pa)
+        {
+            Some("propulsion pressure")
+        } else if !finite(&[p.ejected_fuel_kg, p.ejected_ox_kg]) {
+            Some("ejected propellant mass")
+        } else {
+            None
+        }
+    }
+
+    /// The vehicle and its propulsion as they truly are now (no navigation noise): what
+    /// the log records beside the wire packets, for plots and statistics.
+    pub fn truth(&self) -> TruthState {
+        let s = &self.state;
+        let q = s.q_mci_from_body.quaternion();
+        TruthState {
+            pos_mci_m: s.pos_mci_m.into(),
+            vel_mci_m_s: s.vel_mci_m_s.into(),
+            q_mci_from_body: [q.w, q.i, q.j, q.k],
+            rate_body_rad_s: s.rate_body_rad_s.into(),
+            mass_kg: s.mass_kg,
+            altitude_m: self.altitude_m(),
+            contact: self.touchdown.is_some(),
+            propulsion: self.prop_out,
+            internals: self.propulsion.internals(),
+        }
+    }
+}
+
+/// The true state of the vehicle at a step boundary (see [`Plant::truth`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TruthState {
+    /// Position, Moon-centred inertial, metres.
+    pub pos_mci_m: [f64; 3],
+    /// Velocity, Moon-centred inertial, m/s.
+    pub vel_mci_m_s: [f64; 3],
+    /// Attitude, body to mci, `[w, x, y, z]`.
+    pub q_mci_from_body: [f64; 4],
+    /// Body rates, body axes, rad/s.
+    pub rate_body_rad_s: [f64; 3],
+    /// Vehicle mass, kilograms.
+    pub mass_kg: f64,
+    /// Footpads above the surface, metres.
+    pub altitude_m: f64,
+    /// The footpads have touched the surface.
+    pub contact: bool,
+    /// The propulsion model's outputs.
+    pub propulsion: PropulsionOutput,
+    /// The propulsion model's internal states (NaN where it has none).
+    pub internals: crate::propulsion::PropulsionInternals,
 }

@@ -58,6 +58,34 @@ impl PropulsionOutput {
     }
 }
 
+/// Internal states of a propulsion model worth logging beside its outputs. A model
+/// without such a state reports NaN for it ([`PropulsionInternals::NONE`]), so a log
+/// never shows a value the model did not compute.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PropulsionInternals {
+    /// Pressure regulator outlet, pascals.
+    pub regulator_outlet_pa: f64,
+    /// Feed manifold pressure, fuel then oxidiser, pascals.
+    pub manifold_pressure_pa: [f64; 2],
+    /// Throttle valve position per engine, fuel then oxidiser, 0 (shut) to 1 (open).
+    pub valve_position: [[f64; 2]; ENGINE_COUNT],
+}
+
+impl PropulsionInternals {
+    /// A model with none of these states.
+    pub const NONE: Self = Self {
+        regulator_outlet_pa: f64::NAN,
+        manifold_pressure_pa: [f64::NAN; 2],
+        valve_position: [[f64::NAN; 2]; ENGINE_COUNT],
+    };
+}
+
+impl Default for PropulsionInternals {
+    fn default() -> Self {
+        Self::NONE
+    }
+}
+
 /// A propulsion model the plant can step.
 ///
 /// Contract: `step` does not allocate, lock, log or read the clock; the same sequence of
@@ -73,6 +101,10 @@ pub trait Propulsion: Send {
     /// the end of a run, not per step. `None`: nothing to report.
     fn diagnostics(&self) -> Option<PropulsionDiagnostics> {
         None
+    }
+    /// Internal states for the log, at the current step boundary (no allocation).
+    fn internals(&self) -> PropulsionInternals {
+        PropulsionInternals::NONE
     }
 }
 
@@ -149,13 +181,40 @@ pub fn build_for_bench(
     files: &ModelFiles,
     bench_step_ns: u64,
 ) -> Result<Box<dyn Propulsion>, BuildError> {
+    let params = match &files.hifi_params {
+        Some(path) => hifi::HifiParams::load(path)?,
+        None => hifi::HifiParams::default(),
+    };
+    build_configured(
+        kind,
+        cfg,
+        files.surrogate_model.as_deref(),
+        &params,
+        bench_step_ns,
+    )
+}
+
+/// Builds a model from values: the surrogate model file (none: the committed model)
+/// and the hifi parameters (used by `hifi` and `shadow`).
+pub fn build_configured(
+    kind: PropulsionKind,
+    cfg: &PropulsionConfig,
+    surrogate_model: Option<&std::path::Path>,
+    hifi_params: &hifi::HifiParams,
+    bench_step_ns: u64,
+) -> Result<Box<dyn Propulsion>, BuildError> {
+    let files = ModelFiles {
+        surrogate_model: surrogate_model.map(std::path::Path::to_path_buf),
+        hifi_params: None,
+    };
+    let hifi = || hifi::HifiPropulsion::new(hifi_params, cfg);
     Ok(match kind {
         PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
-        PropulsionKind::Hifi => Box::new(hifi_for_bench(cfg, files)?),
-        PropulsionKind::Surrogate => Box::new(surrogate_for_bench(cfg, files, bench_step_ns)?),
+        PropulsionKind::Hifi => Box::new(hifi()?),
+        PropulsionKind::Surrogate => Box::new(surrogate_for_bench(cfg, &files, bench_step_ns)?),
         PropulsionKind::Shadow => Box::new(shadow::ShadowPropulsion::new(
-            hifi_for_bench(cfg, files)?,
-            surrogate_for_bench(cfg, files, bench_step_ns)?,
+            hifi()?,
+            surrogate_for_bench(cfg, &files, bench_step_ns)?,
         )),
     })
 }

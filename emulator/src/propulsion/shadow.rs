@@ -52,6 +52,10 @@ impl<T: Propulsion, M: Propulsion> Propulsion for ShadowPropulsion<T, M> {
         self.truth.output()
     }
 
+    fn internals(&self) -> super::PropulsionInternals {
+        self.truth.internals()
+    }
+
     fn diagnostics(&self) -> Option<PropulsionDiagnostics> {
         Some(PropulsionDiagnostics {
             out_of_envelope_steps: self

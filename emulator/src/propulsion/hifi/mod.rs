@@ -552,6 +552,19 @@ impl Propulsion for HifiPropulsion {
         "hifi"
     }
 
+    fn internals(&self) -> super::PropulsionInternals {
+        super::PropulsionInternals {
+            regulator_outlet_pa: self.plant.aux.regulator_outlet_pa,
+            manifold_pressure_pa: [
+                self.y[ix::manifold_pressure(FUEL)],
+                self.y[ix::manifold_pressure(OX)],
+            ],
+            valve_position: std::array::from_fn(|e| {
+                [self.tfcvs[e][FUEL].valve, self.tfcvs[e][OX].valve]
+            }),
+        }
+    }
+
     fn step(&mut self, cmd: &EngineCommand, dt_ns: u64) -> PropulsionOutput {
         if dt_ns == 0 || self.fault.is_some() {
             return self.out;

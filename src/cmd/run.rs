@@ -1,0 +1,330 @@
+//! `oils run`: flags (and `--config FILE.toml` / `--config-from REPORT.json`) become a
+//! `RunConfig`; the emulator runs here; over iceoryx2 the onboard stub is spawned as a
+//! separate OS process (this same executable, `oils stub ...`).
+
+use anyhow::{bail, Context, Result};
+use oils_emulator::propulsion::hifi::HifiParams;
+use oils_emulator::propulsion::PropulsionKind;
+use oils_emulator::run_config::{load_scenario, LinkKind, RunConfig, WaitKind};
+use oils_emulator::scheduler::{MissPolicy, Mode};
+use oils_emulator::session::{self, SessionError, StubLaunch};
+use oils_onboard_stub::fsw::FswSpec;
+use oils_shared::service::RunServices;
+use std::path::PathBuf;
+use std::process::{Child, Command as Process, Stdio};
+use std::time::{Duration, Instant};
+
+/// Arguments of a bench run. Every flag is optional: what is not given comes from
+/// `--config` / `--config-from`, else from `RunConfig::default()`.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct RunArgs {
+    /// Run configuration TOML (any subset of fields; template: `oils run --print-config`).
+    #[arg(long, value_name = "TOML", conflicts_with = "config_from")]
+    pub config: Option<PathBuf>,
+    /// Repeat an earlier run: its JSON report (the `config` key) or a configuration JSON.
+    #[arg(long, value_name = "JSON")]
+    pub config_from: Option<PathBuf>,
+    /// Print the run configuration these flags give, as TOML, and exit.
+    #[arg(long)]
+    pub print_config: bool,
+    /// iceoryx2: the flight software in a separate process over shared memory (the
+    /// bench, with timing); inproc: called in the emulator's thread (same digest, fast).
+    /// [default: iceoryx2]
+    #[arg(long, value_name = "LINK")]
+    pub link: Option<LinkKind>,
+    /// lockstep: wait for each command (deterministic); realtime: pace against the
+    /// clock. [default: lockstep]
+    #[arg(long, value_name = "MODE")]
+    pub mode: Option<Mode>,
+    /// Realtime speed factor (2 = twice real time). [default: 1]
+    #[arg(long)]
+    pub speed: Option<f64>,
+    /// Step in milliseconds (1-100). [default: 10]
+    #[arg(long)]
+    pub dt_ms: Option<u64>,
+    /// Longest simulated time, seconds; the run ends `completed` if still flying.
+    /// [default: 2000]
+    #[arg(long, value_name = "SECONDS")]
+    pub duration: Option<f64>,
+    /// Propulsion model: surrogate (the learned model of the seed paper), hifi
+    /// (physics, the truth model), ideal (first-order lag) or shadow (hifi drives, the
+    /// surrogate runs beside it). [default: surrogate]
+    #[arg(long, value_name = "MODEL")]
+    pub propulsion: Option<PropulsionKind>,
+    /// Hifi parameter TOML for hifi|shadow (any subset of emulator/config/hifi.toml).
+    #[arg(long, value_name = "TOML")]
+    pub hifi_params: Option<PathBuf>,
+    /// Surrogate model file for surrogate|shadow (default: the committed model).
+    #[arg(long, value_name = "FILE")]
+    pub model: Option<PathBuf>,
+    /// Flight software: gnc, playback (with --profile), c:PATH (a shared library with
+    /// the C ABI), external (a client you start; same as --no-stub). [default: gnc]
+    #[arg(long, value_name = "FSW")]
+    pub fsw: Option<FswSpec>,
+    /// Thrust-command profile CSV for `--fsw playback`.
+    #[arg(long, value_name = "CSV")]
+    pub profile: Option<PathBuf>,
+    /// Seed of every random stream (navigation noise, ...). [default: 0]
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Seeded navigation noise on the telemetry: on or off. [default: on]
+    #[arg(long, value_name = "ON|OFF", value_parser = ["on", "off"])]
+    pub nav_noise: Option<String>,
+    /// Scenario: a name (default) or a TOML file overriding any default (template:
+    /// emulator/config/scenario.toml). Navigation noise stays as --nav-noise says.
+    #[arg(long, value_name = "NAME|TOML")]
+    pub scenario: Option<String>,
+    /// Write the JSON report here.
+    #[arg(long, value_name = "JSON")]
+    pub report: Option<PathBuf>,
+    /// Log file (default: oils-out/<run id>.oilslog).
+    #[arg(long, value_name = "FILE")]
+    pub log: Option<PathBuf>,
+    /// Do not write a log.
+    #[arg(long, conflicts_with = "log")]
+    pub no_log: bool,
+    /// How the emulator waits for commands over iceoryx2: busy, event or hybrid
+    /// (default: busy in lockstep, hybrid in realtime).
+    #[arg(long, value_name = "WAIT")]
+    pub wait: Option<WaitKind>,
+    /// Realtime deadline-miss policy: hold, zero or abort:N. [default: hold]
+    #[arg(long, value_name = "POLICY")]
+    pub miss_policy: Option<MissPolicy>,
+    /// Realtime: a command must arrive within this fraction of a period. [default: 0.5]
+    #[arg(long)]
+    pub deadline_frac: Option<f64>,
+    /// Realtime: spin this many microseconds before each step start. [default: 200]
+    #[arg(long)]
+    pub wake_spin_us: Option<u64>,
+    /// The flight software is declared dead after this long without a command,
+    /// milliseconds. [default: 2000]
+    #[arg(long)]
+    pub link_timeout_ms: Option<u64>,
+    /// How long to wait for the flight software to connect, milliseconds.
+    /// [default: 10000]
+    #[arg(long)]
+    pub startup_timeout_ms: Option<u64>,
+    /// Run the emulator (and the stub it spawns) under SCHED_FIFO at this priority
+    /// (1-99) with memory locked. Needs root or CAP_SYS_NICE.
+    #[arg(long)]
+    pub rt_priority: Option<i32>,
+    /// Run id (hex); default: a fresh one. It names the run's iceoryx2 services.
+    #[arg(long)]
+    pub run_id: Option<String>,
+    /// Fail the run if the p99 wake error exceeds this, microseconds.
+    #[arg(long)]
+    pub max_wake_p99_us: Option<f64>,
+    /// Fail the run if the p99 round trip exceeds this, microseconds.
+    #[arg(long)]
+    pub max_round_trip_p99_us: Option<f64>,
+    /// Fail the run if the p99 transport exceeds this, microseconds.
+    #[arg(long)]
+    pub max_transport_p99_us: Option<f64>,
+    /// Fail the run if there are more deadline misses than this.
+    #[arg(long)]
+    pub max_deadline_misses: Option<u64>,
+    /// Do not spawn a stub: wait for flight software started by hand on the run's
+    /// services (prints them); the report says `fsw: external`.
+    #[arg(long)]
+    pub no_stub: bool,
+}
+
+impl RunArgs {
+    /// The run configuration: defaults, then the file, then every flag given.
+    pub fn to_config(&self) -> Result<RunConfig> {
+        let mut cfg = match (&self.config, &self.config_from) {
+            (Some(path), _) => RunConfig::load_toml(path)?,
+            (None, Some(path)) => RunConfig::load_from_report(path)?,
+            (None, None) => RunConfig::default(),
+        };
+        macro_rules! set {
+            ($($flag:ident => $field:ident),* $(,)?) => {
+                $(if let Some(v) = &self.$flag { cfg.$field = v.clone(); })*
+            };
+        }
+        set!(link => link, mode => mode, speed => speed, dt_ms => dt_ms,
+             duration => duration_s, propulsion => propulsion, fsw => fsw, seed => seed,
+             miss_policy => miss_policy, deadline_frac => deadline_frac,
+             wake_spin_us => wake_spin_us, link_timeout_ms => link_timeout_ms,
+             startup_timeout_ms => startup_timeout_ms);
+        if let Some(p) = &self.model {
+            cfg.model = Some(p.clone());
+        }
+        if let Some(p) = &self.profile {
+            cfg.profile = Some(p.clone());
+        }
+        if let Some(w) = self.wait {
+            cfg.wait = Some(w);
+        }
+        if let Some(p) = self.rt_priority {
+            cfg.rt_priority = Some(p);
+        }
+        if let Some(path) = &self.hifi_params {
+            cfg.hifi = Some(HifiParams::load(path).context("--hifi-params")?);
+        }
+        if let Some(s) = &self.scenario {
+            // The noise switch is a run setting (--nav-noise), not the scenario file's.
+            let noise = cfg.scenario.nav_noise.enabled;
+            cfg.scenario = load_scenario(s).context("--scenario")?;
+            cfg.scenario.nav_noise.enabled = noise;
+        }
+        if let Some(n) = &self.nav_noise {
+            cfg.scenario.nav_noise.enabled = n == "on";
+        }
+        let t = &mut cfg.thresholds;
+        if self.max_wake_p99_us.is_some() {
+            t.max_wake_p99_us = self.max_wake_p99_us;
+        }
+        if self.max_round_trip_p99_us.is_some() {
+            t.max_round_trip_p99_us = self.max_round_trip_p99_us;
+        }
+        if self.max_transport_p99_us.is_some() {
+            t.max_transport_p99_us = self.max_transport_p99_us;
+        }
+        if self.max_deadline_misses.is_some() {
+            t.max_deadline_misses = self.max_deadline_misses;
+        }
+        if self.no_log {
+            cfg.log.enabled = false;
+        }
+        if let Some(p) = &self.log {
+            cfg.log.enabled = true;
+            cfg.log.path = Some(p.clone());
+        }
+        if self.no_stub {
+            cfg.fsw = FswSpec::External;
+        }
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    fn run_id(&self) -> Result<Option<u64>> {
+        self.run_id
+            .as_ref()
+            .map(|s| {
+                u64::from_str_radix(s.trim_start_matches("0x"), 16)
+                    .with_context(|| format!("--run-id {s}: not a hex number"))
+            })
+            .transpose()
+    }
+}
+
+/// Runs `oils run`.
+pub fn run(args: &RunArgs) -> Result<()> {
+    let cfg = args.to_config()?;
+    if args.print_config {
+        print!("{}", cfg.to_toml());
+        return Ok(());
+    }
+    let run_id = args.run_id()?;
+    let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
+    let mut child: Option<Child> = None;
+    let result = session::run(&cfg, run_id, &stop, &mut |launch| {
+        if cfg.fsw == FswSpec::External {
+            print_services(launch);
+            return Ok(());
+        }
+        child = Some(spawn_stub(&cfg, launch).map_err(|e| SessionError::Launch(format!("{e:#}")))?);
+        Ok(())
+    });
+    let stub_status = child.map(reap_stub);
+    let report = result.context("bench run")?;
+    oils_emulator::report::finish_run(&report, args.report.as_deref())?;
+    if let Some(Err(e)) = stub_status {
+        bail!("onboard stub: {e}");
+    }
+    Ok(())
+}
+
+/// What a flight software started by hand needs to join the run.
+fn print_services(launch: &StubLaunch) {
+    let names = RunServices::new(launch.run_id);
+    eprintln!(
+        "oils: run {:016x} is waiting for flight software (protocol {}, schema hash {:#018x}, wait {}) on:",
+        launch.run_id,
+        oils_shared::PROTOCOL_VERSION,
+        oils_shared::SCHEMA_HASH,
+        launch.wait.as_str()
+    );
+    for (name, what) in [
+        (names.telemetry(), "publish-subscribe, Telemetry: subscribe"),
+        (names.command(), "publish-subscribe, Command: publish"),
+        (
+            names.telemetry_event(),
+            "event: listen (the emulator notifies unless busy)",
+        ),
+        (
+            names.command_event(),
+            "event: notify after each command unless wait is busy",
+        ),
+    ] {
+        eprintln!("    {:<34} {what}", name.as_str());
+    }
+    eprintln!(
+        "  the reference stub joins with: oils stub --run-id {:016x}",
+        launch.run_id
+    );
+}
+
+/// Starts `oils stub` for this run, as a separate OS process.
+fn spawn_stub(cfg: &RunConfig, launch: &StubLaunch) -> Result<Child> {
+    let exe = std::env::current_exe().context("locating the oils executable")?;
+    let mut p = Process::new(exe);
+    p.arg("stub")
+        .arg("--run-id")
+        .arg(format!("{:016x}", launch.run_id))
+        .arg("--wait")
+        .arg(launch.wait.as_str())
+        .arg("--fsw")
+        .arg(cfg.fsw.to_string())
+        // A realtime run slowed down by a speed factor has long periods: never time out
+        // sooner than three of them.
+        .arg("--timeout-ms")
+        .arg((5000 + 3 * (cfg.dt_ms as f64 / cfg.speed) as u64).to_string())
+        .stdin(Stdio::null());
+    if let Some(profile) = &cfg.profile {
+        p.arg("--profile").arg(profile);
+    }
+    p.spawn().context("spawning the onboard stub")
+}
+
+/// Waits briefly for the stub to exit after the end-of-run telemetry; kills it if not.
+fn reap_stub(mut child: Child) -> Result<(), String> {
+    let until = Instant::now() + Duration::from_secs(3);
+    loop {
+        match child.try_wait() {
+            Ok(Some(status)) if status.success() => return Ok(()),
+            Ok(Some(status)) => return Err(format!("exited with {status}")),
+            Ok(None) if Instant::now() < until => std::thread::sleep(Duration::from_millis(5)),
+            Ok(None) => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err("did not exit after the run; killed".into());
+            }
+            Err(e) => return Err(e.to_string()),
+        }
+    }
+}
+
+/// Arguments of `oils replay`.
+#[derive(Debug, clap::Args)]
+pub struct ReplayArgs {
+    /// The log of the run to replay.
+    pub log: PathBuf,
+    /// Write the replay's JSON report here.
+    #[arg(long, value_name = "JSON")]
+    pub report: Option<PathBuf>,
+}
+
+/// Runs `oils replay`: the log's commands through the same plant and loop.
+pub fn replay(args: &ReplayArgs) -> Result<()> {
+    let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
+    let r = session::replay(&args.log, &stop)?;
+    println!(
+        "oils replay: {} records of {} replayed, every telemetry identical",
+        r.records,
+        args.log.display()
+    );
+    oils_emulator::report::finish_run(&r.report, args.report.as_deref())?;
+    Ok(())
+}

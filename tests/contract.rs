@@ -1,0 +1,312 @@
+//! The run core's contracts:
+//! * `regress_*`: the default descent's digest for each propulsion model equals the
+//!   frozen one in `tests/data/frozen-digests.toml` (any change of physics, GNC,
+//!   protocol or model shows here);
+//! * `contract_*`: the same `RunConfig` gives the same digest in process and across two
+//!   processes over real iceoryx2; a report repeats its run; a log replays to the same
+//!   digest (record == replay); the log carries the true state.
+
+mod common;
+use common::*;
+use oils_emulator::propulsion::PropulsionKind;
+use oils_emulator::run_config::{LinkKind, RunConfig};
+use oils_emulator::session;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+fn frozen_digest(model: &str) -> String {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/frozen-digests.toml"),
+    )
+    .unwrap();
+    let table: toml::Table = toml::from_str(&text).unwrap();
+    table[model].as_str().unwrap().to_string()
+}
+
+/// The default run configuration for `model`, in process, without a log.
+fn inproc_config(model: PropulsionKind) -> RunConfig {
+    let mut cfg = RunConfig {
+        link: LinkKind::Inproc,
+        propulsion: model,
+        ..Default::default()
+    };
+    cfg.log.enabled = false;
+    cfg
+}
+
+fn digest_in_process(cfg: &RunConfig) -> String {
+    let stop = AtomicBool::new(false);
+    let report = session::run(cfg, None, &stop, &mut |_| {
+        unreachable!("no launch in process")
+    })
+    .expect("in-process run");
+    report.summary.digest
+}
+
+/// Runs `oils run --config FILE --link iceoryx2` on `cfg` and returns its report.
+fn report_across_processes(name: &str, cfg: &RunConfig) -> serde_json::Value {
+    let dir = scratch(name);
+    let file = dir.join("run.toml");
+    std::fs::write(&file, cfg.to_toml()).unwrap();
+    let rep = dir.join("report.json");
+    let out = run_oils(&[
+        "run",
+        "--config",
+        file.to_str().unwrap(),
+        "--link",
+        "iceoryx2",
+        "--report",
+        rep.to_str().unwrap(),
+        "--no-log",
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    report(&rep)
+}
+
+fn regress_and_contract(model: PropulsionKind) {
+    let cfg = inproc_config(model);
+    let inproc = digest_in_process(&cfg);
+    assert_eq!(
+        inproc,
+        frozen_digest(model.as_str()),
+        "{}: the default descent's digest moved",
+        model.as_str()
+    );
+    let r = report_across_processes(&format!("contract-{}", model.as_str()), &cfg);
+    assert_eq!(r["digest"].as_str().unwrap(), inproc);
+    assert_eq!(r["link"], "iceoryx2");
+    assert_eq!(r["propulsion"], model.as_str());
+    assert_eq!(r["config"]["propulsion"], model.as_str());
+}
+
+#[test]
+fn regress_and_contract_ideal() {
+    regress_and_contract(PropulsionKind::Ideal);
+}
+
+#[test]
+fn regress_and_contract_surrogate() {
+    regress_and_contract(PropulsionKind::Surrogate);
+}
+
+#[test]
+fn regress_and_contract_hifi() {
+    regress_and_contract(PropulsionKind::Hifi);
+}
+
+#[test]
+fn contract_in_process_timing_has_no_transport() {
+    let dir = scratch("inproc-timing");
+    let rep = dir.join("r.json");
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--propulsion",
+        "ideal",
+        "--duration",
+        "50",
+        "--no-log",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let r = report(&rep);
+    let steps = r["steps"].as_u64().unwrap();
+    assert_eq!(r["timing"]["round_trip_ns"]["count"], steps);
+    assert_eq!(r["timing"]["stub_compute_ns"]["count"], steps);
+    assert_eq!(r["timing"]["transport_ns"]["count"], 0);
+    assert_eq!(r["wait"], "none");
+    assert_eq!(r["link"], "inproc");
+}
+
+#[test]
+fn contract_a_report_repeats_its_run() {
+    let dir = scratch("config-from");
+    let first = dir.join("first.json");
+    let again = dir.join("again.json");
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--propulsion",
+        "ideal",
+        "--seed",
+        "42",
+        "--duration",
+        "120",
+        "--no-log",
+        "--report",
+        first.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    // Repeated across processes, from nothing but the report.
+    let out = run_oils(&[
+        "run",
+        "--config-from",
+        first.to_str().unwrap(),
+        "--link",
+        "iceoryx2",
+        "--report",
+        again.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let (a, b) = (report(&first), report(&again));
+    assert_eq!(a["digest"], b["digest"]);
+    assert_eq!(b["seed"], 42);
+    assert_eq!(b["outcome"], "completed");
+    // And a flag given with the file wins over it.
+    let other = dir.join("other.json");
+    let out = run_oils(&[
+        "run",
+        "--config-from",
+        first.to_str().unwrap(),
+        "--seed",
+        "43",
+        "--report",
+        other.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert_ne!(report(&other)["digest"], a["digest"]);
+}
+
+#[test]
+fn contract_record_equals_replay() {
+    let dir = scratch("replay");
+    let log = dir.join("run.oilslog");
+    let rep = dir.join("run.json");
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "iceoryx2",
+        "--duration",
+        "150",
+        "--log",
+        log.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let replayed = dir.join("replay.json");
+    let out = run_oils(&[
+        "replay",
+        log.to_str().unwrap(),
+        "--report",
+        replayed.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert_eq!(report(&rep)["digest"], report(&replayed)["digest"]);
+
+    // A log whose configuration no longer matches its records does not replay.
+    let bytes = std::fs::read(&log).unwrap();
+    let header_len = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
+    let mut header: serde_json::Value =
+        serde_json::from_slice(&bytes[12..12 + header_len]).unwrap();
+    header["config"]["seed"] = 1.into();
+    let header = header.to_string();
+    let mut forged = bytes[..8].to_vec();
+    forged.extend_from_slice(&(header.len() as u32).to_le_bytes());
+    forged.extend_from_slice(header.as_bytes());
+    forged.extend_from_slice(&bytes[12 + header_len..]);
+    let forged_log = dir.join("forged.oilslog");
+    std::fs::write(&forged_log, forged).unwrap();
+    let out = run_oils(&["replay", forged_log.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("diverged at step 0"),
+        "{}",
+        text(&out)
+    );
+}
+
+#[test]
+fn contract_the_log_holds_the_truth_and_checks_itself() {
+    let dir = scratch("truth");
+    let log = dir.join("run.oilslog");
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--propulsion",
+        "hifi",
+        "--duration",
+        "30",
+        "--log",
+        log.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let csv = dir.join("run.csv");
+    let out = run_oils(&[
+        "export",
+        log.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let body = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = body.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("no column {name}"))
+    };
+    for name in [
+        "true_pos_x_m",
+        "true_vel_z_m_s",
+        "true_q_w",
+        "true_rate_x_rad_s",
+        "true_mass_kg",
+        "true_altitude_m",
+        "true_contact",
+        "true_gas_pressure_pa",
+        "true_fuel_manifold_pressure_pa",
+        "true_fuel_valve1",
+        "true_thrust4_n",
+        "true_ejected_ox_kg",
+        "applied_thrust1_n",
+    ] {
+        col(name);
+    }
+    let rows: Vec<Vec<f64>> = lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(
+        rows.len(),
+        3001,
+        "30 s of 10 ms steps and the final telemetry"
+    );
+    // Navigation noise (on by default) is in the telemetry, not in the truth: the
+    // noisy altitude differs from the true one, by the noise's size (0.5 m sigma).
+    let (alt, true_alt) = (col("altitude_m"), col("true_altitude_m"));
+    let diffs: Vec<f64> = rows.iter().map(|r| r[alt] - r[true_alt]).collect();
+    assert!(diffs.iter().any(|d| *d != 0.0));
+    assert!(diffs.iter().all(|d| d.abs() < 5.0), "{diffs:?}");
+    // hifi's internals are there: the manifold holds pressure once the engines run,
+    // and the valve strokes lie in [0, 1].
+    let last = rows.last().unwrap();
+    assert!(last[col("true_fuel_manifold_pressure_pa")] > 1e5);
+    let v = last[col("true_fuel_valve1")];
+    assert!((0.0..=1.0).contains(&v), "{v}");
+    // The true mass falls by the ejected propellant.
+    assert!(rows[0][col("true_mass_kg")] > last[col("true_mass_kg")]);
+
+    // A record damaged on disk is named by its step, not exported as data.
+    let mut bytes = std::fs::read(&log).unwrap();
+    let header_len = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
+    let record_size = oils_emulator::recorder::RECORD_SIZE;
+    let at = 12 + header_len + 1234 * record_size + 100;
+    bytes[at] ^= 0x40;
+    let damaged = dir.join("damaged.oilslog");
+    std::fs::write(&damaged, bytes).unwrap();
+    let out = run_oils(&[
+        "export",
+        damaged.to_str().unwrap(),
+        "--csv",
+        dir.join("d.csv").to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("damaged") && err.contains("1234"), "{err}");
+}
