@@ -14,6 +14,7 @@
 pub mod clock;
 pub mod config;
 pub mod digest;
+pub mod faults;
 pub mod link;
 pub mod plant;
 pub mod plot;

@@ -125,7 +125,8 @@ impl ReplayLink {
         }
     }
 
-    /// Records replayed so far.
+    /// Records replayed so far (up to the last step published; a step whose telemetry
+    /// a fault withheld is not published, but counts).
     pub fn replayed(&self) -> usize {
         self.next
     }
@@ -140,14 +141,18 @@ fn same_telemetry(a: &Telemetry, b: &Telemetry) -> bool {
 
 impl Link for ReplayLink {
     fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {
+        // One record per step from step 0: the step is the record's position.
         let step = tlm.header.step;
-        let Some(rec) = self.log.records.get(self.next) else {
+        let Some(rec) = usize::try_from(step)
+            .ok()
+            .and_then(|i| self.log.records.get(i))
+        else {
             return Err(ExchangeError::ReplayDiverged { step });
         };
         if !same_telemetry(&rec.telemetry, tlm) {
             return Err(ExchangeError::ReplayDiverged { step });
         }
-        self.next += 1;
+        self.next = step as usize + 1;
         self.pending = (rec.flags & REC_COMMAND_RECEIVED != 0 && rec.flags & REC_END_OF_RUN == 0)
             .then_some(rec.command);
         Ok(())

@@ -22,7 +22,7 @@
 
 use crate::plant::{ActuatorCommand, TruthState};
 use crate::propulsion::{PropulsionInternals, PropulsionOutput};
-use crossbeam::channel::{bounded, Receiver, Sender};
+use crossbeam::channel::{bounded, Receiver, Sender, TrySendError};
 use oils_shared::{AsBytes, Command, Telemetry, ENGINE_COUNT};
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
@@ -93,9 +93,10 @@ pub const TRUTH_COLUMNS: [&str; TRUTH_VALUES] = [
     "true_ox_valve3",
     "true_fuel_valve4",
     "true_ox_valve4",
+    "faults_active",
 ];
 /// Number of f64 values after the packets in a record.
-pub const TRUTH_VALUES: usize = 57;
+pub const TRUTH_VALUES: usize = 58;
 const TLM_SIZE: usize = core::mem::size_of::<Telemetry>();
 const CMD_SIZE: usize = core::mem::size_of::<Command>();
 /// Bytes per record.
@@ -108,6 +109,10 @@ pub const REC_DEADLINE_MISS: u32 = 1 << 1;
 pub const REC_REJECTED_VALUES: u32 = 1 << 2;
 /// Record flag: last record of the run (the final telemetry, no command).
 pub const REC_END_OF_RUN: u32 = 1 << 3;
+/// Record flag: a fault fired at this step (`faults_active` says which are active).
+pub const REC_FAULT_FIRED: u32 = 1 << 4;
+/// Record flag: a fault cleared at this step.
+pub const REC_FAULT_CLEARED: u32 = 1 << 5;
 
 /// Records in flight between the stepping thread and the writer.
 const CHANNEL_CAPACITY: usize = 8192;
@@ -125,6 +130,8 @@ pub struct Record {
     pub applied: ActuatorCommand,
     /// The true state at `t_k`, the instant Telemetry(k) describes.
     pub truth: TruthState,
+    /// Faults active at this step: bit i for the i-th declared fault.
+    pub faults_active: u64,
 }
 
 impl Record {
@@ -165,6 +172,8 @@ impl Record {
         for valves in &i.valve_position {
             put(valves);
         }
+        // Exact: at most 64 faults, and masks stay below 2^53 for up to 53 of them.
+        put(&[self.faults_active as f64]);
         debug_assert_eq!(n, TRUTH_VALUES);
         v
     }
@@ -211,6 +220,7 @@ impl Record {
             let s = take(2);
             *valves = [s[0], s[1]];
         }
+        self.faults_active = take(1)[0] as u64;
         self.applied = applied;
         self.truth = TruthState {
             pos_mci_m,
@@ -342,13 +352,26 @@ impl Recorder {
         &self.path
     }
 
-    /// Queues one record (blocks only if the writer is 8192 records behind).
+    /// Queues one record. When the writer is 8192 records behind (an in-process run
+    /// outpaces the disk), waits for room by yielding, not by a blocking send: a
+    /// blocking send registers the thread with the channel's waker list, which
+    /// allocates, and the stepping thread must never allocate.
     pub fn record(&self, rec: &Record) -> Result<(), RecorderError> {
-        match &self.tx {
-            Some(tx) => tx
-                .send(*rec)
-                .map_err(|_| RecorderError::WriterGone("channel closed".into())),
-            None => Err(RecorderError::WriterGone("recorder finished".into())),
+        let Some(tx) = &self.tx else {
+            return Err(RecorderError::WriterGone("recorder finished".into()));
+        };
+        let mut rec = *rec;
+        loop {
+            match tx.try_send(rec) {
+                Ok(()) => return Ok(()),
+                Err(TrySendError::Full(r)) => {
+                    rec = r;
+                    std::thread::yield_now();
+                }
+                Err(TrySendError::Disconnected(_)) => {
+                    return Err(RecorderError::WriterGone("channel closed".into()))
+                }
+            }
         }
     }
 

@@ -150,6 +150,17 @@ impl RunReport {
         for v in &s.threshold_violations {
             let _ = writeln!(out, "THRESHOLD   {v}");
         }
+        for f in &s.faults {
+            let cleared = f
+                .cleared_t_s
+                .map(|t| format!(", cleared at t = {t:.2} s"))
+                .unwrap_or_default();
+            let _ = writeln!(
+                out,
+                "fault       {} fired at t = {:.2} s (step {}){cleared}",
+                f.spec, f.t_s, f.step
+            );
+        }
         if let Some(d) = &s.propulsion_diagnostics {
             diagnostics_lines(&mut out, d);
         }

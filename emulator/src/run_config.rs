@@ -6,6 +6,7 @@
 //! campaign will vary. No clap here: binaries turn flags into a `RunConfig`.
 
 use crate::config::{ConfigError, ScenarioConfig};
+use crate::faults::{FaultSpec, MAX_FAULTS};
 use crate::propulsion::hifi::HifiParams;
 use crate::propulsion::PropulsionKind;
 use crate::scheduler::{MissPolicy, Mode};
@@ -193,6 +194,9 @@ pub struct RunConfig {
     pub thresholds: ThresholdConfig,
     /// Log settings.
     pub log: LogConfig,
+    /// Faults to inject (`[[faults]]`; `--fault SPEC` on the command line).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub faults: Vec<FaultSpec>,
 }
 
 impl Default for RunConfig {
@@ -226,6 +230,7 @@ impl Default for RunConfig {
             rt_priority: None,
             thresholds: ThresholdConfig::default(),
             log: LogConfig::default(),
+            faults: Vec::new(),
         }
     }
 }
@@ -267,6 +272,7 @@ fn flag_of(field: &str) -> String {
     let name = field.strip_prefix("thresholds.").unwrap_or(field);
     match name {
         "duration_s" => "--duration".into(),
+        "faults" => "--fault".into(),
         _ => format!("--{}", name.replace('_', "-")),
     }
 }
@@ -378,6 +384,17 @@ impl RunConfig {
                 format!("{:?}", self.wait).to_lowercase(),
                 "only the iceoryx2 link waits; leave it unset for link = \"inproc\"",
             ));
+        }
+        if self.faults.len() > MAX_FAULTS {
+            return Err(invalid(
+                "faults",
+                self.faults.len(),
+                format!("at most {MAX_FAULTS} faults"),
+            ));
+        }
+        for f in &self.faults {
+            f.validate()
+                .map_err(|why| invalid("faults", f.to_string(), why))?;
         }
         self.scenario.validate()?;
         if let Some(h) = &self.hifi {

@@ -15,10 +15,12 @@
 
 use crate::clock::StepClock;
 use crate::digest::RunDigest;
+use crate::faults::{FaultPlan, FaultReport, PlantFault};
 use crate::link::{ExchangeError, Link};
 use crate::plant::{ActuatorCommand, Plant, PlantStatus, TouchdownState};
 use crate::recorder::{
-    Record, Recorder, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN, REC_REJECTED_VALUES,
+    Record, Recorder, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN, REC_FAULT_CLEARED,
+    REC_FAULT_FIRED, REC_REJECTED_VALUES,
 };
 use crate::sanitize::sanitize;
 use crate::timing::{TimingMonitor, TimingThresholds};
@@ -165,6 +167,8 @@ pub struct RunSummary {
     pub threshold_violations: Vec<String>,
     /// Records written to the log.
     pub log_records: u64,
+    /// Every fault that fired: kind, target, when, and when it cleared.
+    pub faults: Vec<FaultReport>,
     /// What the propulsion model reported at the end (surrogate envelope exits, shadow
     /// divergence); `None` for models with nothing to report.
     pub propulsion_diagnostics: Option<crate::propulsion::PropulsionDiagnostics>,
@@ -217,18 +221,21 @@ pub fn run<L: Link + ?Sized, C: StepClock + ?Sized>(
     plant: &mut Plant,
     link: &mut L,
     clock: &mut C,
+    faults: &mut FaultPlan,
     recorder: Option<&Recorder>,
     stop: &AtomicBool,
 ) -> Result<RunSummary, SchedulerError> {
-    run_observed(cfg, plant, link, clock, recorder, stop, None)
+    run_observed(cfg, plant, link, clock, faults, recorder, stop, None)
 }
 
 /// [`run`], calling `observer` after every integrated step.
+#[allow(clippy::too_many_arguments)]
 pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     cfg: &SchedulerConfig,
     plant: &mut Plant,
     link: &mut L,
     clock: &mut C,
+    faults: &mut FaultPlan,
     recorder: Option<&Recorder>,
     stop: &AtomicBool,
     mut observer: Option<StepObserver<'_>>,
@@ -254,7 +261,27 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         if abort.is_none() && stop.load(Ordering::Relaxed) {
             abort = Some(Abort::Interrupted);
         }
+        let (fired, cleared) = faults.advance(k, t_ns, plant.altitude_m());
+        let mut fault_flags = 0u32;
+        if fired | cleared != 0 {
+            for i in 0..faults.len() {
+                let bit = 1u64 << i;
+                if (fired | cleared) & bit != 0 {
+                    if let Some(f) = PlantFault::of(faults.spec(i)) {
+                        plant.set_fault(&f, fired & bit != 0);
+                    }
+                }
+            }
+            if fired != 0 {
+                fault_flags |= REC_FAULT_FIRED;
+            }
+            if cleared != 0 {
+                fault_flags |= REC_FAULT_CLEARED;
+            }
+        }
+        let faults_active = faults.active_mask();
         let mut tlm = plant.telemetry(PacketHeader::new(cfg.run_id, k, t_ns));
+        faults.apply_sensors(&mut tlm, fired);
         let finished = abort.is_some()
             || matches!(status, PlantStatus::Touchdown(_))
             || t_ns >= cfg.max_duration_ns;
@@ -265,22 +292,31 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             digest.add_telemetry(&tlm);
             if let Some(r) = recorder {
                 r.record(&Record {
-                    flags: REC_END_OF_RUN,
+                    flags: REC_END_OF_RUN | fault_flags,
                     telemetry: tlm,
                     command: Command::default(),
                     applied: ActuatorCommand::default(),
                     truth: plant.truth(),
+                    faults_active,
                 })?;
             }
             break;
         }
 
+        // A link fault may keep Telemetry(k) from the flight software: then nothing is
+        // published, nothing can answer, and the step is a miss.
+        let withheld = faults.telemetry_withheld();
         let published_ns = monotonic_ns();
-        link.publish(&tlm)?;
-        digest.add_telemetry(&tlm);
+        if !withheld {
+            link.publish(&tlm)?;
+            digest.add_telemetry(&tlm);
+        }
 
         let deadline_ns = clock.command_deadline_ns(k, published_ns);
         let received = loop {
+            if withheld {
+                break None;
+            }
             match link.receive_until(deadline_ns, stop) {
                 Ok(Some(c)) if c.header.step < k => timing.record_late_command(),
                 Ok(other) => break other,
@@ -295,9 +331,14 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         if abort.is_some() {
             continue;
         }
+        // A duplicated command from the previous step arrives stale, and is discarded.
+        if faults.take_duplicate().is_some() {
+            timing.record_late_command();
+        }
 
-        let mut flags = 0u32;
+        let mut flags = fault_flags;
         let mut logged_cmd = Command::default();
+        let mut wire_cmd = None;
         match received {
             Some(cmd) => {
                 if let Err(m) = cmd.header.check_peer() {
@@ -319,6 +360,22 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     timing.record_in_process(round_trip_ns, cmd.stub_compute_ns);
                 }
                 digest.add_command(&cmd);
+                flags |= REC_COMMAND_RECEIVED;
+                logged_cmd = cmd;
+                wire_cmd = Some(cmd);
+            }
+            None if !withheld && !clock.misses_allowed() => {
+                abort = Some(Abort::StubSilent {
+                    step: k,
+                    waited_ms: (received_ns - published_ns) / 1_000_000,
+                });
+                continue;
+            }
+            None => {}
+        }
+        // Link faults act between the wire and the sanitiser.
+        match faults.on_command(wire_cmd) {
+            Some(cmd) => {
                 let (safe, rejected) = sanitize(&cmd, cfg.max_thrust_n);
                 if rejected > 0 {
                     rejected_commands += 1;
@@ -326,15 +383,6 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     flags |= REC_REJECTED_VALUES;
                 }
                 applied = safe;
-                flags |= REC_COMMAND_RECEIVED;
-                logged_cmd = cmd;
-            }
-            None if !clock.misses_allowed() => {
-                abort = Some(Abort::StubSilent {
-                    step: k,
-                    waited_ms: (received_ns - published_ns) / 1_000_000,
-                });
-                continue;
             }
             None => {
                 timing.record_deadline_miss();
@@ -366,6 +414,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                 command: logged_cmd,
                 applied,
                 truth: plant.truth(),
+                faults_active,
             })?;
         }
         status = plant.step(&applied, cfg.dt_ns);
@@ -407,6 +456,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         threshold_violations: cfg.thresholds.violations(&timing),
         timing,
         log_records: 0,
+        faults: faults.report(),
         propulsion_diagnostics: plant.propulsion_diagnostics(),
     })
 }

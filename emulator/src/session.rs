@@ -4,6 +4,7 @@
 //! the same loop. No command-line types here: binaries build the `RunConfig`.
 
 use crate::clock::{LockstepClock, RealtimeClock, ReplayClock, StepClock};
+use crate::faults::{FaultPlan, PlantFault};
 use crate::link::{InProcLink, Link, ReplayLink};
 use crate::plant::Plant;
 use crate::propulsion::build_configured;
@@ -103,6 +104,28 @@ pub fn build_plant(cfg: &RunConfig) -> Result<Plant, SessionError> {
     Ok(Plant::new(&cfg.scenario, propulsion, cfg.seed)?)
 }
 
+/// The run's faults, armed, after checking that the plant's propulsion model can
+/// represent each (a fault it cannot is refused, naming the model).
+pub fn fault_plan(cfg: &RunConfig, plant: &Plant) -> Result<FaultPlan, SessionError> {
+    for spec in &cfg.faults {
+        if let Some(f) = PlantFault::of(spec) {
+            if !plant.supports(&f) {
+                return Err(RunConfigError::Invalid {
+                    field: "faults",
+                    value: spec.to_string(),
+                    why: format!(
+                        "the {} propulsion model cannot represent {} (only hifi models it physically)",
+                        cfg.propulsion.as_str(),
+                        spec.kind.name()
+                    ),
+                }
+                .into());
+            }
+        }
+    }
+    Ok(FaultPlan::new(&cfg.faults, cfg.seed))
+}
+
 fn scheduler_config(cfg: &RunConfig, run_id: u64) -> SchedulerConfig {
     SchedulerConfig {
         dt_ns: cfg.dt_ns(),
@@ -167,6 +190,7 @@ pub fn run(
     cfg.validate()?;
     let run_id = run_id.unwrap_or_else(fresh_run_id);
     let mut plant = build_plant(cfg)?;
+    let mut faults = fault_plan(cfg, &plant)?;
     let sched = scheduler_config(cfg, run_id);
     let mut clock = step_clock(cfg);
 
@@ -184,6 +208,7 @@ pub fn run(
                 &mut plant,
                 &mut link,
                 clock.as_mut(),
+                &mut faults,
                 recorder,
                 stop,
             )?;
@@ -210,6 +235,7 @@ pub fn run(
                 &mut plant,
                 &mut link,
                 clock.as_mut(),
+                &mut faults,
                 recorder,
                 stop,
             )?;
@@ -225,10 +251,11 @@ fn run_and_close<L: Link + ?Sized>(
     plant: &mut Plant,
     link: &mut L,
     clock: &mut dyn StepClock,
+    faults: &mut FaultPlan,
     recorder: Option<Recorder>,
     stop: &AtomicBool,
 ) -> Result<(scheduler::RunSummary, Option<PathBuf>), SessionError> {
-    let mut summary = scheduler::run(sched, plant, link, clock, recorder.as_ref(), stop)?;
+    let mut summary = scheduler::run(sched, plant, link, clock, faults, recorder.as_ref(), stop)?;
     let path = recorder.as_ref().map(|r| r.path().to_path_buf());
     if let Some(r) = recorder {
         summary.log_records = r.finish()?;
@@ -274,11 +301,20 @@ pub fn replay(log_path: &Path, stop: &AtomicBool) -> Result<Replay, SessionError
         .ok_or_else(|| bad("header has no run id".into()))?;
     config.validate()?;
     let mut plant = build_plant(&config)?;
+    let mut faults = fault_plan(&config, &plant)?;
     let sched = scheduler_config(&config, run_id);
     let recorded = log.records.len();
     let mut link = ReplayLink::new(log);
     let mut clock = ReplayClock::default();
-    let summary = scheduler::run(&sched, &mut plant, &mut link, &mut clock, None, stop)?;
+    let summary = scheduler::run(
+        &sched,
+        &mut plant,
+        &mut link,
+        &mut clock,
+        &mut faults,
+        None,
+        stop,
+    )?;
     let records = link.replayed();
     if records != recorded {
         return Err(bad(format!(

@@ -123,6 +123,10 @@ pub struct RunArgs {
     /// Fail the run if there are more deadline misses than this.
     #[arg(long)]
     pub max_deadline_misses: Option<u64>,
+    /// Inject a fault (repeatable): KIND[:TARGET][,P=V...]@TRIGGER[,for=S], e.g.
+    /// engine-off:2@t=400 (README "Faults"). Added to the configuration's faults.
+    #[arg(long = "fault", value_name = "SPEC")]
+    pub faults: Vec<oils_emulator::faults::FaultSpec>,
     /// Do not spawn a stub: wait for flight software started by hand on the run's
     /// services (prints them); the report says `fsw: external`.
     #[arg(long)]
@@ -194,6 +198,7 @@ impl RunArgs {
         if self.no_stub {
             cfg.fsw = FswSpec::External;
         }
+        cfg.faults.extend(self.faults.iter().cloned());
         cfg.validate()?;
         Ok(cfg)
     }

@@ -17,7 +17,8 @@ pub mod nav_noise;
 pub mod rigid_body;
 
 use crate::config::{ConfigError, ScenarioConfig, TouchdownLimits};
-use crate::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
+use crate::faults::PlantFault;
+use crate::propulsion::{EngineCommand, Propulsion, PropulsionFault, PropulsionOutput};
 use integrator::RK4;
 use nalgebra::Vector3;
 use nav_noise::NavNoise;
@@ -118,6 +119,18 @@ pub struct Plant {
     rcs_used_kg: f64,
     touchdown: Option<TouchdownState>,
     noise: Option<NavNoise>,
+    /// Engine faults acting on the command.
+    engine_faults: [EngineFault; ENGINE_COUNT],
+    /// Output scale of each engine (a degradation the model cannot represent).
+    output_factor: [f64; ENGINE_COUNT],
+}
+
+/// An engine fault acting on the command the engine gets.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum EngineFault {
+    None,
+    Off,
+    Stuck { thrust_cmd_n: f64, on: bool },
 }
 
 impl Plant {
@@ -162,6 +175,8 @@ impl Plant {
             rcs_used_kg: 0.0,
             touchdown: None,
             noise,
+            engine_faults: [EngineFault::None; ENGINE_COUNT],
+            output_factor: [1.0; ENGINE_COUNT],
         })
     }
 
@@ -213,9 +228,32 @@ impl Plant {
         let dry_mass_kg = setup.dynamics.mass.dry_mass_kg;
 
         // 1. Propulsion first: its mean thrust over the step is what the body feels.
+        // Engine faults act on the command the engines get (every model then follows
+        // it physically); a degradation a model cannot represent scales its outputs.
+        let mut engines = cmd.engines;
+        for (e, o) in self.engine_faults.iter().enumerate() {
+            match *o {
+                EngineFault::None => {}
+                EngineFault::Off => {
+                    engines.on[e] = false;
+                    engines.thrust_cmd_n[e] = 0.0;
+                }
+                EngineFault::Stuck { thrust_cmd_n, on } => {
+                    engines.on[e] = on;
+                    engines.thrust_cmd_n[e] = thrust_cmd_n;
+                }
+            }
+        }
         let ejected_before_kg = self.prop_out.ejected_kg();
-        self.prop_out = self.propulsion.step(&cmd.engines, dt_ns);
-        self.last_engines = cmd.engines;
+        self.prop_out = self.propulsion.step(&engines, dt_ns);
+        for (e, &factor) in self.output_factor.iter().enumerate() {
+            if factor != 1.0 {
+                self.prop_out.thrust_n[e] *= factor;
+                self.prop_out.mean_thrust_n[e] *= factor;
+                self.prop_out.chamber_pressure_pa[e] *= factor;
+            }
+        }
+        self.last_engines = engines;
         let main_ejected_kg = (self.prop_out.ejected_kg() - ejected_before_kg).max(0.0);
 
         // 2. Attitude thrusters: saturated torque; propellant at |torque| / arm / c.
@@ -425,6 +463,48 @@ impl Plant {
     /// The touchdown, once it happened.
     pub fn touchdown(&self) -> Option<TouchdownState> {
         self.touchdown
+    }
+
+    /// Whether this plant's propulsion model can take `fault`: engine-off and stuck act
+    /// on the command and a degradation may act on the outputs, so every model takes
+    /// those; the rest need a model that represents them physically.
+    pub fn supports(&self, fault: &PlantFault) -> bool {
+        match fault {
+            PlantFault::EngineOff(_) | PlantFault::EngineStuck(_) => true,
+            PlantFault::Propulsion(PropulsionFault::ThrustDegraded { .. }) => true,
+            PlantFault::Propulsion(f) => self.propulsion.represents(f),
+        }
+    }
+
+    /// Starts (`active`) or clears a fault. A stuck engine holds the command it was
+    /// last given.
+    pub fn set_fault(&mut self, fault: &PlantFault, active: bool) {
+        match *fault {
+            PlantFault::EngineOff(e) => {
+                self.engine_faults[e] = if active {
+                    EngineFault::Off
+                } else {
+                    EngineFault::None
+                }
+            }
+            PlantFault::EngineStuck(e) => {
+                self.engine_faults[e] = if active {
+                    EngineFault::Stuck {
+                        thrust_cmd_n: self.last_engines.thrust_cmd_n[e],
+                        on: self.last_engines.on[e],
+                    }
+                } else {
+                    EngineFault::None
+                }
+            }
+            PlantFault::Propulsion(f) => {
+                if self.propulsion.represents(&f) {
+                    self.propulsion.inject(&f, active);
+                } else if let PropulsionFault::ThrustDegraded { engine, factor } = f {
+                    self.output_factor[engine] = if active { factor } else { 1.0 };
+                }
+            }
+        }
     }
 
     /// The first state quantity that is not finite, by name; `None` while all are. A

@@ -86,6 +86,53 @@ impl Default for PropulsionInternals {
     }
 }
 
+/// A failure inside the propulsion system, as a model receives it. Engine-off and
+/// engine-stuck faults never reach a model: the plant acts on the command instead, which
+/// every model then follows physically.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PropulsionFault {
+    /// An engine's thrust degraded to `factor` of what it would be.
+    ThrustDegraded {
+        /// Engine, 0-based.
+        engine: usize,
+        /// Remaining fraction, [0, 1).
+        factor: f64,
+    },
+    /// An engine's throttle valves stuck where they are.
+    ValveStuck {
+        /// Engine, 0-based.
+        engine: usize,
+    },
+    /// An engine's throttle valves move `factor` times as fast as they should.
+    ValveSlow {
+        /// Engine, 0-based.
+        engine: usize,
+        /// Speed fraction, (0, 1).
+        factor: f64,
+    },
+    /// The pressure regulator failed wide open.
+    RegulatorOpen,
+    /// The pressure regulator failed shut.
+    RegulatorClosed,
+    /// The regulator's set point drifts at this rate, Pa/s.
+    RegulatorDrift {
+        /// Drift rate, Pa/s.
+        rate_pa_s: f64,
+    },
+    /// Helium leaks from the bottle through this flow area, m^2.
+    PressurantLeak {
+        /// Leak flow area (Cd A), m^2.
+        area_m2: f64,
+    },
+    /// Propellant leaks from a tank.
+    PropellantLeak {
+        /// 0 fuel, 1 oxidiser.
+        side: usize,
+        /// Leak rate while the tank holds liquid, kg/s.
+        kg_s: f64,
+    },
+}
+
 /// A propulsion model the plant can step.
 ///
 /// Contract: `step` does not allocate, lock, log or read the clock; the same sequence of
@@ -106,6 +153,12 @@ pub trait Propulsion: Send {
     fn internals(&self) -> PropulsionInternals {
         PropulsionInternals::NONE
     }
+    /// Whether the model represents `fault` physically (checked before tick 0).
+    fn represents(&self, _fault: &PropulsionFault) -> bool {
+        false
+    }
+    /// Starts (`active`) or clears a fault the model represents; a no-op otherwise.
+    fn inject(&mut self, _fault: &PropulsionFault, _active: bool) {}
 }
 
 /// Which propulsion model a run uses.

@@ -56,6 +56,14 @@ impl<T: Propulsion, M: Propulsion> Propulsion for ShadowPropulsion<T, M> {
         self.truth.internals()
     }
 
+    fn represents(&self, fault: &super::PropulsionFault) -> bool {
+        self.truth.represents(fault)
+    }
+
+    fn inject(&mut self, fault: &super::PropulsionFault, active: bool) {
+        self.truth.inject(fault, active)
+    }
+
     fn diagnostics(&self) -> Option<PropulsionDiagnostics> {
         Some(PropulsionDiagnostics {
             out_of_envelope_steps: self

@@ -21,6 +21,8 @@ pub enum EngineSet {
     Four,
     /// The diagonal pair named in [`GncConfig::two_engine_pair`].
     DiagonalPair,
+    /// The other diagonal pair (flown after an engine of the first pair fails).
+    OtherPair,
 }
 
 /// Output of one allocation.
@@ -49,6 +51,7 @@ struct SetMatrices {
 pub struct ThrustAllocator {
     four: SetMatrices,
     pair: SetMatrices,
+    other_pair: SetMatrices,
     max_thrust_n: f64,
     min_thrust_n: f64,
     rcs_max_torque_nm: Vector3<f64>,
@@ -77,10 +80,20 @@ impl ThrustAllocator {
         Some(Self {
             four: build([true; ENGINE_COUNT])?,
             pair: build(pair_on)?,
+            other_pair: build(pair_on.map(|on| !on))?,
             max_thrust_n: cfg.max_thrust_n,
             min_thrust_n: cfg.max_thrust_n * cfg.throttle_min_frac,
             rcs_max_torque_nm: Vector3::from(cfg.rcs_max_torque_nm),
         })
+    }
+
+    /// The pair that flies without `failed`: the diagonal pair not containing it.
+    pub fn pair_without(&self, failed: usize) -> EngineSet {
+        if self.pair.on.get(failed).copied().unwrap_or(false) {
+            EngineSet::OtherPair
+        } else {
+            EngineSet::DiagonalPair
+        }
     }
 
     /// Number of engines in a set.
@@ -102,6 +115,7 @@ impl ThrustAllocator {
         match set {
             EngineSet::Four => &self.four,
             EngineSet::DiagonalPair => &self.pair,
+            EngineSet::OtherPair => &self.other_pair,
         }
     }
 

@@ -325,6 +325,64 @@ pub struct ReferenceGnc {
     pair_saturated_s: f64,
     last_cmd_total_n: f64,
     last_t_s: f64,
+    /// Engine-out detection.
+    monitor: EngineMonitor,
+}
+
+/// Detects a main engine that stopped delivering: lit and commanded for a while, yet
+/// its thrust reading stays below half of the command. What it sees is telemetry only.
+#[derive(Debug, Clone, Default)]
+struct EngineMonitor {
+    /// Last command per engine (thrust, lit).
+    commanded_n: [f64; ENGINE_COUNT],
+    lit: [bool; ENGINE_COUNT],
+    /// How long each engine has been lit, s.
+    lit_s: [f64; ENGINE_COUNT],
+    /// How long each engine's reading has been short, s.
+    short_s: [f64; ENGINE_COUNT],
+    /// The engine declared failed, once.
+    failed: Option<usize>,
+}
+
+impl EngineMonitor {
+    /// An engine needs this long lit before its reading is judged (start-up transient).
+    const SETTLE_S: f64 = 2.0;
+    /// A reading below this fraction of the command is short.
+    const SHORT_FRAC: f64 = 0.5;
+    /// Short for this long means failed.
+    const CONFIRM_S: f64 = 0.3;
+
+    fn update(&mut self, tlm: &Telemetry, dt_s: f64) -> Option<usize> {
+        if self.failed.is_some() {
+            return self.failed;
+        }
+        for e in 0..ENGINE_COUNT {
+            if !self.lit[e] {
+                self.lit_s[e] = 0.0;
+                self.short_s[e] = 0.0;
+                continue;
+            }
+            self.lit_s[e] += dt_s;
+            let reading = tlm.propulsion.engines[e].thrust_n;
+            // A reading that is not a number counts as short, too.
+            let short = reading.is_nan() || reading < Self::SHORT_FRAC * self.commanded_n[e];
+            if self.lit_s[e] > Self::SETTLE_S && short {
+                self.short_s[e] += dt_s;
+            } else {
+                self.short_s[e] = 0.0;
+            }
+            if self.short_s[e] > Self::CONFIRM_S {
+                self.failed = Some(e);
+                break;
+            }
+        }
+        self.failed
+    }
+
+    fn commanded(&mut self, thrust_n: &[f64; ENGINE_COUNT], on: &[bool; ENGINE_COUNT]) {
+        self.commanded_n = *thrust_n;
+        self.lit = *on;
+    }
 }
 
 impl ReferenceGnc {
@@ -346,6 +404,7 @@ impl ReferenceGnc {
             pair_saturated_s: 0.0,
             last_cmd_total_n: 0.0,
             last_t_s: 0.0,
+            monitor: EngineMonitor::default(),
             cfg,
         })
     }
@@ -358,6 +417,11 @@ impl ReferenceGnc {
     /// Engines in use.
     pub fn engine_set(&self) -> EngineSet {
         self.engine_set
+    }
+
+    /// The main engine declared failed (0-based), if one was.
+    pub fn failed_engine(&self) -> Option<usize> {
+        self.monitor.failed
     }
 
     /// The landing site, once chosen.
@@ -374,6 +438,12 @@ impl ReferenceGnc {
     /// current demand fit under its maximum with margin; back to four (for good) if the
     /// pair runs out of thrust.
     fn manage_engines(&mut self, mass_kg: f64, gravity_m_s2: f64, wanted_n: f64, dt_s: f64) {
+        if let Some(failed) = self.monitor.failed {
+            // Engine out: its diagonal partner goes off too (balanced thrust about the
+            // centre of mass), and the other pair flies to the end.
+            self.engine_set = self.allocator.pair_without(failed);
+            return;
+        }
         let phase = self.guidance.phase();
         let late = matches!(phase, Phase::Hover | Phase::FinalDescent);
         match self.engine_set {
@@ -392,6 +462,7 @@ impl ReferenceGnc {
                     self.pair_saturated_s = 0.0;
                 }
             }
+            EngineSet::OtherPair => {}
             EngineSet::DiagonalPair => {
                 let max = self.allocator.max_total_n(EngineSet::DiagonalPair);
                 if wanted_n > max {
@@ -417,6 +488,12 @@ impl FlightSoftware for ReferenceGnc {
         let nav = self.nav.update(tlm);
         let dt_s = (nav.t_s - self.last_t_s).max(0.0);
         self.last_t_s = nav.t_s;
+        if self.monitor.failed.is_none() && self.monitor.update(tlm, dt_s).is_some() {
+            // Reconfigure before this step's allocation.
+            self.engine_set = self
+                .allocator
+                .pair_without(self.monitor.failed.unwrap_or(0));
+        }
         let mass_kg = if nav.mass_kg > 0.0 {
             nav.mass_kg
         } else {
@@ -453,6 +530,7 @@ impl FlightSoftware for ReferenceGnc {
         let torque = self.attitude.torque_body_nm(&nav, &dir, &inertia);
         let alloc = self.allocator.allocate(set, wanted_n, torque);
         self.last_cmd_total_n = alloc.thrust_cmd_n.iter().sum();
+        self.monitor.commanded(&alloc.thrust_cmd_n, &alloc.on);
 
         Command {
             thrust_cmd_n: alloc.thrust_cmd_n,

@@ -43,7 +43,7 @@ use fluid::{Feed, Tank};
 use gas::{Bottle, CheckValve, Helium};
 use integrator::{Rhs, Ros2};
 use oils_shared::ENGINE_COUNT;
-use plant::{ix, Actuation, Aux, Drive, Plant, FUEL, N_STATES, OX};
+use plant::{ix, Actuation, Aux, Drive, Plant, PlantFaults, FUEL, N_STATES, OX};
 use regulator::Regulator;
 use thiserror::Error;
 
@@ -186,6 +186,11 @@ pub struct HifiPropulsion {
     t_ns: i64,
     out: PropulsionOutput,
     fault: Option<HifiError>,
+    /// Injected valve failures: stuck flags and speed factors per engine.
+    valve_stuck: [bool; ENGINE_COUNT],
+    valve_speed: [f64; ENGINE_COUNT],
+    /// Injected regulator set-point drift, Pa/s (0: none).
+    regulator_drift_pa_s: f64,
 }
 
 impl HifiPropulsion {
@@ -344,6 +349,7 @@ impl HifiPropulsion {
                 chamber,
                 drive: [Drive::default(); 2],
                 aux: Aux::default(),
+                faults: PlantFaults::default(),
             },
             y,
             scratch: [0.0; N_STATES],
@@ -362,6 +368,9 @@ impl HifiPropulsion {
             t_ns: 0,
             out: PropulsionOutput::default(),
             fault: None,
+            valve_stuck: [false; ENGINE_COUNT],
+            valve_speed: [1.0; ENGINE_COUNT],
+            regulator_drift_pa_s: 0.0,
         };
         let act = model.actuation();
         model.plant.set_actuation(0, &act);
@@ -521,7 +530,20 @@ impl HifiPropulsion {
                 act.solenoid[e][p] = s.opening;
                 act.dribble[e][p] = s.dribble_gate();
                 let v = &mut self.tfcvs[e][p];
-                v.advance(h, &self.tfcv_dynamics, tfcv_decay);
+                let speed = self.valve_speed[e];
+                if self.valve_stuck[e] {
+                    // A stuck valve does not move, whatever its actuator is told.
+                } else if speed < 1.0 {
+                    // A slowed actuator: its rate limit and time constant scaled.
+                    let slow = TfcvDynamics {
+                        rate_per_s: self.tfcv_dynamics.rate_per_s * speed,
+                        tau_s: self.tfcv_dynamics.tau_s / speed,
+                        ..self.tfcv_dynamics
+                    };
+                    v.advance(h, &slow, tfcv_decay.powf(speed));
+                } else {
+                    v.advance(h, &self.tfcv_dynamics, tfcv_decay);
+                }
                 act.tfcv[e][p] = v.valve;
             }
         }
@@ -565,9 +587,43 @@ impl Propulsion for HifiPropulsion {
         }
     }
 
+    fn represents(&self, _fault: &super::PropulsionFault) -> bool {
+        true
+    }
+
+    fn inject(&mut self, fault: &super::PropulsionFault, active: bool) {
+        use super::PropulsionFault as F;
+        let f = &mut self.plant.faults;
+        match *fault {
+            F::ThrustDegraded { engine, factor } => {
+                f.injector_factor[engine] = if active { factor } else { 1.0 }
+            }
+            F::ValveStuck { engine } => self.valve_stuck[engine] = active,
+            F::ValveSlow { engine, factor } => {
+                self.valve_speed[engine] = if active { factor } else { 1.0 }
+            }
+            F::RegulatorOpen => f.regulator_held_open = active.then_some(true),
+            F::RegulatorClosed => f.regulator_held_open = active.then_some(false),
+            F::RegulatorDrift { rate_pa_s } => {
+                self.regulator_drift_pa_s = if active { rate_pa_s } else { 0.0 }
+            }
+            F::PressurantLeak { area_m2 } => {
+                f.pressurant_leak_m2 = if active { area_m2 } else { 0.0 }
+            }
+            F::PropellantLeak { side, kg_s } => {
+                f.propellant_leak_kg_s[side] = if active { kg_s } else { 0.0 }
+            }
+        }
+    }
+
     fn step(&mut self, cmd: &EngineCommand, dt_ns: u64) -> PropulsionOutput {
         if dt_ns == 0 || self.fault.is_some() {
             return self.out;
+        }
+        if self.regulator_drift_pa_s != 0.0 {
+            self.plant
+                .regulator
+                .shift_set_point(self.regulator_drift_pa_s * dt_ns as f64 * 1e-9);
         }
         let saved = self.y;
         self.apply_command(cmd);

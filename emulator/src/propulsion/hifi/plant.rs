@@ -141,6 +141,34 @@ pub struct Plant {
     pub drive: [Drive; 2],
     /// Algebraic outputs of the last evaluation.
     pub aux: Aux,
+    /// Failures in force (all off unless a fault is injected).
+    pub faults: PlantFaults,
+}
+
+/// Failures of the pressure-fed system, acting through the physics: a leak is a mass
+/// flow out of a volume, a failed regulator a poppet held at a stop, a clogged injector
+/// a smaller flow. Everything downstream (pressures, flows, thrust) follows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlantFaults {
+    /// Poppet held at its stop: `Some(true)` wide open, `Some(false)` shut.
+    pub regulator_held_open: Option<bool>,
+    /// Helium leak from the bottle, flow area Cd A, m^2 (0: none).
+    pub pressurant_leak_m2: f64,
+    /// Propellant leak from each tank `[fuel, ox]`, kg/s (0: none).
+    pub propellant_leak_kg_s: [f64; 2],
+    /// Injector flow factor per engine (1: healthy).
+    pub injector_factor: [f64; ENGINE_COUNT],
+}
+
+impl Default for PlantFaults {
+    fn default() -> Self {
+        Self {
+            regulator_held_open: None,
+            pressurant_leak_m2: 0.0,
+            propellant_leak_kg_s: [0.0; 2],
+            injector_factor: [1.0; ENGINE_COUNT],
+        }
+    }
 }
 
 impl Rhs<N_STATES> for Plant {
@@ -186,6 +214,19 @@ impl Rhs<N_STATES> for Plant {
         d[ix::POPPET_LIFT] = y[ix::POPPET_VEL];
         d[ix::POPPET_VEL] = acc;
         j[ix::POPPET_VEL] = dacc;
+        // A leak to space: choked flow through the leak's area (vacuum downstream).
+        let leak = if self.faults.pressurant_leak_m2 > 0.0 {
+            he.orifice_flow(
+                self.faults.pressurant_leak_m2,
+                p_b,
+                rho_b,
+                0.0,
+                0.0,
+                GAS_LAMINAR_FRAC,
+            )
+        } else {
+            0.0
+        };
         let br = self.bottle.rates(
             he,
             bottle_kg,
@@ -193,9 +234,9 @@ impl Rhs<N_STATES> for Plant {
             y[ix::WALL_TEMP],
             p_b,
             rho_b,
-            reg_flow,
+            reg_flow + leak,
         );
-        d[ix::BOTTLE_MASS] = -reg_flow;
+        d[ix::BOTTLE_MASS] = -reg_flow - leak;
         d[ix::BOTTLE_TEMP] = br.dgas_temp_k_s;
         d[ix::WALL_TEMP] = br.dwall_temp_k_s;
 
@@ -219,10 +260,12 @@ impl Rhs<N_STATES> for Plant {
                 );
                 d[ix::branch_flow(e, p)] = r.dflow;
                 j[ix::branch_flow(e, p)] = r.dflow_slope;
-                d[ix::dome_mass(e, p)] = flow - r.injected_kg_s;
+                // A clogged injector passes less at the same pressures.
+                let injected_kg_s = r.injected_kg_s * self.faults.injector_factor[e];
+                d[ix::dome_mass(e, p)] = flow - injected_kg_s;
                 branch_sum[p] += flow;
-                injected[p] = r.injected_kg_s;
-                ejected_rate[p] += r.injected_kg_s;
+                injected[p] = injected_kg_s;
+                ejected_rate[p] += injected_kg_s;
             }
             let (dpc, jpc) = self.chamber.pressure_rate(injected[OX], injected[FUEL], pc);
             d[ix::chamber_pressure(e)] = dpc;
@@ -242,14 +285,20 @@ impl Rhs<N_STATES> for Plant {
             let liquid = y[ix::liquid_mass(p)];
             let main = y[ix::main_flow(p)];
             let (_, p_u) = tank.ullage_state(he, gas, temp, liquid);
+            // A leak drains the tank (while it holds liquid) and leaves the vehicle.
+            let leak = if liquid > 0.0 {
+                self.faults.propellant_leak_kg_s[p]
+            } else {
+                0.0
+            };
             let cv = self
                 .check_valve
                 .flow(outlet.pressure_pa, outlet.density_kg_m3, p_u);
             cv_total += cv;
             d[ix::ullage_mass(p)] = cv;
             d[ix::ullage_temp(p)] =
-                tank.ullage_dtemp(he, gas, temp, p_u, cv, outlet.enthalpy_j_kg, main);
-            d[ix::liquid_mass(p)] = -main;
+                tank.ullage_dtemp(he, gas, temp, p_u, cv, outlet.enthalpy_j_kg, main + leak);
+            d[ix::liquid_mass(p)] = -main - leak;
             let p_m = y[ix::manifold_pressure(p)];
             let slow = y[ix::main_flow_slow(p)];
             let feed = &self.feeds[p];
@@ -258,7 +307,7 @@ impl Rhs<N_STATES> for Plant {
             d[ix::main_flow(p)] = dmain;
             j[ix::main_flow(p)] = jmain;
             d[ix::manifold_pressure(p)] = self.feeds[p].manifold_stiffness * (main - branch_sum[p]);
-            d[ix::ejected(p)] = ejected_rate[p];
+            d[ix::ejected(p)] = ejected_rate[p] + leak;
             self.aux.tank_pressure_pa[p] = p_u;
             self.aux.check_valve_flow_kg_s[p] = cv;
         }
@@ -294,6 +343,10 @@ impl Plant {
     pub fn project(&self, y: &mut [f64; N_STATES]) {
         let (mut lift, mut vel) = (y[ix::POPPET_LIFT], y[ix::POPPET_VEL]);
         self.regulator.apply_stops(&mut lift, &mut vel);
+        if let Some(open) = self.faults.regulator_held_open {
+            lift = if open { self.regulator.max_lift_m } else { 0.0 };
+            vel = 0.0;
+        }
         y[ix::POPPET_LIFT] = lift;
         y[ix::POPPET_VEL] = vel;
         for e in 0..ENGINE_COUNT {

@@ -75,6 +75,12 @@ impl Regulator {
         )
     }
 
+    /// Moves the lock-up (set) pressure by `dp_pa`: the spring preload a set-point
+    /// adjustment (or a drifting spring) changes.
+    pub fn shift_set_point(&mut self, dp_pa: f64) {
+        self.preload_n += (self.sensing_area_m2 - self.unbalanced_area_m2) * dp_pa;
+    }
+
     /// Outlet pressure at which the poppet is in equilibrium at a lift, Pa (the static
     /// regulation characteristic; used for reports and tests).
     pub fn static_outlet_pa(&self, lift_m: f64, p_in: f64) -> f64 {

@@ -1,0 +1,574 @@
+//! Fault declarations: the plain value a run configuration (`[[faults]]`), the command
+//! line (`--fault SPEC`) and a Monte Carlo campaign use, and its short text syntax.
+//!
+//! ```text
+//! KIND[:TARGET][,PARAM=VALUE...]@TRIGGER[,for=SECONDS]
+//! engine-off:2@t=400                  engine 2 fails off at t = 400 s
+//! thrust-degraded:1,factor=0.7@alt=5000   engine 1 at 70 % once below 5 km
+//! sensor-bias:altitude_m,value=50@t=500,for=30
+//! command-drop@random,p=0.2,window=100..800,for=2
+//! ```
+//! Engines are numbered 1-4, as in the CSV export. Triggers: `t=S` (simulated time),
+//! `alt=M` (true altitude below M metres), `step=K`, or `random,p=P,window=A..B` (fires
+//! with probability P at a time drawn uniformly in [A, B] s, from the run's seed and the
+//! fault's position in the list only).
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::fmt;
+use std::str::FromStr;
+
+/// What fails.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FaultKind {
+    /// Engine fails off (target: engine 1-4).
+    EngineOff,
+    /// Engine stuck at the throttle it had when the fault fired (target: engine).
+    EngineStuck,
+    /// Engine thrust degraded (target: engine; `factor` in [0, 1)).
+    ThrustDegraded,
+    /// Throttle valves of an engine stuck where they are (hifi; target: engine).
+    ValveStuck,
+    /// Throttle valves of an engine slowed (hifi; target: engine; `factor` in (0, 1)).
+    ValveSlow,
+    /// Pressure regulator failed wide open (hifi).
+    RegulatorOpen,
+    /// Pressure regulator failed shut (hifi).
+    RegulatorClosed,
+    /// Regulator set point drifting (hifi; `rate_pa_s`, either sign).
+    RegulatorDrift,
+    /// Helium leaking from the pressurant bottle (hifi; `area_mm2`, the leak's flow area).
+    PressurantLeak,
+    /// Propellant leaking from a tank (hifi; target `fuel` or `ox`; `kg_s`).
+    PropellantLeak,
+    /// A constant added to a telemetry field (target: field; `value`).
+    SensorBias,
+    /// Extra Gaussian noise on a telemetry field (target: field; `sigma`).
+    SensorNoise,
+    /// A telemetry field stops updating: the last value before the fault repeats.
+    SensorDropout,
+    /// A telemetry field frozen at its value when the fault fired.
+    SensorFrozen,
+    /// Commands lost on the link: the last applied command holds.
+    CommandDrop,
+    /// Commands arrive `steps` steps late.
+    CommandDelay,
+    /// Each command also arrives a second time, a step later (a stale duplicate).
+    CommandDuplicate,
+    /// `bits` random bits of each command's payload flipped (the sanitiser must catch
+    /// what is unusable).
+    CommandCorrupt,
+    /// Telemetry lost: the flight software does not see the step and cannot answer it.
+    TelemetryDrop,
+    /// The flight software paused: it sees no telemetry for the fault's duration (in
+    /// realtime each step is a deadline miss).
+    StubPause,
+}
+
+/// Every kind with its text name, parameters (name, meaning) and target meaning.
+const KINDS: &[(FaultKind, &str, &[&str], Target)] = &[
+    (FaultKind::EngineOff, "engine-off", &[], Target::Engine),
+    (FaultKind::EngineStuck, "engine-stuck", &[], Target::Engine),
+    (
+        FaultKind::ThrustDegraded,
+        "thrust-degraded",
+        &["factor"],
+        Target::Engine,
+    ),
+    (FaultKind::ValveStuck, "valve-stuck", &[], Target::Engine),
+    (
+        FaultKind::ValveSlow,
+        "valve-slow",
+        &["factor"],
+        Target::Engine,
+    ),
+    (
+        FaultKind::RegulatorOpen,
+        "regulator-open",
+        &[],
+        Target::None,
+    ),
+    (
+        FaultKind::RegulatorClosed,
+        "regulator-closed",
+        &[],
+        Target::None,
+    ),
+    (
+        FaultKind::RegulatorDrift,
+        "regulator-drift",
+        &["rate_pa_s"],
+        Target::None,
+    ),
+    (
+        FaultKind::PressurantLeak,
+        "pressurant-leak",
+        &["area_mm2"],
+        Target::None,
+    ),
+    (
+        FaultKind::PropellantLeak,
+        "propellant-leak",
+        &["kg_s"],
+        Target::Side,
+    ),
+    (
+        FaultKind::SensorBias,
+        "sensor-bias",
+        &["value"],
+        Target::Field,
+    ),
+    (
+        FaultKind::SensorNoise,
+        "sensor-noise",
+        &["sigma"],
+        Target::Field,
+    ),
+    (
+        FaultKind::SensorDropout,
+        "sensor-dropout",
+        &[],
+        Target::Field,
+    ),
+    (FaultKind::SensorFrozen, "sensor-frozen", &[], Target::Field),
+    (FaultKind::CommandDrop, "command-drop", &[], Target::None),
+    (
+        FaultKind::CommandDelay,
+        "command-delay",
+        &["steps"],
+        Target::None,
+    ),
+    (
+        FaultKind::CommandDuplicate,
+        "command-duplicate",
+        &[],
+        Target::None,
+    ),
+    (
+        FaultKind::CommandCorrupt,
+        "command-corrupt",
+        &["bits"],
+        Target::None,
+    ),
+    (
+        FaultKind::TelemetryDrop,
+        "telemetry-drop",
+        &[],
+        Target::None,
+    ),
+    (FaultKind::StubPause, "stub-pause", &[], Target::None),
+];
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Target {
+    None,
+    Engine,
+    Side,
+    Field,
+}
+
+impl FaultKind {
+    /// The kind's text name.
+    pub fn name(self) -> &'static str {
+        KINDS.iter().find(|k| k.0 == self).map_or("?", |k| k.1)
+    }
+
+    fn entry(self) -> &'static (FaultKind, &'static str, &'static [&'static str], Target) {
+        KINDS
+            .iter()
+            .find(|k| k.0 == self)
+            .expect("every kind is in KINDS")
+    }
+
+    /// Whether the kind acts on the propulsion model.
+    pub fn is_propulsion(self) -> bool {
+        matches!(
+            self,
+            FaultKind::EngineOff
+                | FaultKind::EngineStuck
+                | FaultKind::ThrustDegraded
+                | FaultKind::ValveStuck
+                | FaultKind::ValveSlow
+                | FaultKind::RegulatorOpen
+                | FaultKind::RegulatorClosed
+                | FaultKind::RegulatorDrift
+                | FaultKind::PressurantLeak
+                | FaultKind::PropellantLeak
+        )
+    }
+}
+
+impl FromStr for FaultKind {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        KINDS.iter().find(|k| k.1 == s).map(|k| k.0).ok_or_else(|| {
+            let names: Vec<&str> = KINDS.iter().map(|k| k.1).collect();
+            format!("unknown fault kind `{s}` (one of {})", names.join(", "))
+        })
+    }
+}
+
+/// Telemetry fields a sensor fault can act on.
+pub const SENSOR_FIELDS: &[&str] = &[
+    "altitude_m",
+    "position_m",
+    "velocity_m_s",
+    "attitude",
+    "rate_rad_s",
+    "accel_m_s2",
+    "mass_kg",
+    "gas_pressure_pa",
+    "fuel_tank_pressure_pa",
+    "ox_tank_pressure_pa",
+    "thrust1_n",
+    "thrust2_n",
+    "thrust3_n",
+    "thrust4_n",
+    "chamber_pressure1_pa",
+    "chamber_pressure2_pa",
+    "chamber_pressure3_pa",
+    "chamber_pressure4_pa",
+];
+
+/// When a fault fires.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum Trigger {
+    /// At a simulated time, seconds.
+    Time(f64),
+    /// When the true altitude first falls below this, metres.
+    AltitudeBelow(f64),
+    /// At a step.
+    Step(u64),
+    /// With a probability, at a time drawn uniformly in a window (seconds).
+    Random {
+        /// Probability that the fault happens at all.
+        probability: f64,
+        /// Earliest time, seconds.
+        from_s: f64,
+        /// Latest time, seconds.
+        to_s: f64,
+    },
+}
+
+impl fmt::Display for Trigger {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Trigger::Time(t) => write!(f, "t={t}"),
+            Trigger::AltitudeBelow(a) => write!(f, "alt={a}"),
+            Trigger::Step(k) => write!(f, "step={k}"),
+            Trigger::Random {
+                probability,
+                from_s,
+                to_s,
+            } => write!(f, "random,p={probability},window={from_s}..{to_s}"),
+        }
+    }
+}
+
+fn number(key: &str, v: &str) -> Result<f64, String> {
+    let x: f64 = v.parse().map_err(|_| format!("{key}={v}: not a number"))?;
+    if !x.is_finite() {
+        return Err(format!("{key}={v}: not finite"));
+    }
+    Ok(x)
+}
+
+impl FromStr for Trigger {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let mut parts = s.split(',');
+        let first = parts.next().unwrap_or("");
+        if first == "random" {
+            let (mut p, mut window) = (None, None);
+            for kv in parts {
+                match kv.split_once('=') {
+                    Some(("p", v)) => p = Some(number("p", v)?),
+                    Some(("window", v)) => {
+                        let (a, b) = v
+                            .split_once("..")
+                            .ok_or_else(|| format!("window={v}: expected A..B seconds"))?;
+                        window = Some((number("window", a)?, number("window", b)?));
+                    }
+                    _ => return Err(format!("random trigger: unknown part `{kv}`")),
+                }
+            }
+            let probability = p.ok_or("random trigger needs p=PROBABILITY")?;
+            let (from_s, to_s) = window.ok_or("random trigger needs window=A..B")?;
+            if !(0.0..=1.0).contains(&probability) {
+                return Err(format!("p={probability}: expected a probability in [0, 1]"));
+            }
+            if !(from_s >= 0.0 && to_s >= from_s) {
+                return Err(format!("window={from_s}..{to_s}: expected 0 <= A <= B"));
+            }
+            return Ok(Trigger::Random {
+                probability,
+                from_s,
+                to_s,
+            });
+        }
+        if parts.next().is_some() {
+            return Err(format!(
+                "trigger `{s}`: one of t=S, alt=M, step=K, random,..."
+            ));
+        }
+        match first.split_once('=') {
+            Some(("t", v)) => {
+                let t = number("t", v)?;
+                if t < 0.0 {
+                    return Err(format!("t={v}: expected >= 0"));
+                }
+                Ok(Trigger::Time(t))
+            }
+            Some(("alt", v)) => Ok(Trigger::AltitudeBelow(number("alt", v)?)),
+            Some(("step", v)) => v
+                .parse()
+                .map(Trigger::Step)
+                .map_err(|_| format!("step={v}: expected a step number")),
+            _ => Err(format!(
+                "trigger `{s}`: expected t=SECONDS, alt=METRES, step=K or random,p=P,window=A..B"
+            )),
+        }
+    }
+}
+
+impl TryFrom<String> for Trigger {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl From<Trigger> for String {
+    fn from(t: Trigger) -> String {
+        t.to_string()
+    }
+}
+
+/// One declared fault. In TOML:
+/// ```toml
+/// [[faults]]
+/// kind = "thrust-degraded"
+/// target = "1"              # engine 1-4, `fuel`/`ox`, or a telemetry field
+/// params = { factor = 0.7 }
+/// trigger = "t=300"         # or "alt=5000", "step=100", "random,p=0.5,window=100..600"
+/// duration_s = 20           # optional: cleared after this long
+/// ```
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FaultSpec {
+    /// What fails.
+    pub kind: FaultKind,
+    /// What it fails on (engine 1-4, `fuel`/`ox`, or a telemetry field), if the kind
+    /// takes one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target: Option<String>,
+    /// The kind's numbers.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub params: BTreeMap<String, f64>,
+    /// When it fires.
+    pub trigger: Trigger,
+    /// How long it lasts once fired, seconds; none: to the end of the run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duration_s: Option<f64>,
+}
+
+impl FaultSpec {
+    /// Checks the kind's target and parameters (not yet against a propulsion model).
+    pub fn validate(&self) -> Result<(), String> {
+        let (_, name, params, target) = *self.kind.entry();
+        let ctx = |m: String| format!("fault `{self}`: {m}");
+        match (target, &self.target) {
+            (Target::None, Some(t)) => {
+                return Err(ctx(format!("{name} takes no target, got `{t}`")))
+            }
+            (Target::None, None) => {}
+            (_, None) => return Err(ctx(format!("{name} needs a target"))),
+            (Target::Engine, Some(t)) => {
+                if !matches!(t.as_str(), "1" | "2" | "3" | "4") {
+                    return Err(ctx(format!("engine `{t}`: expected 1, 2, 3 or 4")));
+                }
+            }
+            (Target::Side, Some(t)) => {
+                if !matches!(t.as_str(), "fuel" | "ox") {
+                    return Err(ctx(format!("tank `{t}`: expected fuel or ox")));
+                }
+            }
+            (Target::Field, Some(t)) => {
+                if !SENSOR_FIELDS.contains(&t.as_str()) {
+                    return Err(ctx(format!(
+                        "telemetry field `{t}`: one of {}",
+                        SENSOR_FIELDS.join(", ")
+                    )));
+                }
+            }
+        }
+        for key in self.params.keys() {
+            if !params.contains(&key.as_str()) {
+                return Err(ctx(format!(
+                    "unknown parameter `{key}` (takes: {})",
+                    if params.is_empty() {
+                        "none".to_string()
+                    } else {
+                        params.join(", ")
+                    }
+                )));
+            }
+        }
+        for key in params {
+            let v = *self
+                .params
+                .get(*key)
+                .ok_or_else(|| ctx(format!("needs {key}=VALUE")))?;
+            let ok = v.is_finite()
+                && match *key {
+                    "factor" if self.kind == FaultKind::ThrustDegraded => (0.0..1.0).contains(&v),
+                    "factor" => v > 0.0 && v < 1.0,
+                    "area_mm2" => v > 0.0 && v <= 100.0,
+                    "kg_s" => v > 0.0 && v <= 10.0,
+                    "rate_pa_s" => v.abs() <= 1e6,
+                    "sigma" => v >= 0.0,
+                    "steps" => (1.0..=1000.0).contains(&v) && v.fract() == 0.0,
+                    "bits" => (1.0..=64.0).contains(&v) && v.fract() == 0.0,
+                    _ => true,
+                };
+            if !ok {
+                return Err(ctx(format!("{key} = {v} is out of its range")));
+            }
+        }
+        if let Some(d) = self.duration_s {
+            if !(d.is_finite() && d > 0.0) {
+                return Err(ctx(format!("for={d}: expected a positive duration")));
+            }
+        }
+        if self.kind == FaultKind::StubPause && self.duration_s.is_none() {
+            return Err(ctx("stub-pause needs for=SECONDS".into()));
+        }
+        Ok(())
+    }
+
+    /// A parameter (present after `validate`).
+    pub fn param(&self, key: &str) -> f64 {
+        self.params.get(key).copied().unwrap_or(f64::NAN)
+    }
+
+    /// The target engine, 0-based (for engine faults, after `validate`).
+    pub fn engine(&self) -> usize {
+        self.target
+            .as_deref()
+            .and_then(|t| t.parse::<usize>().ok())
+            .map_or(0, |e| e.saturating_sub(1))
+    }
+}
+
+impl fmt::Display for FaultSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.kind.name())?;
+        if let Some(t) = &self.target {
+            write!(f, ":{t}")?;
+        }
+        for (k, v) in &self.params {
+            write!(f, ",{k}={v}")?;
+        }
+        write!(f, "@{}", self.trigger)?;
+        if let Some(d) = self.duration_s {
+            write!(f, ",for={d}")?;
+        }
+        Ok(())
+    }
+}
+
+impl FromStr for FaultSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        let (what, when) = s
+            .split_once('@')
+            .ok_or_else(|| format!("fault `{s}`: expected KIND[:TARGET][,P=V...]@TRIGGER"))?;
+        let mut parts = what.split(',');
+        let head = parts.next().unwrap_or("");
+        let (kind, target) = match head.split_once(':') {
+            Some((k, t)) => (k, Some(t.to_string())),
+            None => (head, None),
+        };
+        let kind: FaultKind = kind.parse().map_err(|e| format!("fault `{s}`: {e}"))?;
+        let mut params = BTreeMap::new();
+        for kv in parts {
+            let (k, v) = kv
+                .split_once('=')
+                .ok_or_else(|| format!("fault `{s}`: parameter `{kv}` is not NAME=VALUE"))?;
+            params.insert(
+                k.to_string(),
+                number(k, v).map_err(|e| format!("fault `{s}`: {e}"))?,
+            );
+        }
+        // `for=S` closes the trigger part.
+        let (trigger_text, duration_s) = match when.rsplit_once(",for=") {
+            Some((t, d)) => (
+                t,
+                Some(number("for", d).map_err(|e| format!("fault `{s}`: {e}"))?),
+            ),
+            None => (when, None),
+        };
+        let trigger = trigger_text
+            .parse()
+            .map_err(|e| format!("fault `{s}`: {e}"))?;
+        let spec = FaultSpec {
+            kind,
+            target,
+            params,
+            trigger,
+            duration_s,
+        };
+        spec.validate()?;
+        Ok(spec)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_short_syntax_round_trips() {
+        for s in [
+            "engine-off:2@t=400",
+            "thrust-degraded:1,factor=0.7@alt=5000",
+            "sensor-bias:altitude_m,value=50@t=500,for=30",
+            "command-drop@random,p=0.2,window=100..800,for=2",
+            "propellant-leak:ox,kg_s=0.05@step=100",
+            "stub-pause@t=10,for=2",
+        ] {
+            let f: FaultSpec = s.parse().unwrap();
+            assert_eq!(f.to_string(), s);
+            let toml_text = toml::to_string(&f).unwrap();
+            assert_eq!(toml::from_str::<FaultSpec>(&toml_text).unwrap(), f);
+        }
+        let f: FaultSpec = "engine-off:2@t=400".parse().unwrap();
+        assert_eq!(f.kind, FaultKind::EngineOff);
+        assert_eq!(f.engine(), 1);
+        assert_eq!(f.trigger, Trigger::Time(400.0));
+    }
+
+    #[test]
+    fn impossible_specs_are_refused_with_a_reason() {
+        for (s, needle) in [
+            ("engine-off:5@t=1", "engine `5`"),
+            ("engine-off@t=1", "needs a target"),
+            ("warp-core-breach@t=1", "unknown fault kind"),
+            ("thrust-degraded:1@t=1", "needs factor"),
+            ("thrust-degraded:1,factor=2@t=1", "out of its range"),
+            ("engine-off:1,factor=0.5@t=1", "unknown parameter"),
+            ("sensor-bias:warp_factor,value=1@t=1", "telemetry field"),
+            ("engine-off:1@t=-5", "expected >= 0"),
+            ("engine-off:1@t=nan", "not finite"),
+            ("engine-off:1@random,p=2,window=0..10", "probability"),
+            ("engine-off:1", "expected KIND"),
+            ("stub-pause@t=1", "for=SECONDS"),
+            ("regulator-open:1@t=1", "takes no target"),
+        ] {
+            let e = s.parse::<FaultSpec>().unwrap_err();
+            assert!(e.contains(needle), "{s}: {e}");
+        }
+    }
+}
