@@ -156,6 +156,46 @@ fn sigterm_ends_the_run_cleanly_with_the_log_flushed() {
     assert_eq!(flags & 8, 8);
 }
 
+/// SIGHUP (a closed terminal) ends a run like SIGTERM, and promptly even when a slow
+/// realtime run is between steps ten seconds apart.
+#[test]
+fn sighup_at_a_slow_speed_ends_the_run_promptly_with_its_report() {
+    let dir = scratch("sighup");
+    let rep = dir.join("report.json");
+    let mut emulator = oils()
+        .args([
+            "run",
+            "--mode",
+            "realtime",
+            "--speed",
+            "0.001",
+            "--link",
+            "inproc",
+            "--no-log",
+            "--report",
+            rep.to_str().unwrap(),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    let sent = std::time::Instant::now();
+    // SAFETY: plain kill(2) on our own child.
+    unsafe { libc::kill(emulator.id() as i32, libc::SIGHUP) };
+    let status = wait_with_deadline(&mut emulator, 10);
+    // The wait sleeps in 20 ms slices: a period of 10 s is not waited out.
+    assert!(
+        sent.elapsed() < Duration::from_secs(3),
+        "{:?}",
+        sent.elapsed()
+    );
+    assert!(!status.success());
+    let r = report(&rep);
+    assert_eq!(r["outcome"], "aborted");
+    assert!(r["error"].as_str().unwrap().contains("signal"));
+}
+
 /// A foreign flight program written against `oils-shared` only: it answers every
 /// telemetry with `make(tlm)` until the end of the run.
 fn foreign_stub(id: &str, make: impl Fn(&oils_shared::Telemetry) -> Command) {
