@@ -36,6 +36,9 @@ pub enum StubError {
     /// The emulator's packet speaks another protocol.
     #[error(transparent)]
     Protocol(#[from] oils_shared::ProtocolMismatch),
+    /// The flight software reported a failed step.
+    #[error(transparent)]
+    FlightSoftware(#[from] crate::fsw::FswFailure),
 }
 
 /// Serves one run until the emulator sends its end-of-run telemetry.
@@ -67,6 +70,9 @@ pub fn serve(
         let started_ns = monotonic_ns();
         let mut cmd = fsw.step(&tlm);
         let compute_ns = monotonic_ns() - started_ns;
+        if let Some(failure) = fsw.failure() {
+            return Err(failure.into());
+        }
         cmd.header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
         cmd.stub_compute_ns = compute_ns;
         link.publish(&cmd)?;
