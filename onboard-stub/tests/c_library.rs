@@ -85,9 +85,16 @@ fn a_library_steps_and_its_failure_stops_it() {
         assert_eq!(fsw.failure(), None);
     }
     let cmd = fsw.step(&tlm(3));
-    assert_eq!(cmd.engine_on, [0; 4], "a failed step's command is not the library's");
+    assert_eq!(
+        cmd.engine_on, [0; 4],
+        "a failed step's command is not the library's"
+    );
     assert_eq!(fsw.failure(), Some(FswFailure { step: 3, status: 7 }));
-    assert!(fsw.failure().unwrap().to_string().contains("step 3 (status 7)"));
+    assert!(fsw
+        .failure()
+        .unwrap()
+        .to_string()
+        .contains("step 3 (status 7)"));
 }
 
 #[test]
@@ -129,7 +136,10 @@ fn a_missing_function_or_file_is_named() {
     assert!(err.contains("does not export `oils_fsw_fini`"), "{err}");
     let none = FswSpec::CLibrary(dir.join("libnot-there.so"));
     let err = load_error(&none, None, 0x22);
-    assert!(err.contains("cannot load") && err.contains("libnot-there.so"), "{err}");
+    assert!(
+        err.contains("cannot load") && err.contains("libnot-there.so"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -32,12 +32,23 @@ pub fn shared_library(src: &Path, name: &str, out_dir: &Path, defines: &[&str]) 
         .to_command();
     let out = out_dir.join(format!("lib{name}.so"));
     cmd.args([
-        "-std=c11", "-Wall", "-Wextra", "-Werror", "-pedantic", "-shared", "-fPIC",
+        "-std=c11",
+        "-Wall",
+        "-Wextra",
+        "-Werror",
+        "-pedantic",
+        "-shared",
+        "-fPIC",
     ]);
     for d in defines {
         cmd.arg(format!("-D{d}"));
     }
-    cmd.arg("-I").arg(include_dir()).arg(src).arg("-o").arg(&out).arg("-lm");
+    cmd.arg("-I")
+        .arg(include_dir())
+        .arg(src)
+        .arg("-o")
+        .arg(&out)
+        .arg("-lm");
     let output = cmd.output().expect("running the C compiler");
     assert!(
         output.status.success(),
