@@ -62,6 +62,7 @@ fn doc_gives_the_iceoryx2_version_in_use() {
         doc.contains(&format!("iceoryx2=={version}")),
         "docs: the pip pin"
     );
+    assert_eq!(oils_shared::service::ICEORYX2_VERSION, version);
     let script = read("tools/python-e2e.sh");
     assert!(
         script.contains(&format!("ICEORYX2_VERSION={version}")),
