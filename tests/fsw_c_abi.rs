@@ -6,7 +6,7 @@
 mod common;
 use common::*;
 
-#[path = "../onboard-stub/tests/common/c_build.rs"]
+#[path = "../shared/tests/common/c_build.rs"]
 mod c_build;
 
 use std::path::{Path, PathBuf};

@@ -4,12 +4,10 @@
 
 use oils_shared::c_abi::{c_header, FSW_LAYOUT_HASH};
 use oils_shared::{Command, Telemetry, SCHEMA_HASH};
-use std::path::{Path, PathBuf};
 use std::process::Command as Process;
 
-fn include_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("include")
-}
+mod common;
+use common::c_build::{c_compiler, include_dir};
 
 #[test]
 fn c_header_is_current() {
@@ -19,18 +17,6 @@ fn c_header_is_current() {
         "shared/include/oils.h is stale: regenerate it with\n    \
          cargo run -p oils-shared --example c_header > shared/include/oils.h"
     );
-}
-
-/// A C compiler from the `cc` crate (outside a build script it needs the target named).
-fn c_compiler() -> Process {
-    let target = format!("{}-unknown-linux-gnu", std::env::consts::ARCH);
-    cc::Build::new()
-        .target(&target)
-        .host(&target)
-        .opt_level(1)
-        .cargo_metadata(false)
-        .get_compiler()
-        .to_command()
 }
 
 const PROBE_C: &str = r#"

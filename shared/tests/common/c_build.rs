@@ -1,5 +1,7 @@
-//! Builds C flight software into a shared library for a test, with the `cc` crate's
-//! compiler (the way a user would build theirs: `cc -shared -fPIC -I shared/include`).
+//! C for the tests of three crates (shared, onboard-stub, the root's end-to-end tests,
+//! which include this file by path): the `cc` crate's compiler, and C flight software
+//! built into a shared library the way a user would build theirs
+//! (`cc -shared -fPIC -I shared/include`).
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
@@ -18,18 +20,23 @@ pub fn terminal_descent_c() -> PathBuf {
     include_dir().join("../../onboard-stub/examples/c/terminal_descent.c")
 }
 
-/// Compiles `src` (and `-D` `defines`) into `out_dir/lib<name>.so`; panics with the
-/// compiler's messages on failure. Warnings are errors: the examples must build clean.
-pub fn shared_library(src: &Path, name: &str, out_dir: &Path, defines: &[&str]) -> PathBuf {
-    // Outside a build script the `cc` crate needs the target named.
+/// The C compiler of the `cc` crate, at `-O2` (outside a build script it needs the
+/// target named).
+pub fn c_compiler() -> std::process::Command {
     let target = format!("{}-unknown-linux-gnu", std::env::consts::ARCH);
-    let mut cmd = cc::Build::new()
+    cc::Build::new()
         .target(&target)
         .host(&target)
         .opt_level(2)
         .cargo_metadata(false)
         .get_compiler()
-        .to_command();
+        .to_command()
+}
+
+/// Compiles `src` (and `-D` `defines`) into `out_dir/lib<name>.so`; panics with the
+/// compiler's messages on failure. Warnings are errors: the examples must build clean.
+pub fn shared_library(src: &Path, name: &str, out_dir: &Path, defines: &[&str]) -> PathBuf {
+    let mut cmd = c_compiler();
     let out = out_dir.join(format!("lib{name}.so"));
     cmd.args([
         "-std=c11",
