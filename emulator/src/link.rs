@@ -23,6 +23,9 @@ pub enum ExchangeError {
     /// The iceoryx2 link failed or was interrupted.
     #[error(transparent)]
     Link(#[from] LinkError),
+    /// The in-process flight software reported a failed step.
+    #[error("flight software: {0}")]
+    FlightSoftware(#[from] oils_onboard_stub::fsw::FswFailure),
     /// A replayed run produced telemetry other than the recorded one.
     #[error("replay diverged at step {step}: the emulator's telemetry differs from the log's")]
     ReplayDiverged {
@@ -91,7 +94,11 @@ impl<F: FlightSoftware + ?Sized> Link for InProcLink<F> {
         // The end-of-run telemetry is not answered, as on the wire.
         self.pending = (tlm.header.flags & oils_shared::TLM_FLAG_END_OF_RUN == 0)
             .then(|| answer(self.fsw.as_mut(), tlm));
-        Ok(())
+        // A failed step ends the run, as it ends the stub.
+        match self.fsw.failure() {
+            Some(f) => Err(f.into()),
+            None => Ok(()),
+        }
     }
 
     fn receive_until(

@@ -36,6 +36,8 @@ pub struct RunReport {
     pub log: Option<String>,
     /// The whole run configuration: `oils run --config-from REPORT.json` repeats the run.
     pub config: RunConfig,
+    /// Things the run noticed that do not fail it (a peer that never notifies, ...).
+    pub warnings: Vec<String>,
     /// The run's figures.
     #[serde(flatten)]
     pub summary: RunSummary,
@@ -63,6 +65,7 @@ impl RunReport {
             protocol_version: oils_shared::PROTOCOL_VERSION,
             log: log.map(|p| p.display().to_string()),
             config: cfg.clone(),
+            warnings: Vec::new(),
             summary,
         }
     }
@@ -149,6 +152,9 @@ impl RunReport {
         );
         for v in &s.threshold_violations {
             let _ = writeln!(out, "THRESHOLD   {v}");
+        }
+        for w in &self.warnings {
+            let _ = writeln!(out, "WARNING     {w}");
         }
         for f in &s.faults {
             let cleared = f

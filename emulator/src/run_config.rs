@@ -169,6 +169,9 @@ pub struct RunConfig {
     pub hifi: Option<HifiParams>,
     /// Flight software.
     pub fsw: FswSpec,
+    /// Parameter file handed to a C flight software's `oils_fsw_init` (`fsw = "c:PATH"`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fsw_params: Option<PathBuf>,
     /// Thrust-command profile CSV for `fsw = "playback"`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub profile: Option<PathBuf>,
@@ -212,6 +215,7 @@ impl Default for RunConfig {
             model: None,
             hifi: None,
             fsw: FswSpec::Gnc,
+            fsw_params: None,
             profile: None,
             scenario: ScenarioConfig {
                 // The bench flies with navigation noise unless told otherwise.
@@ -475,8 +479,13 @@ fn read_capped(path: &Path) -> Result<String, RunConfigError> {
 }
 
 /// Named scenarios shipped with the bench (`--scenario NAME`), compiled in.
-pub const NAMED_SCENARIOS: &[(&str, &str)] =
-    &[("default", include_str!("../config/scenario.toml"))];
+pub const NAMED_SCENARIOS: &[(&str, &str)] = &[
+    ("default", include_str!("../config/scenario.toml")),
+    (
+        "terminal-descent",
+        include_str!("../config/scenarios/terminal-descent.toml"),
+    ),
+];
 
 /// A scenario by name (see [`NAMED_SCENARIOS`]) or from a TOML file.
 pub fn load_scenario(name_or_path: &str) -> Result<ScenarioConfig, RunConfigError> {

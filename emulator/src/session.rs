@@ -198,9 +198,15 @@ pub fn run(
         oils_shared::clock::set_realtime_priority(priority)
             .map_err(|source| SessionError::RealtimePriority { priority, source })?;
     }
+    let mut warnings = Vec::new();
     let (summary, log_path, wait) = match cfg.link {
         LinkKind::Inproc => {
-            let fsw = build_fsw(&cfg.fsw, cfg.profile.as_deref())?;
+            let fsw = build_fsw(
+                &cfg.fsw,
+                cfg.profile.as_deref(),
+                cfg.fsw_params.as_deref(),
+                run_id,
+            )?;
             let mut link = InProcLink::new(fsw);
             let recorder = open_recorder(cfg, run_id)?;
             let summary = run_and_close(
@@ -239,10 +245,17 @@ pub fn run(
                 recorder,
                 stop,
             )?;
+            if wait.notifies() && link.wake_counts().peer_never_notified() {
+                warnings.push(format!(
+                    "the flight software never notified oils/{run_id:016x}/command-ready; each step waited for the 1 ms re-poll (docs/protocol.md, wait strategies)"
+                ));
+            }
             (summary.0, summary.1, Some(wait))
         }
     };
-    Ok(RunReport::new(cfg, run_id, wait, log_path, summary))
+    let mut report = RunReport::new(cfg, run_id, wait, log_path, summary);
+    report.warnings = warnings;
+    Ok(report)
 }
 
 /// Runs the scheduler and closes the log (on every path: dropping the recorder syncs).

@@ -1,6 +1,7 @@
 //! The stub's command line (`oils-onboard-stub`, and `oils stub` when the bench spawns
 //! it): which run to join and which flight software to fly.
 
+use crate::c_library::{CLibraryError, CLibraryFsw};
 use crate::fsw::{FlightSoftware, FswSpec};
 use crate::gnc::{GncConfig, GncConfigError, ReferenceGnc};
 use crate::playback::ProfilePlayback;
@@ -22,6 +23,10 @@ pub struct StubArgs {
     /// Thrust-command profile CSV for `--fsw playback`.
     #[arg(long)]
     pub profile: Option<PathBuf>,
+    /// For `--fsw c:PATH`: a text file handed to the library's `oils_fsw_init` as its
+    /// parameters (any format the library reads; default: empty).
+    #[arg(long)]
+    pub fsw_params: Option<PathBuf>,
     /// busy, event or hybrid; default: what the emulator announces.
     #[arg(long)]
     pub wait: Option<String>,
@@ -49,6 +54,9 @@ pub enum StubCliError {
     /// GNC configuration invalid.
     #[error(transparent)]
     Gnc(#[from] GncConfigError),
+    /// C flight software could not be loaded.
+    #[error(transparent)]
+    CLibrary(#[from] CLibraryError),
     /// Link failure.
     #[error(transparent)]
     Link(#[from] LinkError),
@@ -58,16 +66,25 @@ pub enum StubCliError {
 }
 
 /// Builds the flight software asked for (allocation happens here, before tick 0).
+/// `profile` is for playback; `fsw_params` (a text file) and `run_id` are handed to a C
+/// library's `oils_fsw_init`.
 pub fn build_fsw(
     spec: &FswSpec,
     profile: Option<&Path>,
+    fsw_params: Option<&Path>,
+    run_id: u64,
 ) -> Result<Box<dyn FlightSoftware>, StubCliError> {
     match spec {
         FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(GncConfig::default())?)),
-        FswSpec::CLibrary(path) => Err(StubCliError::Argument(format!(
-            "c:{}: C flight software is not supported yet",
-            path.display()
-        ))),
+        FswSpec::CLibrary(path) => {
+            let params = match fsw_params {
+                Some(p) => std::fs::read_to_string(p).map_err(|e| {
+                    StubCliError::Argument(format!("--fsw-params {}: {e}", p.display()))
+                })?,
+                None => String::new(),
+            };
+            Ok(Box::new(CLibraryFsw::load(path, run_id, &params)?))
+        }
         FswSpec::External => Err(StubCliError::Argument(
             "--fsw external is flown by a client started by hand, not by this stub".into(),
         )),
@@ -98,7 +115,12 @@ pub fn run_stub(args: &StubArgs, stop: &AtomicBool) -> Result<StubSummary, StubC
             ))
         })?;
     }
-    let mut fsw = build_fsw(&args.fsw, args.profile.as_deref())?;
+    let mut fsw = build_fsw(
+        &args.fsw,
+        args.profile.as_deref(),
+        args.fsw_params.as_deref(),
+        run_id,
+    )?;
     let node = create_node("oils-onboard-stub")?;
     let link = StubLink::open(&node, run_id, wait, args.startup_timeout_ms, stop)?;
     Ok(serve(&link, fsw.as_mut(), args.timeout_ms, stop)?)

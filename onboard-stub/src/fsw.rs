@@ -18,7 +18,34 @@ pub trait FlightSoftware {
     fn name(&self) -> &'static str;
     /// Answers one telemetry packet.
     fn step(&mut self, tlm: &Telemetry) -> Command;
+    /// Whether a step failed (flight software that can report a failure, like a C
+    /// library's nonzero status). The loop checks it after every step and stops the run
+    /// instead of sending that step's command.
+    fn failure(&self) -> Option<FswFailure> {
+        None
+    }
 }
+
+/// A step the flight software reported as failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FswFailure {
+    /// The step whose telemetry it was answering.
+    pub step: u64,
+    /// The status it returned (nonzero).
+    pub status: i32,
+}
+
+impl fmt::Display for FswFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "flight software failed at step {} (status {})",
+            self.step, self.status
+        )
+    }
+}
+
+impl std::error::Error for FswFailure {}
 
 /// Which flight software flies a run, as written on the command line and in a run
 /// configuration: `gnc`, `playback` (needs a profile), `c:PATH` (a shared library with

@@ -36,6 +36,9 @@ pub enum StubError {
     /// The emulator's packet speaks another protocol.
     #[error(transparent)]
     Protocol(#[from] oils_shared::ProtocolMismatch),
+    /// The flight software reported a failed step.
+    #[error(transparent)]
+    FlightSoftware(#[from] crate::fsw::FswFailure),
 }
 
 /// Runs the flight software on Telemetry(k) and returns Command(k) stamped as the wire
@@ -79,6 +82,9 @@ pub fn serve(
             return Ok(summary);
         }
         let cmd = answer(fsw, &tlm);
+        if let Some(failure) = fsw.failure() {
+            return Err(failure.into());
+        }
         link.publish(&cmd)?;
         summary.commands += 1;
         summary.last_step = tlm.header.step;

@@ -17,6 +17,7 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 
+pub mod c_abi;
 pub mod clock;
 pub mod link;
 pub mod profile;

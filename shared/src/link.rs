@@ -13,7 +13,7 @@ use crate::clock::monotonic_ns;
 use crate::service::RunServices;
 use crate::{Command, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH};
 use core::fmt::Debug;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use core::time::Duration;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -178,6 +178,25 @@ where
     rx_service: PubSubFactory<ipc::Service, Rx, ()>,
     _tx_event: EventFactory<ipc::Service>,
     _rx_event: EventFactory<ipc::Service>,
+    sleeps: AtomicU64,
+    wake_notifications: AtomicU64,
+}
+
+/// How often a receiver slept on the peer's event, and how many notifications it saw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WakeCounts {
+    /// Waits on the peer's event (each at most 1 ms).
+    pub sleeps: u64,
+    /// Notifications from the peer seen while sleeping.
+    pub notifications: u64,
+}
+
+impl WakeCounts {
+    /// The receiver slept on the peer's event but the peer never notified: it flew on
+    /// the 1 ms re-polls alone (a foreign client that ignores `oils.wait`).
+    pub fn peer_never_notified(&self) -> bool {
+        self.sleeps > 0 && self.notifications == 0
+    }
 }
 
 /// The emulator's side.
@@ -424,6 +443,8 @@ where
             rx_service,
             _tx_event: tx_event,
             _rx_event: rx_event,
+            sleeps: AtomicU64::new(0),
+            wake_notifications: AtomicU64::new(0),
         })
     }
 
@@ -435,6 +456,16 @@ where
     /// The wait strategy in use.
     pub fn wait_strategy(&self) -> WaitStrategy {
         self.wait
+    }
+
+    /// How often [`Link::receive_until`] slept on the peer's event and how many of the
+    /// peer's notifications it saw: with an `event` or `hybrid` wait, a run whose
+    /// [`WakeCounts::peer_never_notified`] is true had a peer that does not notify.
+    pub fn wake_counts(&self) -> WakeCounts {
+        WakeCounts {
+            sleeps: self.sleeps.load(Ordering::Relaxed),
+            notifications: self.wake_notifications.load(Ordering::Relaxed),
+        }
     }
 
     /// Whether the peer's receiving port is still attached (a cleanly exited peer
@@ -502,8 +533,14 @@ where
             // Sleep on the peer's event, in slices of at most 1 ms so a peer that does not
             // notify (a busy-polling emulator, or foreign code) is still seen promptly.
             let slice_ns = (deadline_ns - now).min(1_000_000);
+            self.sleeps.fetch_add(1, Ordering::Relaxed);
             self.listener
-                .timed_wait(|_| {}, Duration::from_nanos(slice_ns))
+                .timed_wait(
+                    |_| {
+                        self.wake_notifications.fetch_add(1, Ordering::Relaxed);
+                    },
+                    Duration::from_nanos(slice_ns),
+                )
                 .map_err(ice("event wait"))?;
         }
     }

@@ -9,6 +9,9 @@ use core::fmt::Write;
 /// Prefix of every oils service.
 pub const SERVICE_PREFIX: &str = "oils";
 
+/// The iceoryx2 version of the services (a client must use the same one; docs/protocol.md).
+pub const ICEORYX2_VERSION: &str = "0.10.0";
+
 /// Longest service name this module builds.
 pub const MAX_SERVICE_NAME_LEN: usize = 64;
 
@@ -46,6 +49,41 @@ impl RunServices {
     /// Event service: the stub notifies after publishing a command.
     pub fn command_event(&self) -> ServiceNameBuf {
         self.name("command-ready")
+    }
+
+    /// What a flight software started by hand needs to join this run (printed by
+    /// `oils run --no-stub`): the four services and what to do with each, the protocol
+    /// version, schema hash and wait strategy, and two ready-made clients.
+    pub fn client_guide(&self, wait: crate::link::WaitStrategy) -> String {
+        let notify = if wait.notifies() {
+            "notify after each command"
+        } else {
+            "do not notify (the emulator busy-polls)"
+        };
+        let woken = if wait.notifies() {
+            "notified after each telemetry: wait on it"
+        } else {
+            "never notified (busy): poll the telemetry subscriber"
+        };
+        let id = self.run_id;
+        format!(
+            "oils: run {id:016x} waits for flight software on its iceoryx2 {} services (ipc, default config):\n\
+             \x20   {:<38} publish-subscribe oils.v1.Telemetry, 304 bytes: subscribe\n\
+             \x20   {:<38} publish-subscribe oils.v1.Command, 120 bytes: publish\n\
+             \x20   {:<38} event: {woken}\n\
+             \x20   {:<38} event: {notify}\n\
+             \x20 protocol v{}, schema hash {:#018x}, wait {} (docs/protocol.md). For example:\n\
+             \x20   oils stub --run-id {id:016x} --fsw gnc|c:PATH/libmyfsw.so\n\
+             \x20   PYTHONPATH=python python -m oils_fsw.examples.terminal_descent --run-id {id:016x}",
+            ICEORYX2_VERSION,
+            self.telemetry().as_str(),
+            self.command().as_str(),
+            self.telemetry_event().as_str(),
+            self.command_event().as_str(),
+            crate::PROTOCOL_VERSION,
+            crate::SCHEMA_HASH,
+            wait.as_str(),
+        )
     }
 
     fn name(&self, what: &str) -> ServiceNameBuf {
@@ -125,5 +163,28 @@ mod tests {
             RunServices::new(1).telemetry(),
             RunServices::new(2).telemetry()
         );
+    }
+
+    #[test]
+    fn client_guide_names_services_hash_and_what_to_notify() {
+        use crate::link::WaitStrategy;
+        let s = RunServices::new(0xabc);
+        let busy = s.client_guide(WaitStrategy::BusyPoll);
+        for part in [
+            "oils/0000000000000abc/telemetry ",
+            "oils/0000000000000abc/command ",
+            "oils/0000000000000abc/telemetry-ready ",
+            "oils/0000000000000abc/command-ready ",
+            "iceoryx2 0.10.0",
+            "wait busy",
+            "do not notify",
+            "--run-id 0000000000000abc",
+        ] {
+            assert!(busy.contains(part), "`{part}` missing from:\n{busy}");
+        }
+        assert!(busy.contains(&format!("{:#018x}", crate::SCHEMA_HASH)));
+        let event = s.client_guide(WaitStrategy::Event);
+        assert!(event.contains("notify after each command") && event.contains("wait event"));
+        assert!(!event.contains("do not notify"));
     }
 }

@@ -64,6 +64,9 @@ pub struct RunArgs {
     /// Thrust-command profile CSV for `--fsw playback`.
     #[arg(long, value_name = "CSV")]
     pub profile: Option<PathBuf>,
+    /// Parameter file handed to a C flight software's init (`--fsw c:PATH`).
+    #[arg(long, value_name = "FILE")]
+    pub fsw_params: Option<PathBuf>,
     /// Seed of every random stream (navigation noise, ...). [default: 0]
     #[arg(long)]
     pub seed: Option<u64>,
@@ -157,6 +160,9 @@ impl RunArgs {
         if let Some(p) = &self.profile {
             cfg.profile = Some(p.clone());
         }
+        if let Some(p) = &self.fsw_params {
+            cfg.fsw_params = Some(p.clone());
+        }
         if let Some(w) = self.wait {
             cfg.wait = Some(w);
         }
@@ -243,31 +249,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
 
 /// What a flight software started by hand needs to join the run.
 fn print_services(launch: &StubLaunch) {
-    let names = RunServices::new(launch.run_id);
-    eprintln!(
-        "oils: run {:016x} is waiting for flight software (protocol {}, schema hash {:#018x}, wait {}) on:",
-        launch.run_id,
-        oils_shared::PROTOCOL_VERSION,
-        oils_shared::SCHEMA_HASH,
-        launch.wait.as_str()
-    );
-    for (name, what) in [
-        (names.telemetry(), "publish-subscribe, Telemetry: subscribe"),
-        (names.command(), "publish-subscribe, Command: publish"),
-        (
-            names.telemetry_event(),
-            "event: listen (the emulator notifies unless busy)",
-        ),
-        (
-            names.command_event(),
-            "event: notify after each command unless wait is busy",
-        ),
-    ] {
-        eprintln!("    {:<34} {what}", name.as_str());
-    }
-    eprintln!(
-        "  the reference stub joins with: oils stub --run-id {:016x}",
-        launch.run_id
+    eprint!(
+        "{}",
+        RunServices::new(launch.run_id).client_guide(launch.wait)
     );
 }
 
@@ -289,6 +273,9 @@ fn spawn_stub(cfg: &RunConfig, launch: &StubLaunch) -> Result<Child> {
         .stdin(Stdio::null());
     if let Some(profile) = &cfg.profile {
         p.arg("--profile").arg(profile);
+    }
+    if let Some(params) = &cfg.fsw_params {
+        p.arg("--fsw-params").arg(params);
     }
     p.spawn().context("spawning the onboard stub")
 }

@@ -44,3 +44,47 @@ pub fn text(o: &Output) -> String {
 pub fn run_id(tag: u64) -> String {
     format!("{:016x}", (std::process::id() as u64) << 20 | tag)
 }
+
+/// Flies one run whose flight software is a client started by hand: `oils run --no-stub`
+/// with `run_args` on run `run_id`, and `client` (which opens the run's services itself).
+/// Returns the outputs of `oils run` and of the client.
+pub fn fly_with_client(run_args: &[&str], run_id: &str, mut client: Command) -> (Output, Output) {
+    use std::process::Stdio;
+    let emulator = oils()
+        .args(["run", "--no-stub", "--run-id", run_id])
+        .args(run_args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawning oils run");
+    let client_out = client
+        .stdin(Stdio::null())
+        .output()
+        .expect("spawning the client");
+    let emulator_out = emulator.wait_with_output().expect("waiting for oils run");
+    (emulator_out, client_out)
+}
+
+/// The committed terminal-descent scenario.
+pub fn terminal_descent_scenario() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("emulator/config/scenarios/terminal-descent.toml")
+}
+
+/// Checks a report's touchdown against the scenario's `[touchdown]` limits.
+pub fn assert_soft_touchdown(r: &serde_json::Value, scenario: &Path) {
+    let limits = oils_emulator::run_config::load_scenario(scenario.to_str().unwrap())
+        .expect("scenario loads")
+        .touchdown;
+    assert_eq!(r["outcome"], "landed", "{r}");
+    let td = &r["touchdown"];
+    assert!(
+        td["vertical_speed_mps"].as_f64().unwrap() <= limits.vertical_speed_mps,
+        "{td}"
+    );
+    assert!(
+        td["horizontal_speed_mps"].as_f64().unwrap() <= limits.horizontal_speed_mps,
+        "{td}"
+    );
+    assert!(td["tilt_deg"].as_f64().unwrap() <= limits.tilt_deg, "{td}");
+}

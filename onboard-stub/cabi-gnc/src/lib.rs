@@ -1,0 +1,102 @@
+//! The reference descent GNC ([`ReferenceGnc`]) behind the C ABI of
+//! `shared/include/oils.h`, built as `liboils_cabi_gnc.so`:
+//!
+//! ```text
+//! cargo build --release -p oils-cabi-gnc
+//! oils run --fsw c:target/release/liboils_cabi_gnc.so
+//! ```
+//!
+//! It proves the ABI carries a whole GNC: through it the default descent gives the same
+//! digest as the native `--fsw gnc` (tested in `tests/fsw_c_abi.rs` at the workspace root).
+//! It takes no parameters (`--fsw-params` must be absent or empty): it flies
+//! [`GncConfig::default`], like `--fsw gnc`.
+#![warn(missing_docs)]
+
+use oils_onboard_stub::fsw::FlightSoftware;
+use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
+use oils_shared::c_abi::{FswConfig, FSW_ABI_VERSION, FSW_LAYOUT_HASH, FSW_STATUS_OK};
+use oils_shared::{Command, Telemetry};
+use std::ffi::c_void;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+
+/// `oils_fsw_step` status: the GNC panicked (a bug; the run stops).
+pub const STATUS_PANIC: i32 = 2;
+/// `oils_fsw_step` status: a NULL context or packet.
+pub const STATUS_NULL: i32 = 3;
+
+/// [`FSW_ABI_VERSION`] this library was built with.
+#[no_mangle]
+pub extern "C" fn oils_fsw_abi_version() -> u32 {
+    FSW_ABI_VERSION
+}
+
+/// [`FSW_LAYOUT_HASH`] this library was built with.
+#[no_mangle]
+pub extern "C" fn oils_fsw_layout_hash() -> u64 {
+    FSW_LAYOUT_HASH
+}
+
+/// A boxed [`ReferenceGnc`] with the default configuration; NULL when `config` is NULL,
+/// from another ABI version, or carries parameters.
+///
+/// # Safety
+/// `config` is NULL or points to a valid [`FswConfig`] whose `params` holds `params_len`
+/// readable bytes.
+#[no_mangle]
+pub unsafe extern "C" fn oils_fsw_init(config: *const FswConfig) -> *mut c_void {
+    // SAFETY: the caller passes NULL or a valid config.
+    let Some(config) = (unsafe { config.as_ref() }) else {
+        return std::ptr::null_mut();
+    };
+    if config.abi_version != FSW_ABI_VERSION || config.params_len != 0 {
+        return std::ptr::null_mut();
+    }
+    match ReferenceGnc::new(GncConfig::default()) {
+        Ok(gnc) => Box::into_raw(Box::new(gnc)).cast(),
+        Err(_) => std::ptr::null_mut(),
+    }
+}
+
+/// One GNC step: Telemetry(k) in, Command(k) out.
+///
+/// # Safety
+/// `ctx` comes from [`oils_fsw_init`] and is not yet finalised; `tlm` and `cmd` are NULL
+/// or valid packets.
+#[no_mangle]
+pub unsafe extern "C" fn oils_fsw_step(
+    ctx: *mut c_void,
+    tlm: *const Telemetry,
+    cmd: *mut Command,
+) -> i32 {
+    // SAFETY: the caller's contract.
+    let (gnc, tlm, cmd) = unsafe {
+        (
+            ctx.cast::<ReferenceGnc>().as_mut(),
+            tlm.as_ref(),
+            cmd.as_mut(),
+        )
+    };
+    let (Some(gnc), Some(tlm), Some(cmd)) = (gnc, tlm, cmd) else {
+        return STATUS_NULL;
+    };
+    // A panic must not unwind into C.
+    match catch_unwind(AssertUnwindSafe(|| gnc.step(tlm))) {
+        Ok(c) => {
+            *cmd = c;
+            FSW_STATUS_OK
+        }
+        Err(_) => STATUS_PANIC,
+    }
+}
+
+/// Frees the GNC.
+///
+/// # Safety
+/// `ctx` is NULL or comes from [`oils_fsw_init`] and is finalised only once.
+#[no_mangle]
+pub unsafe extern "C" fn oils_fsw_fini(ctx: *mut c_void) {
+    if !ctx.is_null() {
+        // SAFETY: made by Box::into_raw in init, freed once.
+        drop(unsafe { Box::from_raw(ctx.cast::<ReferenceGnc>()) });
+    }
+}
