@@ -20,9 +20,11 @@
 use anyhow::{bail, Context, Result};
 use oils_emulator::propulsion::hifi::HifiPropulsion;
 use oils_emulator::propulsion::{EngineCommand, Propulsion};
-use oils_emulator::surrogate::features::{InputVec, INPUT_DIM};
-use oils_emulator::surrogate::valve::{IgnitionClock, ValveFilter, ValveTrack, NOT_IGNITED};
-use oils_emulator::surrogate::{hifi_params_of, TrainConfig};
+use oils_emulator::surrogate::runtime::features::{InputVec, INPUT_DIM};
+use oils_emulator::surrogate::runtime::valve::{
+    IgnitionClock, ValveFilter, ValveTrack, NOT_IGNITED,
+};
+use oils_emulator::surrogate::training::{hifi_params_of, TrainConfig};
 use oils_shared::ENGINE_COUNT;
 
 const STEP_NS: u64 = 10_000_000;

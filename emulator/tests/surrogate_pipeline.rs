@@ -6,10 +6,10 @@
 use oils_emulator::config::PropulsionConfig;
 use oils_emulator::propulsion::hifi::HifiPropulsion;
 use oils_emulator::propulsion::{build, EngineCommand, Propulsion, PropulsionKind};
-use oils_emulator::surrogate::excitation::ExcitationConfig;
-use oils_emulator::surrogate::model_file::{ModelFile, ModelFileError};
+use oils_emulator::surrogate::runtime::model_file::{ModelFile, ModelFileError};
 use oils_emulator::surrogate::runtime::{SurrogatePropulsion, DEFAULT_MODEL_JSON};
-use oils_emulator::surrogate::{hifi_params_of, train_configured, Quiet, TrainConfig};
+use oils_emulator::surrogate::training::excitation::ExcitationConfig;
+use oils_emulator::surrogate::training::{hifi_params_of, train_configured, Quiet, TrainConfig};
 use std::path::PathBuf;
 
 fn root() -> PathBuf {
@@ -63,7 +63,7 @@ fn refusal(text: &str, bench_step_ns: u64) -> ModelFileError {
 /// every state finite.
 fn reads_and_runs(text: &str) -> ModelFile {
     let file = ModelFile::parse(text).expect("the earlier default reads");
-    let mut model = oils_emulator::surrogate::predictor::Predictor::new(&file.model);
+    let mut model = oils_emulator::surrogate::runtime::predictor::Predictor::new(&file.model);
     for k in 0..200 {
         let x = model.step(&[600.0 + k as f64, 500.0, 700.0, 650.0, 1.0, 1.0, 1.0, 1.0]);
         assert!(x.iter().all(|v| v.is_finite()), "step {k}: {x:?}");
@@ -330,7 +330,7 @@ fn surrogate_tracks_reference_on_unseen_excitation() {
     let commands: Vec<EngineCommand> = ex
         .inputs
         .iter()
-        .map(oils_emulator::surrogate::dataset::command_of)
+        .map(oils_emulator::surrogate::training::dataset::command_of)
         .collect();
     let (rmse, naive, mass_err, outside) = compare(&commands);
     // The learned dynamics must explain the reference better than the command does, and
@@ -473,7 +473,7 @@ fn draw_changes_without_a_valve_filter_are_refused_clearly() {
 
 #[test]
 fn a_fixed_penalty_ignores_the_variant_penalty() {
-    use oils_emulator::surrogate::fit::{sub_specs, Penalty, Variant};
+    use oils_emulator::surrogate::training::fit::{sub_specs, Penalty, Variant};
     let cfg = committed_config();
     let specs = sub_specs(Variant::SharedEngine, 2, &cfg.variants);
     assert_eq!(specs[0].penalty, Penalty::Scaled(1.0));
@@ -538,7 +538,7 @@ fn the_stroke_map_is_hifis_calibration() {
 /// The model inputs of a validation case, step by 10 ms step, with each step's start.
 fn case_inputs(
     case: &oils_emulator::validation::cases::Case,
-) -> impl Iterator<Item = (i64, oils_emulator::surrogate::features::InputVec)> + '_ {
+) -> impl Iterator<Item = (i64, oils_emulator::surrogate::runtime::features::InputVec)> + '_ {
     use oils_emulator::surrogate::runtime::input_of;
     use oils_emulator::validation::compare::command_at;
     (0..case.duration_ns)
@@ -556,7 +556,7 @@ fn case_inputs(
 #[test]
 fn the_valve_filter_follows_hifis_valve_in_stroke() {
     use oils_emulator::propulsion::hifi::engine::{Tfcv, TfcvDynamics};
-    use oils_emulator::surrogate::valve::ValveTrack;
+    use oils_emulator::surrogate::runtime::valve::ValveTrack;
     use oils_emulator::validation::cases::builtin;
 
     let cfg = committed_config();
@@ -590,7 +590,7 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
         0.5 * (lo + hi)
     };
     // (worst, RMS after 3 s) over all cases, with and without the map.
-    let stray = |filter: oils_emulator::surrogate::valve::ValveFilter| {
+    let stray = |filter: oils_emulator::surrogate::runtime::valve::ValveFilter| {
         let (mut worst, mut sum2, mut n) = (0.0f64, 0.0, 0.0);
         for case in builtin() {
             let mut track = ValveTrack::new(filter, dt_s);
@@ -617,10 +617,11 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
         (worst, (sum2 / n).sqrt())
     };
     let (worst_n, rms_n) = stray(filter);
-    let (plain_worst_n, plain_rms_n) = stray(oils_emulator::surrogate::valve::ValveFilter {
-        stroke: None,
-        ..filter
-    });
+    let (plain_worst_n, plain_rms_n) =
+        stray(oils_emulator::surrogate::runtime::valve::ValveFilter {
+            stroke: None,
+            ..filter
+        });
     eprintln!(
         "valve filter against hifi's valve: worst {worst_n:.2} N, RMS {rms_n:.3} N; \
          without the map {plain_worst_n:.2} N, {plain_rms_n:.3} N"
@@ -630,7 +631,7 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
 
     // Beside the map, the ignition clock integrates the filter in newtons: the same
     // bits, and the same clock, as the filter without the map.
-    let plain = oils_emulator::surrogate::valve::ValveFilter {
+    let plain = oils_emulator::surrogate::runtime::valve::ValveFilter {
         stroke: None,
         ..filter
     };

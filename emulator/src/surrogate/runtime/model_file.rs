@@ -7,7 +7,6 @@
 //! back bit for bit (shortest round-trip digits), which the reproduce test relies on.
 
 use super::features::{FeatureSpec, STATE_DIM};
-use super::fit::Variant;
 use super::model::Model;
 use crate::propulsion::PropulsionOutput;
 use serde::{Deserialize, Serialize};
@@ -290,5 +289,26 @@ fn json_error(e: serde_json::Error, text: &str) -> ModelFileError {
         ModelFileError::Invalid(format!("non-finite number (NaN or infinity): {msg}"))
     } else {
         ModelFileError::Malformed(msg)
+    }
+}
+/// Which model structure a file holds (and training fits).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Variant {
+    /// The paper as written: one MIMO model, `11n+10` features, seven absolute outputs.
+    Paper,
+    /// Beyond the paper: one per-engine thrust model with coefficients shared by the
+    /// four engines (trained on all four engines' rows) predicting thrust increments,
+    /// plus a MIMO model of the increments of gas pressure and ejected masses.
+    SharedEngine,
+}
+
+impl Variant {
+    /// Name in reports and the model file.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Variant::Paper => "paper",
+            Variant::SharedEngine => "shared-engine",
+        }
     }
 }

@@ -266,12 +266,12 @@ impl Predictor {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::surrogate::features::{
+    use crate::surrogate::runtime::features::{
         FeatureSpec, TrajectoryHistory, STATE_DIM, STATE_MF, STATE_MO, STATE_P,
     };
-    use crate::surrogate::library::Library;
-    use crate::surrogate::model::{ActiveTerm, OutputRow, Submodel, Target};
-    use crate::surrogate::valve::{IgnitionClock, ValveFilter};
+    use crate::surrogate::runtime::model::{ActiveTerm, OutputRow, Submodel, Target};
+    use crate::surrogate::runtime::valve::{IgnitionClock, ValveFilter};
+    use crate::surrogate::training::library::Library;
 
     /// A valve filter for the test models (hifi's TFCV figures in newtons).
     pub(crate) const TEST_VALVE: ValveFilter = ValveFilter {
@@ -420,7 +420,7 @@ pub(crate) mod tests {
 
     /// The committed default model.
     fn committed_model() -> Model {
-        crate::surrogate::model_file::ModelFile::parse(
+        crate::surrogate::runtime::model_file::ModelFile::parse(
             crate::surrogate::runtime::DEFAULT_MODEL_JSON,
         )
         .expect("the committed model parses")
@@ -463,7 +463,8 @@ pub(crate) mod tests {
     #[test]
     fn avx2_and_portable_steps_agree_bit_for_bit() {
         let committed = committed_model();
-        let (cmds, _) = crate::surrogate::features::source_tests::switching_trajectory(400);
+        let (cmds, _) =
+            crate::surrogate::runtime::features::source_tests::switching_trajectory(400);
         // The same switching at 2.5 times the thrust: commands beyond the on-range,
         // clamped and counted.
         let wild: Vec<InputVec> = cmds
@@ -550,7 +551,7 @@ pub(crate) mod tests {
                 }
             }
             let (inputs, states) =
-                crate::surrogate::features::source_tests::switching_trajectory(60);
+                crate::surrogate::runtime::features::source_tests::switching_trajectory(60);
             let (valves, valve_rest) = valves_of(&model, &inputs);
             let mut p = Predictor::new(&model);
             for t in 4..inputs.len() {
@@ -578,7 +579,8 @@ pub(crate) mod tests {
     fn compiled_step_equals_full_evaluation_of(model: &Model) {
         model.check().unwrap();
         let mut p = Predictor::new(model);
-        let (cmds, _) = crate::surrogate::features::source_tests::switching_trajectory(150);
+        let (cmds, _) =
+            crate::surrogate::runtime::features::source_tests::switching_trajectory(150);
         let mut inputs: Vec<InputVec> = Vec::new();
         let mut states: Vec<StateVec> = Vec::new();
         let mut clocked_steps = 0;

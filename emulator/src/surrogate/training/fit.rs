@@ -3,35 +3,15 @@
 //! into [`Submodel`]s.
 
 use super::dataset::Dataset;
-use super::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
 use super::lasso::{lasso_gram, GramStats, LassoSettings, Standardised};
 use super::library::Library;
-use super::model::{active_terms_of, Model, OutputRow, Submodel, Target};
-use super::valve::ValveFilter;
+use crate::surrogate::runtime::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
+use crate::surrogate::runtime::model::{active_terms_of, Model, OutputRow, Submodel, Target};
+use crate::surrogate::runtime::valve::ValveFilter;
 use oils_shared::ENGINE_COUNT;
 use serde::{Deserialize, Serialize};
 
-/// Which model structure to train.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Variant {
-    /// The paper as written: one MIMO model, `11n+10` features, seven absolute outputs.
-    Paper,
-    /// Beyond the paper: one per-engine thrust model with coefficients shared by the
-    /// four engines (trained on all four engines' rows) predicting thrust increments,
-    /// plus a MIMO model of the increments of gas pressure and ejected masses.
-    SharedEngine,
-}
-
-impl Variant {
-    /// Name in reports and the model file.
-    pub fn as_str(&self) -> &'static str {
-        match self {
-            Variant::Paper => "paper",
-            Variant::SharedEngine => "shared-engine",
-        }
-    }
-}
+pub use crate::surrogate::runtime::model_file::Variant;
 
 /// Polynomial degrees and feature choices of the variants.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -2,10 +2,10 @@
 //! latest `depth` records are always one contiguous window.
 
 use super::aligned::AlignedValues;
-use crate::surrogate::features::{
+use crate::surrogate::runtime::features::{
     command_sum_of, lambda_of, InputVec, StateVec, INPUT_DIM, STATE_DIM, STATE_MF, STATE_MO,
 };
-use crate::surrogate::valve::valve_sum_of;
+use crate::surrogate::runtime::valve::valve_sum_of;
 use oils_shared::ENGINE_COUNT;
 
 /// Components of a ring record: the step's inputs, its command sum and the change of

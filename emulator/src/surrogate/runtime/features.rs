@@ -759,7 +759,7 @@ pub(crate) mod source_tests {
                 start_steps: 7,
                 stop_steps: 4,
                 command_sum: true,
-                valve: Some(crate::surrogate::predictor::tests::TEST_VALVE),
+                valve: Some(crate::surrogate::runtime::predictor::tests::TEST_VALVE),
                 valve_sum: true,
                 ..FeatureSpec::per_engine(2)
             },
@@ -804,7 +804,7 @@ pub(crate) mod source_tests {
     #[test]
     fn draw_changes_count_only_engines_that_are_on() {
         let spec = FeatureSpec {
-            valve: Some(crate::surrogate::predictor::tests::TEST_VALVE),
+            valve: Some(crate::surrogate::runtime::predictor::tests::TEST_VALVE),
             valve_sum: true,
             ..FeatureSpec::per_engine(2)
         };

@@ -1,7 +1,7 @@
 //! The every-step and grouped terms of a compiled output row: flat by degree, or
 //! factored by a shared first factor, summed in independent partial sums.
 
-use crate::surrogate::model::OutputRow;
+use crate::surrogate::runtime::model::OutputRow;
 
 /// Terms compiled for evaluation, split by degree (factor slots into the gathered
 /// features, coefficients) in flat arrays, so a linear term costs one read and one

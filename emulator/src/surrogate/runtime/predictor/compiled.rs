@@ -10,9 +10,9 @@ use super::gather::gather_lanes_avx2;
 use super::gather::{Clock, ClockGather, FeatureScaling, Gather, PhaseGather, Phases};
 use super::ring::{Ring, REC_LAMBDA, REC_STATE, REC_SUM, REC_VALVE, REC_VALVE_SUM_CHANGE};
 use super::terms::CompiledRow;
-use crate::surrogate::features::{Layout, Source, StateVec, STATE_MF, STATE_MO};
-use crate::surrogate::model::{Submodel, Target};
-use crate::surrogate::valve::IgnitionClock;
+use crate::surrogate::runtime::features::{Layout, Source, StateVec, STATE_MF, STATE_MO};
+use crate::surrogate::runtime::model::{Submodel, Target};
+use crate::surrogate::runtime::valve::IgnitionClock;
 
 /// A submodel compiled for `LANES` evaluations per step: 1 for a MIMO submodel, 4 (one
 /// per engine, evaluated together and vectorised, the same arithmetic per lane as for

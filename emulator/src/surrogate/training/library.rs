@@ -5,13 +5,8 @@
 //! that always holds 1.0; lower-degree terms are padded with that slot. Evaluation is then
 //! the same branch-free product for every term, in training and in the runtime.
 
-use super::features::Role;
-
-/// Highest supported polynomial degree.
-pub const MAX_DEGREE: usize = 3;
-
-/// One monomial: the product of three entries of the extended feature vector.
-pub type Term = [u16; MAX_DEGREE];
+use crate::surrogate::runtime::features::Role;
+pub use crate::surrogate::runtime::model::{eval_term, term_name, Term, MAX_DEGREE};
 
 /// All monomials of degree 1..=`degree` over `dim` features (no constant: the intercept is
 /// fitted separately and not penalised). Powers of binary features are left out: they
@@ -112,37 +107,6 @@ impl Library {
     }
 }
 
-/// Product of a term's factors.
-#[inline(always)]
-pub fn eval_term(t: &Term, x_ext: &[f64]) -> f64 {
-    x_ext[t[0] as usize] * x_ext[t[1] as usize] * x_ext[t[2] as usize]
-}
-
-/// Name of a term, see [`Library::term_name`].
-pub fn term_name(term: &Term, dim: usize, feature_names: &[String]) -> String {
-    let mut parts: Vec<String> = Vec::new();
-    let mut i = 0;
-    let f: Vec<usize> = term
-        .iter()
-        .map(|&x| x as usize)
-        .filter(|&x| x < dim)
-        .collect();
-    while i < f.len() {
-        let mut j = i;
-        while j < f.len() && f[j] == f[i] {
-            j += 1;
-        }
-        let name = feature_names.get(f[i]).map_or("?", String::as_str);
-        if j - i == 1 {
-            parts.push(name.to_string());
-        } else {
-            parts.push(format!("{name}^{}", j - i));
-        }
-        i = j;
-    }
-    parts.join("*")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -201,7 +165,7 @@ mod tests {
 
     #[test]
     fn phase_indicators_multiply_only_their_partners() {
-        use crate::surrogate::features::FeatureSpec;
+        use crate::surrogate::runtime::features::FeatureSpec;
         let spec = FeatureSpec {
             start_steps: 2,
             stop_steps: 1,

@@ -618,7 +618,7 @@ pub fn valve_sum_of(input: &InputVec, valve_n: &[f64; ENGINE_COUNT]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::surrogate::features::INPUT_DIM;
+    use crate::surrogate::runtime::features::INPUT_DIM;
 
     /// The valve filter: parked when off, a large step at the rate limit, a small one
     /// with the lag, a reversal only after the backlash.

@@ -1,7 +1,7 @@
 //! How a compiled submodel reads its features: positions in the history window,
 //! envelope clamp and scaling, phase indicators and ignition features.
 
-use crate::surrogate::valve::NOT_IGNITED;
+use crate::surrogate::runtime::valve::NOT_IGNITED;
 use oils_shared::ENGINE_COUNT;
 
 /// One feature an active term uses, compiled to a read of the history window (see
@@ -34,7 +34,7 @@ pub(super) struct ClockGather {
 }
 
 /// The engines' ignition clocks after the step being predicted (see
-/// [`crate::surrogate::valve::IgnitionClock`]).
+/// [`crate::surrogate::runtime::valve::IgnitionClock`]).
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Clock {
     pub(super) since_ignition_s: [f64; ENGINE_COUNT],
