@@ -1,6 +1,6 @@
 //! A fitted surrogate: what the model file holds (submodels, their active terms,
 //! feature scaling and training envelope) and the checks a model must pass before
-//! [`super::predictor::Predictor`] compiles it.
+//! [`super::predictor::Predictor`] steps it.
 
 use super::features::{FeatureSpec, Layout, StateVec, STATE_DIM};
 use oils_shared::ENGINE_COUNT;
