@@ -40,6 +40,7 @@ impl Target {
 
 /// One non-zero coefficient.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ActiveTerm {
     /// Readable name, e.g. `T_o1[t-2]*P[t-1]` (of scaled features).
     pub name: String,
@@ -51,6 +52,7 @@ pub struct ActiveTerm {
 
 /// The coefficients of one output.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct OutputRow {
     /// Output name (`T_o1` .. `m_o`; `T_o` for the shared per-engine row).
     pub output: String,
@@ -62,6 +64,7 @@ pub struct OutputRow {
 
 /// A block of outputs predicted from one feature layout.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Submodel {
     /// Feature layout and history length.
     pub features: FeatureSpec,
@@ -91,6 +94,7 @@ pub struct Submodel {
 
 /// A whole surrogate: every state output predicted by exactly one submodel.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Model {
     /// Sample time, nanoseconds.
     pub sample_time_ns: u64,
