@@ -7,7 +7,9 @@ use oils_emulator::config::PropulsionConfig;
 use oils_emulator::propulsion::hifi::HifiPropulsion;
 use oils_emulator::propulsion::{build, EngineCommand, Propulsion, PropulsionKind};
 use oils_emulator::surrogate::runtime::model_file::{ModelFile, ModelFileError};
+use oils_emulator::surrogate::runtime::valve::ValveFilter;
 use oils_emulator::surrogate::runtime::{SurrogatePropulsion, DEFAULT_MODEL_JSON};
+use oils_emulator::surrogate::training::derive::{self, ValveSpec};
 use oils_emulator::surrogate::training::excitation::ExcitationConfig;
 use oils_emulator::surrogate::training::{hifi_params_of, train_configured, Quiet, TrainConfig};
 use std::path::PathBuf;
@@ -407,37 +409,45 @@ fn a_fixed_penalty_ignores_the_variant_penalty() {
     assert_eq!(specs[1].penalty.at(1e-5), 1e-5 * scaled.system_mu_scale);
 }
 
-/// The valve filter's stroke map in `train.toml` is hifi's throttle calibration (the
-/// mean of the fuel and oxidiser TFCV positions) at its knots, so the surrogate's filter
-/// rate-limits the stroke hifi's valves move; and the quadratic slope the filter steps
-/// with is within 0.5 % of every segment's. When hifi's parameters change this fails
-/// and prints the strokes to put in `train.toml`.
+/// The valve filter of the committed configuration with its stroke table derived from
+/// hifi, and the committed model's ignition clock (fitting one takes a while).
+fn committed_valve(cfg: &TrainConfig) -> ValveFilter {
+    let spec = cfg.variants.engine_valve_spec.expect("a valve filter");
+    let params = hifi_params_of(cfg).unwrap();
+    let grid = spec.stroke.expect("a stroke table");
+    let stroke = derive::stroke_table(&grid, &params, &cfg.propulsion).unwrap();
+    let clock = ModelFile::parse(DEFAULT_MODEL_JSON)
+        .unwrap()
+        .model
+        .submodels
+        .iter()
+        .find_map(|s| s.features.valve.and_then(|v| v.ignition));
+    let plain = ValveSpec {
+        stroke: None,
+        ignition: None,
+        ..spec
+    };
+    ValveFilter {
+        stroke: Some(stroke),
+        ignition: clock,
+        ..plain.plain().unwrap()
+    }
+}
+
+/// The stroke table `oils train` derives is hifi's calibration: it spans the throttle
+/// range, its slope is the segments' to 0.5 %, and it is far from linear (which is why
+/// it is there).
 #[test]
 fn the_stroke_map_is_hifis_calibration() {
     let cfg = committed_config();
-    let map = cfg
-        .variants
-        .engine_valve
-        .and_then(|v| v.stroke)
-        .expect("train.toml has a stroke map");
+    let map = committed_valve(&cfg).stroke.unwrap();
     let hifi = HifiPropulsion::new(&hifi_params_of(&cfg).unwrap(), &cfg.propulsion).unwrap();
-    let want: Vec<f64> = (0..map.strokes().len())
-        .map(|k| {
-            let [fuel, ox] = hifi
-                .throttle_table()
-                .positions(map.first_n() + map.step_n() * k as f64);
-            0.5 * (fuel + ox)
-        })
-        .collect();
-    let close = want
-        .iter()
-        .zip(map.strokes())
-        .all(|(w, s)| (w - s).abs() < 1e-9);
-    assert!(
-        close,
-        "train.toml's stroke map should be\nstroke = {want:?}"
-    );
-    // The map spans the throttle range, which is where commands are.
+    for (k, s) in map.strokes().iter().enumerate() {
+        let [fuel, ox] = hifi
+            .throttle_table()
+            .positions(map.first_n() + map.step_n() * k as f64);
+        assert_eq!(*s, 0.5 * (fuel + ox));
+    }
     assert_eq!(
         (map.first_n(), map.last_n()),
         (
@@ -450,8 +460,53 @@ fn the_stroke_map_is_hifis_calibration() {
         .map(|(t, k)| (map.slope_at(t) / k - 1.0).abs())
         .fold(0.0, f64::max);
     assert!(worst < 0.005, "slope off by {:.2} %", 100.0 * worst);
-    // And the valve is far from linear, which is why the map is there.
     assert!(map.slope_at(map.first_n()) > 2.0 * map.slope_at(map.last_n()));
+}
+
+/// What `oils train` derives from hifi follows hifi's parameters: with the regulator set
+/// 1 bar higher (lock-up and the tanks' regulated pressure, which hifi's calibration
+/// assumes), every knot of the stroke table opens less (more pressure across the valve
+/// for the same thrust), and the ignition clock fitted to that hifi differs from the
+/// default one and places its ignitions at least as well as the stale clock does. (2 bar
+/// lower, hifi's valves cannot reach full thrust: its calibration refuses.)
+#[test]
+fn derived_constants_follow_a_changed_regulator_set_point() {
+    let cfg = committed_config();
+    let spec = cfg.variants.engine_valve_spec.expect("a valve filter");
+    let base = hifi_params_of(&cfg).unwrap();
+    let mut high = base.clone();
+    high.regulator.lockup_pressure_pa += 1e5;
+    high.tanks.nominal_pressure_pa += 1e5;
+    let dt_s = cfg.sample_time_ns as f64 * 1e-9;
+    let (f0, fit0) = spec.derive(&base, &cfg.propulsion, dt_s).unwrap();
+    let (f1, fit1) = spec.derive(&high, &cfg.propulsion, dt_s).unwrap();
+    let (s0, s1) = (f0.stroke.unwrap(), f1.stroke.unwrap());
+    for (k, (a, b)) in s0.strokes().iter().zip(s1.strokes()).enumerate() {
+        assert!(b < a, "knot {k}: stroke {b} at 18 bar, {a} at 17 bar");
+    }
+    let (fit0, fit1) = (fit0.unwrap(), fit1.unwrap());
+    eprintln!("17 bar: {fit0}\n18 bar: {fit1}");
+    let c = |f: &derive::ClockFit| {
+        (
+            f.clock.fill_n_s,
+            f.clock.sag_per_n,
+            f.clock.priming_sag_per_n,
+        )
+    };
+    assert_ne!(c(&fit0), c(&fit1));
+    let without_clock = ValveFilter {
+        ignition: None,
+        ..f1
+    };
+    let (_, stale_rms_s, _) =
+        derive::clock_spread(&without_clock, fit0.clock, &high, &cfg.propulsion, dt_s).unwrap();
+    eprintln!(
+        "the 17 bar clock on the 18 bar hifi: spread RMS {:.2} ms",
+        stale_rms_s * 1e3
+    );
+    assert!(fit1.rms_s <= stale_rms_s);
+    // Both fits place hifi's ignitions within a few milliseconds (one 10 ms step).
+    assert!(fit0.rms_s < 2e-3 && fit1.rms_s < 2e-3);
 }
 
 /// The model inputs of a validation case, step by 10 ms step, with each step's start.
@@ -479,7 +534,7 @@ fn the_valve_filter_follows_hifis_valve_in_stroke() {
     use oils_emulator::validation::cases::builtin;
 
     let cfg = committed_config();
-    let filter = cfg.variants.engine_valve.expect("a valve filter");
+    let filter = committed_valve(&cfg);
     let params = hifi_params_of(&cfg).unwrap();
     let hifi = HifiPropulsion::new(&params, &cfg.propulsion).unwrap();
     let e = &params.engine;
@@ -574,28 +629,25 @@ fn bad_stroke_maps_in_a_training_configuration_are_refused_clearly() {
     let text = std::fs::read_to_string(root().join("config/train.toml")).unwrap();
     assert!(
         text.contains("\nstep_n = 40.0\n"),
-        "the committed map moved"
+        "the committed grid moved"
     );
-    for (from, to, why) in [
-        ("\nstep_n = 40.0\n", "\nstep_n = 0.0\n", "positive"),
-        ("0.23498252205750586, ", "0.9, ", "rise"),
-        (
-            "\nfirst_n = 320.0\n",
-            "\nfirst_n = 400.0\n",
-            "park_n 320 is outside",
-        ),
-    ] {
-        let edited = text.replacen(from, to, 1);
-        assert_ne!(edited, text);
-        let err = TrainConfig::from_toml(&edited).unwrap_err().to_string();
-        assert!(
-            err.contains(why) && err.contains("stroke"),
-            "{to}: unclear error {err:?}"
-        );
-    }
+    let edited = text.replacen("\nstep_n = 40.0\n", "\nstep_n = 0.0\n", 1);
+    let err = TrainConfig::from_toml(&edited).unwrap_err().to_string();
+    assert!(err.contains("positive") && err.contains("stroke"), "{err}");
+    // A grid that does not divide the throttle range is refused when derived.
+    let edited = text.replacen("\nstep_n = 40.0\n", "\nstep_n = 70.0\n", 1);
+    let cfg = TrainConfig::from_toml(&edited).unwrap();
+    let params = hifi_params_of(&cfg).unwrap();
+    let err = cfg.resolve(Some(&params)).unwrap_err().to_string();
+    assert!(err.contains("does not divide the throttle range"), "{err}");
+    // Without the table the filter works in newtons (and still has its clock to derive).
     let start = text.find("[variants.engine_valve.stroke]").unwrap();
     let end = text.find("[variants.engine_valve.ignition]").unwrap();
     let without = format!("{}{}", &text[..start], &text[end..]);
     let cfg = TrainConfig::from_toml(&without).unwrap();
-    assert!(cfg.variants.engine_valve.unwrap().stroke.is_none());
+    let spec = cfg.variants.engine_valve_spec.unwrap();
+    assert!(spec.stroke.is_none() && spec.ignition.is_some());
+    // Such a spec needs hifi: without it, it is refused by name rather than half used.
+    let err = spec.plain().unwrap_err();
+    assert!(err.contains("derived from the hifi reference"), "{err}");
 }

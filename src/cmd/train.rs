@@ -93,6 +93,19 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let t0 = Instant::now();
     let outcome = train_configured(&cfg, &bars).context("training")?;
     let train_s = t0.elapsed().as_secs_f64();
+    // What was derived from the reference rather than read from the configuration.
+    if let Some(stroke) = outcome.valve.and_then(|v| v.stroke) {
+        println!(
+            "derived: stroke table from hifi's calibration, {} knots {}..={} N: {:.4?}",
+            stroke.strokes().len(),
+            stroke.first_n(),
+            stroke.last_n(),
+            stroke.strokes()
+        );
+    }
+    if let Some(fit) = &outcome.clock_fit {
+        println!("derived: {fit}");
+    }
     let written =
         report::write_reports(&outcome, &args.out, cfg.top_terms).context("writing the reports")?;
     let deployed = outcome.deployed_model();

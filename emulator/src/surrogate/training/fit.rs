@@ -3,6 +3,7 @@
 //! into [`Submodel`]s.
 
 use super::dataset::Dataset;
+use super::derive::ValveSpec;
 use super::lasso::{lasso_gram, GramStats, LassoSettings, Standardised};
 use super::library::Library;
 use crate::surrogate::runtime::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
@@ -50,8 +51,14 @@ pub struct VariantConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub system_mu: Option<f64>,
     /// Beyond the paper: give the per-engine thrust model the command passed through a
-    /// model of the throttle valve's actuator (`T_v`, see [`FeatureSpec::valve`]).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// model of the throttle valve's actuator (`T_v`, see [`FeatureSpec::valve`]), as
+    /// `train.toml` gives it (`[variants.engine_valve]`): its stroke table and ignition
+    /// clock are derived from the reference ([`super::derive`]).
+    #[serde(rename = "engine_valve", skip_serializing_if = "Option::is_none")]
+    pub engine_valve_spec: Option<ValveSpec>,
+    /// The filter the features read: `engine_valve_spec` with what was derived from the
+    /// reference ([`super::TrainConfig::resolve`]).
+    #[serde(skip)]
     pub engine_valve: Option<ValveFilter>,
     /// Beyond the paper: give the per-engine thrust model how the engines' total draw
     /// changed over the last steps, `dT_vsum[t..t-n]` (see [`FeatureSpec::valve_sum`]).
@@ -76,6 +83,7 @@ impl Default for VariantConfig {
             engine_command_sum: false,
             system_mu_scale: 1.0,
             system_mu: None,
+            engine_valve_spec: None,
             engine_valve: None,
             engine_valve_sum: false,
             engine_history_max: 0,

@@ -11,6 +11,7 @@
 
 pub mod cv;
 pub mod dataset;
+pub mod derive;
 pub mod excitation;
 pub mod figures;
 pub mod fit;
@@ -129,11 +130,11 @@ impl TrainConfig {
                 v.engine_history_max
             )));
         }
-        if let Some(f) = &v.engine_valve {
+        if let Some(f) = &v.engine_valve_spec {
             f.validate()
                 .map_err(|m| e(format!("variants.engine_valve: {m}")))?;
         }
-        if v.engine_valve_sum && v.engine_valve.is_none() {
+        if v.engine_valve_sum && v.engine_valve_spec.is_none() {
             return Err(e(
                 "variants.engine_valve_sum = true needs a [variants.engine_valve] filter".into(),
             ));
@@ -176,6 +177,30 @@ impl TrainConfig {
         let cfg: Self = toml::from_str(text).map_err(|err| TrainConfigError(err.to_string()))?;
         cfg.validate()?;
         Ok(cfg)
+    }
+
+    /// The configuration with its valve filter complete: the stroke table and ignition
+    /// clock derived from hifi with `hifi` (when the reference is hifi), or the filter as
+    /// given when it asks for neither. Already resolved: returned as it is.
+    pub fn resolve(
+        &self,
+        hifi: Option<&HifiParams>,
+    ) -> Result<(Self, Option<derive::ClockFit>), TrainConfigError> {
+        let mut cfg = self.clone();
+        let v = &mut cfg.variants;
+        let Some(spec) = v.engine_valve_spec.filter(|_| v.engine_valve.is_none()) else {
+            return Ok((cfg, None));
+        };
+        let dt_s = self.sample_time_ns as f64 * 1e-9;
+        let err = |m: String| TrainConfigError(format!("variants.engine_valve: {m}"));
+        let (filter, fit) = match (self.reference, hifi) {
+            (PropulsionKind::Hifi, Some(h)) => {
+                spec.derive(h, &self.propulsion, dt_s).map_err(err)?
+            }
+            _ => (spec.plain().map_err(err)?, None),
+        };
+        v.engine_valve = Some(filter);
+        Ok((cfg, fit))
     }
 
     /// A BLAKE3 hash of the configuration (provenance).
@@ -242,7 +267,12 @@ pub fn train_configured(
             .unwrap_or_else(|e| unreachable!("built once already: {e}"))
     };
     let info = ReferenceInfo::new(cfg.reference, &cfg.propulsion, &hifi);
-    train(cfg, &factory, &info, progress)
+    progress.begin("derive", 1);
+    let (resolved, clock_fit) = cfg.resolve(Some(&hifi))?;
+    progress.finish();
+    let mut outcome = train(&resolved, &factory, &info, progress)?;
+    outcome.clock_fit = clock_fit;
+    Ok(outcome)
 }
 
 /// Progress reporting hooks (the CLI draws bars; tests pass [`Quiet`]).
@@ -277,6 +307,10 @@ pub struct TrainOutcome {
     pub models: Vec<ModelFile>,
     /// Index of the deployed one.
     pub deployed: usize,
+    /// The valve filter the features read, with what was derived from the reference.
+    pub valve: Option<crate::surrogate::runtime::valve::ValveFilter>,
+    /// How the derived ignition clock fits the reference's ignitions.
+    pub clock_fit: Option<derive::ClockFit>,
 }
 
 impl TrainOutcome {
@@ -295,6 +329,7 @@ pub fn train(
     progress: &dyn Progress,
 ) -> Result<TrainOutcome, TrainConfigError> {
     cfg.validate()?;
+    let (cfg, _) = &cfg.resolve(None)?;
     let excitation = cfg.excitation.generate(cfg.sample_time_ns);
     let mut model = reference();
     progress.begin("data", excitation.inputs.len() as u64);
@@ -359,5 +394,7 @@ pub fn train(
         cv: results,
         models,
         deployed,
+        valve: cfg.variants.engine_valve,
+        clock_fit: None,
     })
 }
