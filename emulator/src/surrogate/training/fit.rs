@@ -14,12 +14,26 @@ use serde::{Deserialize, Serialize};
 
 pub use crate::surrogate::runtime::model_file::Variant;
 
+/// Which polynomial phi a submodel's library is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Phi {
+    /// Every monomial of the features up to the degree (products included).
+    #[default]
+    Products,
+    /// Each feature's powers alone up to the degree ([`Library::powers`]).
+    Powers,
+}
+
 /// Polynomial degrees and feature choices of the variants.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct VariantConfig {
     /// Degree of the paper model's library (1: K has the paper's stated 7 x (11n+10)).
     pub paper_degree: usize,
+    /// The paper model's phi: each feature's powers (`powers`, the reading that keeps
+    /// K's blocks of 11n+10) or every product up to the degree (`products`).
+    pub paper_phi: Phi,
     /// Degree of the shared per-engine thrust model.
     pub engine_degree: usize,
     /// Degree of the shared-engine variant's pressure and mass model.
@@ -74,6 +88,7 @@ impl Default for VariantConfig {
     fn default() -> Self {
         Self {
             paper_degree: 1,
+            paper_phi: Phi::Powers,
             engine_degree: 2,
             system_degree: 1,
             engine_mass_features: false,
@@ -98,6 +113,8 @@ pub struct SubSpec {
     pub features: FeatureSpec,
     /// Library degree.
     pub degree: usize,
+    /// Which polynomial of that degree.
+    pub phi: Phi,
     /// Target kind.
     pub target: Target,
     /// State indices predicted.
@@ -149,6 +166,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
         Variant::Paper => vec![SubSpec {
             features: FeatureSpec::paper(n),
             degree: cfg.paper_degree,
+            phi: cfg.paper_phi,
             target: Target::Absolute,
             outputs: (0..STATE_DIM).collect(),
             penalty: Penalty::Scaled(1.0),
@@ -167,6 +185,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                     valve_sum: cfg.engine_valve_sum,
                 },
                 degree: cfg.engine_degree,
+                phi: Phi::Products,
                 target: Target::Increment,
                 outputs: (0..ENGINE_COUNT).collect(),
                 penalty: Penalty::Scaled(1.0),
@@ -174,6 +193,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
             SubSpec {
                 features: FeatureSpec::paper(n),
                 degree: cfg.system_degree,
+                phi: Phi::Products,
                 target: Target::Increment,
                 outputs: (ENGINE_COUNT..STATE_DIM).collect(),
                 penalty: match cfg.system_mu {
@@ -214,7 +234,10 @@ impl Prepared {
         let fs = spec.features;
         data.assert_valves_for(&fs);
         let dim = fs.dim();
-        let library = Library::new(dim, spec.degree, &fs.roles(), fs.phase_degree);
+        let library = match spec.phi {
+            Phi::Products => Library::new(dim, spec.degree, &fs.roles(), fs.phase_degree),
+            Phi::Powers => Library::powers(dim, spec.degree, &fs.roles()),
+        };
         let mut sum = vec![0.0; dim];
         let mut sum2 = vec![0.0; dim];
         let mut lo = vec![f64::INFINITY; dim];

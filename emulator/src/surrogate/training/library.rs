@@ -82,6 +82,24 @@ impl Library {
         Self { dim, degree, terms }
     }
 
+    /// The powers of each feature alone, `x_j, x_j^2, ..., x_j^degree` (no products of
+    /// two features): the reading of the paper's polynomial phi that keeps its
+    /// `K in R^{7 x (11n+10)}` one block per power. Powers of a binary feature equal the
+    /// feature and are left out.
+    pub fn powers(dim: usize, degree: usize, roles: &[Role]) -> Self {
+        assert!((1..=MAX_DEGREE).contains(&degree) && dim < u16::MAX as usize);
+        let one = dim as u16;
+        let mut terms: Vec<Term> = (0..dim).map(|i| [i as u16, one, one]).collect();
+        let continuous = || (0..dim).filter(|&i| roles[i].group == 0).map(|i| i as u16);
+        if degree >= 2 {
+            terms.extend(continuous().map(|i| [i, i, one]));
+        }
+        if degree >= 3 {
+            terms.extend(continuous().map(|i| [i, i, i]));
+        }
+        Self { dim, degree, terms }
+    }
+
     /// Number of terms.
     pub fn len(&self) -> usize {
         self.terms.len()
@@ -113,6 +131,23 @@ mod tests {
 
     fn choose(n: usize, k: usize) -> usize {
         (0..k).fold(1, |acc, i| acc * (n - i) / (i + 1))
+    }
+
+    #[test]
+    fn powers_are_each_feature_alone_up_to_the_degree() {
+        let roles = [
+            Role::default(),
+            Role {
+                group: 1,
+                ..Role::default()
+            },
+            Role::default(),
+        ];
+        let names: Vec<String> = ["a", "s", "b"].iter().map(|s| s.to_string()).collect();
+        let lib = Library::powers(3, 3, &roles);
+        let got: Vec<String> = lib.terms.iter().map(|t| lib.term_name(t, &names)).collect();
+        assert_eq!(got, ["a", "s", "b", "a^2", "b^2", "a^3", "b^3"]);
+        assert_eq!(Library::powers(3, 1, &roles), Library::new(3, 1, &roles, 0));
     }
 
     #[test]
