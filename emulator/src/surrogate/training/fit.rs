@@ -53,15 +53,13 @@ pub struct VariantConfig {
     /// (`T_rsum[t]`, see [`FeatureSpec::command_sum`]).
     pub engine_command_sum: bool,
     /// The shared-engine variant's pressure and mass model is fitted at this multiple of
-    /// the penalty `mu` chosen for the variant (1: one penalty for both submodels). Its
-    /// rows are smooth functions of the thrusts, and a larger penalty drops terms the
-    /// step would otherwise pay for (see docs/surrogate.md, "Cost").
+    /// the penalty `mu` chosen for the variant (1: one penalty for both submodels).
     pub system_mu_scale: f64,
     /// The shared-engine variant's pressure and mass model is fitted at this penalty
     /// whatever `mu` cross-validation tries for the thrust model (overrides
     /// `system_mu_scale`), so CV chooses the thrust's penalty alone instead of moving
     /// both submodels together. The committed value is where the mass rows' CV free-run
-    /// errors are lowest (docs/surrogate.md, "Penalties and sweeps").
+    /// errors are lowest (docs/journal/surrogate-history.md, "Penalties and sweeps").
     #[serde(skip_serializing_if = "Option::is_none")]
     pub system_mu: Option<f64>,
     /// Beyond the paper: give the per-engine thrust model the command passed through a
@@ -79,8 +77,8 @@ pub struct VariantConfig {
     /// Needs `engine_valve`.
     pub engine_valve_sum: bool,
     /// Largest history length the shared-engine variant's cross-validation tries (0: the
-    /// `[cv]` range). The step's cost grows with `n`, while the score barely moves past
-    /// 2 (docs/surrogate.md, "Cost").
+    /// `[cv]` range). Its degree-2 library grows with the square of `n`, and with it the
+    /// training's time.
     pub engine_history_max: usize,
 }
 
