@@ -1,4 +1,4 @@
-//! One 10 ms step of the surrogate propulsion model for four engines (target <= 200 ns).
+//! One 10 ms step of the surrogate propulsion model for four engines (the step alone; the figure that matters is a whole descent, `emulator/examples/surrogate_descent.rs`).
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use oils_emulator::config::PropulsionConfig;

@@ -2,7 +2,9 @@
 //! against scikit-learn's `Lasso(precompute=True, fit_intercept=True)` on a committed
 //! fixture (`tools/gen_lasso_fixture.py` made it; this test needs no Python).
 
-use oils_emulator::surrogate::lasso::{lasso_gram, GramProblem, GramStats, LassoSettings};
+use oils_emulator::surrogate::training::lasso::{
+    lasso_gram, GramProblem, GramStats, LassoSettings,
+};
 use std::path::PathBuf;
 
 fn data_dir() -> PathBuf {

@@ -8,7 +8,7 @@ use oils_emulator::propulsion::hifi::figures::DESCENT_PROFILE_CSV;
 use oils_emulator::propulsion::{
     hifi_for_bench, surrogate_for_bench, BuildError, ModelFiles, Propulsion,
 };
-use oils_emulator::surrogate::model_file::ModelFile;
+use oils_emulator::surrogate::runtime::model_file::ModelFile;
 use oils_emulator::surrogate::runtime::DEFAULT_MODEL_JSON;
 use oils_emulator::validation::cases::{self, CaseKind};
 use oils_emulator::validation::report::{Bounds, ValidationReport};

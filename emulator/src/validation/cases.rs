@@ -15,7 +15,7 @@
 //! judged as a whole after its start-up transient; a descent (or user profile) as a
 //! whole.
 
-use crate::surrogate::excitation::sphere_signal;
+use crate::surrogate::training::excitation::sphere_signal;
 use oils_shared::profile::{ProfileError, ProfileRow, ThrustProfile};
 use oils_shared::ENGINE_COUNT;
 use serde::Serialize;

@@ -3,34 +3,26 @@
 //! into [`Submodel`]s.
 
 use super::dataset::Dataset;
-use super::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
+use super::derive::ValveSpec;
 use super::lasso::{lasso_gram, GramStats, LassoSettings, Standardised};
 use super::library::Library;
-use super::model::{active_terms_of, Model, OutputRow, Submodel, Target};
-use super::valve::ValveFilter;
+use crate::surrogate::runtime::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
+use crate::surrogate::runtime::model::{active_terms_of, Model, OutputRow, Submodel, Target};
+use crate::surrogate::runtime::valve::ValveFilter;
 use oils_shared::ENGINE_COUNT;
 use serde::{Deserialize, Serialize};
 
-/// Which model structure to train.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Variant {
-    /// The paper as written: one MIMO model, `11n+10` features, seven absolute outputs.
-    Paper,
-    /// Beyond the paper: one per-engine thrust model with coefficients shared by the
-    /// four engines (trained on all four engines' rows) predicting thrust increments,
-    /// plus a MIMO model of the increments of gas pressure and ejected masses.
-    SharedEngine,
-}
+pub use crate::surrogate::runtime::model_file::Variant;
 
-impl Variant {
-    /// Name in reports and the model file.
-    pub fn as_str(&self) -> &'static str {
-        match self {
-            Variant::Paper => "paper",
-            Variant::SharedEngine => "shared-engine",
-        }
-    }
+/// Which polynomial phi a submodel's library is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Phi {
+    /// Every monomial of the features up to the degree (products included).
+    #[default]
+    Products,
+    /// Each feature's powers alone up to the degree ([`Library::powers`]).
+    Powers,
 }
 
 /// Polynomial degrees and feature choices of the variants.
@@ -39,6 +31,9 @@ impl Variant {
 pub struct VariantConfig {
     /// Degree of the paper model's library (1: K has the paper's stated 7 x (11n+10)).
     pub paper_degree: usize,
+    /// The paper model's phi: each feature's powers (`powers`, the reading that keeps
+    /// K's blocks of 11n+10) or every product up to the degree (`products`).
+    pub paper_phi: Phi,
     /// Degree of the shared per-engine thrust model.
     pub engine_degree: usize,
     /// Degree of the shared-engine variant's pressure and mass model.
@@ -58,28 +53,32 @@ pub struct VariantConfig {
     /// (`T_rsum[t]`, see [`FeatureSpec::command_sum`]).
     pub engine_command_sum: bool,
     /// The shared-engine variant's pressure and mass model is fitted at this multiple of
-    /// the penalty `mu` chosen for the variant (1: one penalty for both submodels). Its
-    /// rows are smooth functions of the thrusts, and a larger penalty drops terms the
-    /// step would otherwise pay for (see docs/surrogate.md, "Cost").
+    /// the penalty `mu` chosen for the variant (1: one penalty for both submodels).
     pub system_mu_scale: f64,
     /// The shared-engine variant's pressure and mass model is fitted at this penalty
     /// whatever `mu` cross-validation tries for the thrust model (overrides
     /// `system_mu_scale`), so CV chooses the thrust's penalty alone instead of moving
     /// both submodels together. The committed value is where the mass rows' CV free-run
-    /// errors are lowest (docs/surrogate.md, "Penalties and sweeps").
+    /// errors are lowest (docs/journal/surrogate-history.md, "Penalties and sweeps").
     #[serde(skip_serializing_if = "Option::is_none")]
     pub system_mu: Option<f64>,
     /// Beyond the paper: give the per-engine thrust model the command passed through a
-    /// model of the throttle valve's actuator (`T_v`, see [`FeatureSpec::valve`]).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// model of the throttle valve's actuator (`T_v`, see [`FeatureSpec::valve`]), as
+    /// `train.toml` gives it (`[variants.engine_valve]`): its stroke table and ignition
+    /// clock are derived from the reference ([`super::derive`]).
+    #[serde(rename = "engine_valve", skip_serializing_if = "Option::is_none")]
+    pub engine_valve_spec: Option<ValveSpec>,
+    /// The filter the features read: `engine_valve_spec` with what was derived from the
+    /// reference ([`super::TrainConfig::resolve`]).
+    #[serde(skip)]
     pub engine_valve: Option<ValveFilter>,
     /// Beyond the paper: give the per-engine thrust model how the engines' total draw
     /// changed over the last steps, `dT_vsum[t..t-n]` (see [`FeatureSpec::valve_sum`]).
     /// Needs `engine_valve`.
     pub engine_valve_sum: bool,
     /// Largest history length the shared-engine variant's cross-validation tries (0: the
-    /// `[cv]` range). The step's cost grows with `n`, while the score barely moves past
-    /// 2 (docs/surrogate.md, "Cost").
+    /// `[cv]` range). Its degree-2 library grows with the square of `n`, and with it the
+    /// training's time.
     pub engine_history_max: usize,
 }
 
@@ -87,6 +86,7 @@ impl Default for VariantConfig {
     fn default() -> Self {
         Self {
             paper_degree: 1,
+            paper_phi: Phi::Powers,
             engine_degree: 2,
             system_degree: 1,
             engine_mass_features: false,
@@ -96,6 +96,7 @@ impl Default for VariantConfig {
             engine_command_sum: false,
             system_mu_scale: 1.0,
             system_mu: None,
+            engine_valve_spec: None,
             engine_valve: None,
             engine_valve_sum: false,
             engine_history_max: 0,
@@ -110,6 +111,8 @@ pub struct SubSpec {
     pub features: FeatureSpec,
     /// Library degree.
     pub degree: usize,
+    /// Which polynomial of that degree.
+    pub phi: Phi,
     /// Target kind.
     pub target: Target,
     /// State indices predicted.
@@ -161,6 +164,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
         Variant::Paper => vec![SubSpec {
             features: FeatureSpec::paper(n),
             degree: cfg.paper_degree,
+            phi: cfg.paper_phi,
             target: Target::Absolute,
             outputs: (0..STATE_DIM).collect(),
             penalty: Penalty::Scaled(1.0),
@@ -179,6 +183,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
                     valve_sum: cfg.engine_valve_sum,
                 },
                 degree: cfg.engine_degree,
+                phi: Phi::Products,
                 target: Target::Increment,
                 outputs: (0..ENGINE_COUNT).collect(),
                 penalty: Penalty::Scaled(1.0),
@@ -186,6 +191,7 @@ pub fn sub_specs(variant: Variant, n: usize, cfg: &VariantConfig) -> Vec<SubSpec
             SubSpec {
                 features: FeatureSpec::paper(n),
                 degree: cfg.system_degree,
+                phi: Phi::Products,
                 target: Target::Increment,
                 outputs: (ENGINE_COUNT..STATE_DIM).collect(),
                 penalty: match cfg.system_mu {
@@ -226,7 +232,10 @@ impl Prepared {
         let fs = spec.features;
         data.assert_valves_for(&fs);
         let dim = fs.dim();
-        let library = Library::new(dim, spec.degree, &fs.roles(), fs.phase_degree);
+        let library = match spec.phi {
+            Phi::Products => Library::new(dim, spec.degree, &fs.roles(), fs.phase_degree),
+            Phi::Powers => Library::powers(dim, spec.degree, &fs.roles()),
+        };
         let mut sum = vec![0.0; dim];
         let mut sum2 = vec![0.0; dim];
         let mut lo = vec![f64::INFINITY; dim];

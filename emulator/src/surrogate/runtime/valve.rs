@@ -35,7 +35,7 @@ pub struct ValveFilter {
     /// rate limit and backlash act in stroke, as hifi's TFCV's do (`rate_n_per_s` and
     /// `backlash_n` are then per position newton and scaled by the newtons per stroke
     /// where the valve moves). The ignition clock keeps integrating a second filter
-    /// with them constant, the path its constants were fitted on (docs/surrogate.md,
+    /// with them constant, the path its constants were fitted on (docs/journal/surrogate-history.md,
     /// "The rate limit in stroke"). `None`: constant in newtons (absent from files
     /// before version 7).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -66,8 +66,8 @@ pub struct ValveFilter {
 /// `priming_sag_per_n * (valve positions of the other engines still priming)`: a branch
 /// whose dome is still filling meets no injector and draws far more than a running one.
 /// Parameters: `drain_time_s` and `full` are hifi's dome figures, `fill_n_s`, `sag_per_n`
-/// and `priming_sag_per_n` are fitted to hifi's ignition times (`cargo run --release -p
-/// oils-emulator --example ignition_times`).
+/// and `priming_sag_per_n` are fitted to hifi's ignition times by `oils train`
+/// (`surrogate::training::derive`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct IgnitionClock {
@@ -618,7 +618,7 @@ pub fn valve_sum_of(input: &InputVec, valve_n: &[f64; ENGINE_COUNT]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::surrogate::features::INPUT_DIM;
+    use crate::surrogate::runtime::features::INPUT_DIM;
 
     /// The valve filter: parked when off, a large step at the rate limit, a small one
     /// with the lag, a reversal only after the backlash.

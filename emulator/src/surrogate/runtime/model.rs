@@ -1,9 +1,8 @@
 //! A fitted surrogate: what the model file holds (submodels, their active terms,
 //! feature scaling and training envelope) and the checks a model must pass before
-//! [`super::predictor::Predictor`] compiles it.
+//! [`super::predictor::Predictor`] steps it.
 
 use super::features::{FeatureSpec, Layout, StateVec, STATE_DIM};
-use super::library::{term_name, Term, MAX_DEGREE};
 use oils_shared::ENGINE_COUNT;
 use serde::{Deserialize, Serialize};
 
@@ -41,6 +40,7 @@ impl Target {
 
 /// One non-zero coefficient.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ActiveTerm {
     /// Readable name, e.g. `T_o1[t-2]*P[t-1]` (of scaled features).
     pub name: String,
@@ -52,6 +52,7 @@ pub struct ActiveTerm {
 
 /// The coefficients of one output.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct OutputRow {
     /// Output name (`T_o1` .. `m_o`; `T_o` for the shared per-engine row).
     pub output: String,
@@ -63,6 +64,7 @@ pub struct OutputRow {
 
 /// A block of outputs predicted from one feature layout.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Submodel {
     /// Feature layout and history length.
     pub features: FeatureSpec,
@@ -92,6 +94,7 @@ pub struct Submodel {
 
 /// A whole surrogate: every state output predicted by exactly one submodel.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Model {
     /// Sample time, nanoseconds.
     pub sample_time_ns: u64,
@@ -310,4 +313,42 @@ pub fn active_terms_of(
             coef: *c,
         })
         .collect()
+}
+/// The library terms: a term is stored as three factor indices into the feature vector
+/// extended by one slot that always holds 1.0; lower-degree terms are padded with that slot.
+/// Highest supported polynomial degree.
+pub const MAX_DEGREE: usize = 3;
+
+/// One monomial: the product of three entries of the extended feature vector.
+pub type Term = [u16; MAX_DEGREE];
+
+/// Product of a term's factors.
+#[inline(always)]
+pub fn eval_term(t: &Term, x_ext: &[f64]) -> f64 {
+    x_ext[t[0] as usize] * x_ext[t[1] as usize] * x_ext[t[2] as usize]
+}
+
+/// Name of a term, see [`Library::term_name`].
+pub fn term_name(term: &Term, dim: usize, feature_names: &[String]) -> String {
+    let mut parts: Vec<String> = Vec::new();
+    let mut i = 0;
+    let f: Vec<usize> = term
+        .iter()
+        .map(|&x| x as usize)
+        .filter(|&x| x < dim)
+        .collect();
+    while i < f.len() {
+        let mut j = i;
+        while j < f.len() && f[j] == f[i] {
+            j += 1;
+        }
+        let name = feature_names.get(f[i]).map_or("?", String::as_str);
+        if j - i == 1 {
+            parts.push(name.to_string());
+        } else {
+            parts.push(format!("{name}^{}", j - i));
+        }
+        i = j;
+    }
+    parts.join("*")
 }

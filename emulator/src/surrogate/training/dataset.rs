@@ -2,12 +2,12 @@
 //! sample per surrogate sample time, and its CSV export for re-fitting elsewhere.
 
 use super::excitation::Excitation;
-use super::features::{
+use crate::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
+use crate::surrogate::runtime::features::{
     FeatureSpec, InputVec, StateVec, TrajectoryHistory, STATE_DIM, STATE_MF, STATE_MO, STATE_NAMES,
     STATE_P,
 };
-use super::valve::{ValveFilter, ValveState};
-use crate::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
+use crate::surrogate::runtime::valve::{ValveFilter, ValveState};
 use oils_shared::ENGINE_COUNT;
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -169,7 +169,7 @@ mod tests {
     use super::*;
     use crate::config::PropulsionConfig;
     use crate::propulsion::ideal::IdealPropulsion;
-    use crate::surrogate::excitation::ExcitationConfig;
+    use crate::surrogate::training::excitation::ExcitationConfig;
 
     #[test]
     fn records_and_exports() {

@@ -6,10 +6,10 @@
 
 use super::dataset::Dataset;
 use super::excitation::{sphere_signal, Excitation, Segment};
-use super::features::{InputVec, StateVec, INPUT_DIM, STATE_MF, STATE_MO};
-use super::model::Model;
-use super::predictor::Predictor;
 use crate::propulsion::Propulsion;
+use crate::surrogate::runtime::features::{InputVec, StateVec, INPUT_DIM, STATE_MF, STATE_MO};
+use crate::surrogate::runtime::model::Model;
+use crate::surrogate::runtime::predictor::Predictor;
 use oils_shared::profile::ThrustProfile;
 use oils_shared::ENGINE_COUNT;
 

@@ -6,8 +6,7 @@
 //! JSON because it is readable, diffable and serde_json writes every f64 so it reads
 //! back bit for bit (shortest round-trip digits), which the reproduce test relies on.
 
-use super::features::{FeatureSpec, STATE_DIM};
-use super::fit::Variant;
+use super::features::STATE_DIM;
 use super::model::Model;
 use crate::propulsion::PropulsionOutput;
 use serde::{Deserialize, Serialize};
@@ -15,58 +14,15 @@ use std::path::Path;
 
 /// Value of the `format` field.
 pub const FORMAT: &str = "oils-surrogate";
-/// Current file version; bump on any change of meaning. Version 2 added the per-engine
-/// physics features (`start_steps`, `stop_steps`, `phase_degree`, `command_sum` in a
-/// feature spec): a version-1 reader would ignore them and misread the model, so it must
-/// refuse such files, and this reader refuses version-1 files (retrain them). Version 3
-/// added the valve-filtered command (`valve` in a feature spec); a version-2 file has none
-/// and reads unchanged, so both are read, and a version-2 file that names a valve filter
-/// is refused (no version-2 writer made one). Version 4 added the ignition clock
-/// (`ignition` in a valve filter), which a version-3 reader would refuse as an unknown
-/// field; a version-3 file that names one is refused here too. Version 5 added the
-/// clock's manifold sag (`sag_per_n`), which a version-4 reader would refuse as an
-/// unknown field; a version-4 file that sets one is refused here too. Version 6 added
-/// the valve sum (`valve_sum` in a feature spec), which a version-5 reader would ignore
-/// (feature specs accept unknown fields) and so misread; a version-5 file that sets it
-/// is refused here. Version 7 added the valve's stroke map (`stroke` in a valve filter),
-/// which a version-6 reader would refuse as an unknown field; a version-6 file that names
-/// one is refused here too. Version 8 added the clock's sag for engines still priming
-/// (`priming_sag_per_n`), which a version-7 reader would refuse as an unknown field; a
-/// version-7 file that sets one is refused here too.
+/// The file version this build reads and writes, and the only one: bump it on any
+/// change of meaning, and a file of another version is refused with "retrain with
+/// `oils train`" rather than read by old rules. Every structure in the file refuses
+/// unknown fields, so a field added later is refused by an older build, never ignored.
 pub const VERSION: u32 = 8;
-/// The version that added each optional feature, what to call it, and whether a
-/// submodel's features use it (see [`VERSION`]).
-type AddedIn = (u64, &'static str, fn(&FeatureSpec) -> bool);
-const ADDED_IN: [AddedIn; 6] = [
-    (3, "a valve filter", |f| f.valve.is_some()),
-    (4, "an ignition clock", |f| {
-        f.valve.is_some_and(|v| v.ignition.is_some())
-    }),
-    (5, "an ignition clock's sag", |f| {
-        f.valve
-            .and_then(|v| v.ignition)
-            .is_some_and(|c| c.sag_per_n != 0.0)
-    }),
-    (6, "a valve sum (`valve_sum`)", |f| f.valve_sum),
-    (7, "a valve stroke map (`stroke`)", |f| {
-        f.valve.is_some_and(|v| v.stroke.is_some())
-    }),
-    (
-        8,
-        "an ignition clock's priming sag (`priming_sag_per_n`)",
-        |f| {
-            f.valve
-                .and_then(|v| v.ignition)
-                .is_some_and(|c| c.priming_sag_per_n != 0.0)
-        },
-    ),
-];
-
-/// Oldest version this build reads.
-pub const OLDEST_VERSION: u32 = 2;
 
 /// Where a model came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Provenance {
     /// Reference model that made the data (`hifi`).
     pub reference: String,
@@ -82,6 +38,7 @@ pub struct Provenance {
 
 /// What cross-validation chose and why.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct Selection {
     /// History length n.
     pub history: usize,
@@ -97,6 +54,7 @@ pub struct Selection {
 
 /// Reference outputs the surrogate does not model but reports (held constant).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ReferenceOutput {
     /// Fuel tank pressure at the start, pascals.
     pub fuel_tank_pressure_pa: f64,
@@ -116,6 +74,7 @@ impl ReferenceOutput {
 
 /// The file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct ModelFile {
     /// Always [`FORMAT`].
     pub format: String,
@@ -163,7 +122,7 @@ pub enum ModelFileError {
     #[error("not a surrogate model file (format `{0}`, expected `{FORMAT}`)")]
     WrongFormat(String),
     /// A version this build cannot read.
-    #[error("surrogate model file version {found} is not supported (this build reads {OLDEST_VERSION} to {VERSION}); retrain with `oils train`")]
+    #[error("surrogate model file version {found} is not supported (this build reads version {VERSION} only); retrain with `oils train`")]
     WrongVersion {
         /// Version in the file.
         found: u32,
@@ -229,22 +188,13 @@ impl ModelFile {
             return Err(ModelFileError::WrongFormat(format.to_string()));
         }
         let version = value.get("version").and_then(|v| v.as_u64()).unwrap_or(0);
-        if !(u64::from(OLDEST_VERSION)..=u64::from(VERSION)).contains(&version) {
+        if version != u64::from(VERSION) {
             return Err(ModelFileError::WrongVersion {
                 found: u32::try_from(version).unwrap_or(u32::MAX),
             });
         }
         let file: Self = serde_json::from_value(value).map_err(|e| json_error(e, text))?;
         file.model.check().map_err(ModelFileError::Invalid)?;
-        // A feature newer than the file's version was written by no writer of that
-        // version: refused rather than read with a meaning that version did not have.
-        for (since, what, uses) in ADDED_IN {
-            if version < since && file.model.submodels.iter().any(|s| uses(&s.features)) {
-                return Err(ModelFileError::Invalid(format!(
-                    "{what} needs file version {since}"
-                )));
-            }
-        }
         if file.model.sample_time_ns == 0 {
             return Err(ModelFileError::Invalid("sample_time_ns is 0".into()));
         }
@@ -290,5 +240,26 @@ fn json_error(e: serde_json::Error, text: &str) -> ModelFileError {
         ModelFileError::Invalid(format!("non-finite number (NaN or infinity): {msg}"))
     } else {
         ModelFileError::Malformed(msg)
+    }
+}
+/// Which model structure a file holds (and training fits).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Variant {
+    /// The paper as written: one MIMO model, `11n+10` features, seven absolute outputs.
+    Paper,
+    /// Beyond the paper: one per-engine thrust model with coefficients shared by the
+    /// four engines (trained on all four engines' rows) predicting thrust increments,
+    /// plus a MIMO model of the increments of gas pressure and ejected masses.
+    SharedEngine,
+}
+
+impl Variant {
+    /// Name in reports and the model file.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            Variant::Paper => "paper",
+            Variant::SharedEngine => "shared-engine",
+        }
     }
 }

@@ -2,11 +2,11 @@
 //! Fig. 3, the excitation, and a free-run comparison against the reference model.
 
 use super::cv::{CvResult, GridPoint};
-use super::features::{StateVec, STATE_DIM};
-use super::predictor::Predictor;
 use super::report::{at_chosen_n, best_per_n};
 use super::TrainOutcome;
 use crate::plot::{write_png, Panel, PlotError, Series};
+use crate::surrogate::runtime::features::{StateVec, STATE_DIM};
+use crate::surrogate::runtime::predictor::Predictor;
 use oils_shared::ENGINE_COUNT;
 use std::path::{Path, PathBuf};
 

@@ -8,10 +8,10 @@
 //! block's start and then feeds its own predictions back, as in the loop.
 
 use super::dataset::Dataset;
-use super::features::STATE_DIM;
 use super::fit::{assemble, fit_path, sse, sub_specs, Prepared, Variant, VariantConfig};
 use super::lasso::{mu_grid, GramStats, LassoSettings};
-use super::predictor::Predictor;
+use crate::surrogate::runtime::features::STATE_DIM;
+use crate::surrogate::runtime::predictor::Predictor;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -351,7 +351,7 @@ struct Acc {
 /// Free-run RMSE per output over steps `a..b`: the model starts from the true history at
 /// `a` and then runs on its own predictions.
 pub fn free_run_rmse(
-    model: &super::model::Model,
+    model: &crate::surrogate::runtime::model::Model,
     data: &Dataset,
     a: usize,
     b: usize,
@@ -376,7 +376,7 @@ pub fn fit_final(
     data: &Dataset,
     cv: &CvConfig,
     vcfg: &VariantConfig,
-) -> super::model::Model {
+) -> crate::surrogate::runtime::model::Model {
     // Walk the grid's path down to mu for the warm start, then mu itself.
     let mut mus: Vec<f64> = cv.mus().into_iter().filter(|m| *m > mu).collect();
     mus.push(mu);

@@ -2,7 +2,7 @@
 //! and biased over M thrust levels, plus step stairs, ramps and engine on/off switching.
 //! Deterministic from a seed; clamped to the valid thrust range when an engine is on.
 
-use super::features::{InputVec, INPUT_DIM};
+use crate::surrogate::runtime::features::{InputVec, INPUT_DIM};
 use oils_shared::profile::{ProfileError, ProfileRow, ThrustProfile};
 use oils_shared::ENGINE_COUNT;
 use rand::{Rng, SeedableRng};

@@ -55,6 +55,7 @@ pub enum Layout {
 
 /// Which features, for which history length.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct FeatureSpec {
     /// Layout of the vector.
     pub layout: Layout,
@@ -66,20 +67,16 @@ pub struct FeatureSpec {
     /// ("this engine switched on k steps ago"), so the delayed, dome-filling cold start is
     /// a learned lookup rather than something a polynomial of 10 ms histories must
     /// reproduce. 0 = none (the paper's features).
-    #[serde(default)]
     pub start_steps: usize,
     /// Beyond the paper, per-engine layout only: stop-phase indicators `stop0..stop{K-1}`
     /// ("this engine switched off k steps ago") for the tail-off (dome dribble). 0 = none.
-    #[serde(default)]
     pub stop_steps: usize,
     /// Highest degree of library terms with a phase indicator (0: the library degree).
-    #[serde(default)]
     pub phase_degree: usize,
     /// Beyond the paper, per-engine layout only: the sum of the four engines' commands
     /// over the step, `T_rsum[t]` (off engines count 0). The engines share feed lines and
     /// manifolds, so how fast one engine's dome fills at a start depends on what the
     /// others draw; a per-engine model cannot see that otherwise.
-    #[serde(default)]
     pub command_sum: bool,
     /// Beyond the paper, per-engine layout only: the command passed through a model of
     /// the throttle valve's actuator (lag, rate limit, backlash; [`ValveFilter`]),
@@ -759,7 +756,7 @@ pub(crate) mod source_tests {
                 start_steps: 7,
                 stop_steps: 4,
                 command_sum: true,
-                valve: Some(crate::surrogate::predictor::tests::TEST_VALVE),
+                valve: Some(crate::surrogate::runtime::predictor::tests::TEST_VALVE),
                 valve_sum: true,
                 ..FeatureSpec::per_engine(2)
             },
@@ -804,7 +801,7 @@ pub(crate) mod source_tests {
     #[test]
     fn draw_changes_count_only_engines_that_are_on() {
         let spec = FeatureSpec {
-            valve: Some(crate::surrogate::predictor::tests::TEST_VALVE),
+            valve: Some(crate::surrogate::runtime::predictor::tests::TEST_VALVE),
             valve_sum: true,
             ..FeatureSpec::per_engine(2)
         };

@@ -3,8 +3,8 @@
 //! CV grid, the excitation profile, and a readable summary of the chosen models.
 
 use super::cv::{CvResult, GridPoint};
-use super::features::{STATE_DIM, STATE_NAMES};
 use super::TrainOutcome;
+use crate::surrogate::runtime::features::{STATE_DIM, STATE_NAMES};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 

@@ -5,13 +5,8 @@
 //! that always holds 1.0; lower-degree terms are padded with that slot. Evaluation is then
 //! the same branch-free product for every term, in training and in the runtime.
 
-use super::features::Role;
-
-/// Highest supported polynomial degree.
-pub const MAX_DEGREE: usize = 3;
-
-/// One monomial: the product of three entries of the extended feature vector.
-pub type Term = [u16; MAX_DEGREE];
+use crate::surrogate::runtime::features::Role;
+pub use crate::surrogate::runtime::model::{eval_term, term_name, Term, MAX_DEGREE};
 
 /// All monomials of degree 1..=`degree` over `dim` features (no constant: the intercept is
 /// fitted separately and not penalised). Powers of binary features are left out: they
@@ -87,6 +82,24 @@ impl Library {
         Self { dim, degree, terms }
     }
 
+    /// The powers of each feature alone, `x_j, x_j^2, ..., x_j^degree` (no products of
+    /// two features): the reading of the paper's polynomial phi that keeps its
+    /// `K in R^{7 x (11n+10)}` one block per power. Powers of a binary feature equal the
+    /// feature and are left out.
+    pub fn powers(dim: usize, degree: usize, roles: &[Role]) -> Self {
+        assert!((1..=MAX_DEGREE).contains(&degree) && dim < u16::MAX as usize);
+        let one = dim as u16;
+        let mut terms: Vec<Term> = (0..dim).map(|i| [i as u16, one, one]).collect();
+        let continuous = || (0..dim).filter(|&i| roles[i].group == 0).map(|i| i as u16);
+        if degree >= 2 {
+            terms.extend(continuous().map(|i| [i, i, one]));
+        }
+        if degree >= 3 {
+            terms.extend(continuous().map(|i| [i, i, i]));
+        }
+        Self { dim, degree, terms }
+    }
+
     /// Number of terms.
     pub fn len(&self) -> usize {
         self.terms.len()
@@ -112,43 +125,29 @@ impl Library {
     }
 }
 
-/// Product of a term's factors.
-#[inline(always)]
-pub fn eval_term(t: &Term, x_ext: &[f64]) -> f64 {
-    x_ext[t[0] as usize] * x_ext[t[1] as usize] * x_ext[t[2] as usize]
-}
-
-/// Name of a term, see [`Library::term_name`].
-pub fn term_name(term: &Term, dim: usize, feature_names: &[String]) -> String {
-    let mut parts: Vec<String> = Vec::new();
-    let mut i = 0;
-    let f: Vec<usize> = term
-        .iter()
-        .map(|&x| x as usize)
-        .filter(|&x| x < dim)
-        .collect();
-    while i < f.len() {
-        let mut j = i;
-        while j < f.len() && f[j] == f[i] {
-            j += 1;
-        }
-        let name = feature_names.get(f[i]).map_or("?", String::as_str);
-        if j - i == 1 {
-            parts.push(name.to_string());
-        } else {
-            parts.push(format!("{name}^{}", j - i));
-        }
-        i = j;
-    }
-    parts.join("*")
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn choose(n: usize, k: usize) -> usize {
         (0..k).fold(1, |acc, i| acc * (n - i) / (i + 1))
+    }
+
+    #[test]
+    fn powers_are_each_feature_alone_up_to_the_degree() {
+        let roles = [
+            Role::default(),
+            Role {
+                group: 1,
+                ..Role::default()
+            },
+            Role::default(),
+        ];
+        let names: Vec<String> = ["a", "s", "b"].iter().map(|s| s.to_string()).collect();
+        let lib = Library::powers(3, 3, &roles);
+        let got: Vec<String> = lib.terms.iter().map(|t| lib.term_name(t, &names)).collect();
+        assert_eq!(got, ["a", "s", "b", "a^2", "b^2", "a^3", "b^3"]);
+        assert_eq!(Library::powers(3, 1, &roles), Library::new(3, 1, &roles, 0));
     }
 
     #[test]
@@ -201,7 +200,7 @@ mod tests {
 
     #[test]
     fn phase_indicators_multiply_only_their_partners() {
-        use crate::surrogate::features::FeatureSpec;
+        use crate::surrogate::runtime::features::FeatureSpec;
         let spec = FeatureSpec {
             start_steps: 2,
             stop_steps: 1,

@@ -3,9 +3,19 @@
 //! only active terms, and allocates nothing per step. Inputs outside the training
 //! envelope are clamped and counted ([`SurrogatePropulsion::out_of_envelope_steps`]).
 
-use super::features::{InputVec, StateVec, INPUT_DIM, STATE_MF, STATE_MO, STATE_P};
-use super::model_file::{ModelFile, ModelFileError};
-use super::predictor::Predictor;
+// Index loops read like the equations in this numerical code.
+#![allow(clippy::needless_range_loop)]
+
+pub mod features;
+pub mod model;
+pub mod model_file;
+pub mod predictor;
+pub mod stroke_map;
+pub mod valve;
+
+use self::features::{InputVec, StateVec, INPUT_DIM, STATE_MF, STATE_MO, STATE_P};
+use self::model_file::{ModelFile, ModelFileError};
+use self::predictor::Predictor;
 use crate::config::PropulsionConfig;
 use crate::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
 use oils_shared::ENGINE_COUNT;
@@ -13,7 +23,7 @@ use std::path::Path;
 
 /// The committed default model (`emulator/models/surrogate-default.json`), built into the
 /// binary so the bench runs without training.
-pub const DEFAULT_MODEL_JSON: &str = include_str!("../../models/surrogate-default.json");
+pub const DEFAULT_MODEL_JSON: &str = include_str!("../../../models/surrogate-default.json");
 
 /// The surrogate propulsion model.
 #[derive(Debug, Clone)]
@@ -25,7 +35,7 @@ pub struct SurrogatePropulsion {
     per_sample_s: f64,
     /// Chamber pressure per newton of thrust (the model predicts thrust only).
     chamber_pa_per_n: f64,
-    held: super::model_file::ReferenceOutput,
+    held: self::model_file::ReferenceOutput,
     /// What the latest step was, for [`Propulsion::output`].
     last: LastStep,
 }
