@@ -15,6 +15,7 @@ pub mod clock;
 pub mod config;
 pub mod digest;
 pub mod link;
+pub mod mcap_log;
 pub mod plant;
 pub mod plot;
 pub mod propulsion;
