@@ -22,6 +22,7 @@ pub mod propulsion;
 pub mod recorder;
 pub mod report;
 pub mod run_config;
+pub mod run_plots;
 pub mod sanitize;
 pub mod scheduler;
 pub mod session;
