@@ -59,6 +59,8 @@ pub const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 pub const METADATA_NAME: &str = "oils";
 /// Uncompressed chunk size, bytes (the crate's default; 4 MiB saved only 0.5 %).
 const CHUNK_SIZE: u64 = 1 << 20;
+/// Readers check every chunk's CRC (the crate's reader does not by default).
+const CHECK_CRCS: mcap::read::Options = mcap::read::Options::ValidateChunkCrcs;
 /// zstd level of the chunks.
 const ZSTD_LEVEL: u32 = 1;
 
@@ -119,7 +121,11 @@ impl From<McapLogError> for RecorderError {
     fn from(e: McapLogError) -> Self {
         match e {
             McapLogError::Io { path, source } => RecorderError::Io { path, source },
-            other => RecorderError::WriterGone(other.to_string()),
+            McapLogError::Mcap { path, source } => RecorderError::NotALog {
+                path,
+                why: format!("damaged MCAP: {source}"),
+            },
+            McapLogError::NotOils { path, why } => RecorderError::NotALog { path, why },
         }
     }
 }
@@ -1355,7 +1361,7 @@ pub fn read_mcap(path: &Path) -> Result<Log, McapLogError> {
             records.len() - 1
         })
     };
-    for msg in mcap::MessageStream::new(&bytes).map_err(mcap_err)? {
+    for msg in mcap::MessageStream::new_with_options(&bytes, CHECK_CRCS.into()).map_err(mcap_err)? {
         let msg = msg.map_err(mcap_err)?;
         let topic = msg.channel.topic.as_str();
         let bad = |e: serde_json::Error| not(format!("{topic} at t = {} ns: {e}", msg.log_time));
@@ -1443,7 +1449,7 @@ pub fn read_mcap_timing(path: &Path) -> Result<Vec<StepTiming>, McapLogError> {
         source,
     };
     let mut out = Vec::new();
-    for msg in mcap::MessageStream::new(&bytes).map_err(mcap_err)? {
+    for msg in mcap::MessageStream::new_with_options(&bytes, CHECK_CRCS.into()).map_err(mcap_err)? {
         let msg = msg.map_err(mcap_err)?;
         if msg.channel.topic == topic::TIMING {
             out.push(
