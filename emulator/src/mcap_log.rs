@@ -184,8 +184,17 @@ impl Serialize for F {
 }
 
 impl<'de> Deserialize<'de> for F {
+    /// Parses the number's own text with Rust's exact parser (serde_json's default float
+    /// parser may be one ulp off); `null` is NaN.
     fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        Ok(F(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN)))
+        let raw: &'de serde_json::value::RawValue = Deserialize::deserialize(d)?;
+        match raw.get() {
+            "null" => Ok(F(f64::NAN)),
+            text => text
+                .parse::<f64>()
+                .map(F)
+                .map_err(|e| serde::de::Error::custom(format!("number `{text}`: {e}"))),
+        }
     }
 }
 
