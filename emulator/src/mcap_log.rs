@@ -874,7 +874,7 @@ impl Site {
         }
     }
 
-    fn to_site(&self, p_mci: &Vector3<f64>) -> Vector3<f64> {
+    fn site_of(&self, p_mci: &Vector3<f64>) -> Vector3<f64> {
         self.q_mci_from_site.inverse() * (p_mci - self.origin_mci_m)
     }
 }
@@ -1003,7 +1003,7 @@ impl Encoder {
 
         let pos = Vector3::from(truth.pos_mci_m);
         let (vertical, horizontal, tilt) = local(truth);
-        let pos_site = site.to_site(&pos);
+        let pos_site = site.site_of(&pos);
         let truth_msg = TruthMsg {
             t_s,
             pos_mci_m: fs(truth.pos_mci_m),
@@ -1552,10 +1552,10 @@ mod tests {
         assert!((site.origin_mci_m - Vector3::new(1_737_400.0, 0.0, 0.0)).norm() < 1e-6);
         // 1 km north (mci +Z here) and 100 m up of the site.
         t.pos_mci_m = [1_737_500.0, 0.0, 1000.0];
-        let p = site.to_site(&Vector3::from(t.pos_mci_m));
+        let p = site.site_of(&Vector3::from(t.pos_mci_m));
         assert!((p - Vector3::new(0.0, 1000.0, 100.0)).norm() < 1e-6, "{p}");
         // East is mci +Y at this point.
-        let e = site.to_site(&Vector3::new(1_737_400.0, 50.0, 0.0));
+        let e = site.site_of(&Vector3::new(1_737_400.0, 50.0, 0.0));
         assert!((e - Vector3::new(50.0, 0.0, 0.0)).norm() < 1e-6, "{e}");
     }
 
