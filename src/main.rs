@@ -27,8 +27,10 @@ enum Cmd {
     Run(Box<cmd::run::RunArgs>),
     /// Replay a run's log through the same plant and loop (record == replay).
     Replay(cmd::run::ReplayArgs),
-    /// Turn a run log into CSV.
+    /// Turn a run log into CSV, a thrust profile or MCAP (Foxglove).
     Export(ExportArgs),
+    /// Draw a run's figures (PNG) from its log (OILSLOG2 or MCAP).
+    Plot(PlotArgs),
     /// Drive the high-fidelity propulsion model open loop with a profile, or draw its figures.
     Hifi(cmd::hifi::HifiArgs),
     /// Train the propulsion surrogate (seed paper): excitation, data, Lasso, CV, model file.
@@ -42,11 +44,14 @@ enum Cmd {
 
 #[derive(clap::Args)]
 struct ExportArgs {
-    /// The log file (`.oilslog`).
+    /// The log file (`.oilslog`, or `.mcap` from `oils run --log-format mcap`).
     log: PathBuf,
     /// Write every step as CSV here.
-    #[arg(long, required_unless_present = "profile")]
+    #[arg(long, required_unless_present_any = ["profile", "mcap"])]
     csv: Option<PathBuf>,
+    /// Write the run as MCAP here (opens in Foxglove; docs/foxglove-layout.json).
+    #[arg(long, value_name = "OUT.mcap")]
+    mcap: Option<PathBuf>,
     /// Write the applied commands as a thrust-command profile CSV here (replayable with
     /// `oils run --fsw playback`, `oils hifi`, `oils validate`).
     #[arg(long)]
@@ -54,6 +59,15 @@ struct ExportArgs {
     /// With --profile: keep one step in N (rows hold until the next).
     #[arg(long, default_value_t = 1)]
     every: usize,
+}
+
+#[derive(clap::Args)]
+struct PlotArgs {
+    /// The run's log (`.oilslog` or `.mcap`).
+    log: PathBuf,
+    /// Folder for the PNGs (created if needed).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
 }
 
 /// Errors print as one chain of causes (no backtrace, whatever RUST_BACKTRACE says)
@@ -76,6 +90,7 @@ fn real_main() -> anyhow::Result<()> {
         Cmd::Run(args) => cmd::run::run(&args),
         Cmd::Replay(a) => cmd::run::replay(&a),
         Cmd::Export(a) => export(&a),
+        Cmd::Plot(a) => cmd::plot::run(&a.log, &a.out),
         Cmd::Hifi(a) => cmd::hifi::run(&a),
         Cmd::Train(a) => cmd::train::run(&a),
         Cmd::Validate(a) => cmd::validate::run(&a),
@@ -89,7 +104,7 @@ fn real_main() -> anyhow::Result<()> {
 }
 
 fn export(a: &ExportArgs) -> anyhow::Result<()> {
-    let log = oils_emulator::recorder::read_log(&a.log)?;
+    let log = oils_emulator::mcap_log::read_any(&a.log)?;
     if !log.damaged_records.is_empty() {
         // One record per step from step 0, so a record's position is its step.
         let shown: Vec<String> = log
@@ -128,6 +143,17 @@ fn export(a: &ExportArgs) -> anyhow::Result<()> {
             "oils export: {} records to {}{torn}",
             log.records.len(),
             csv.display()
+        );
+    }
+    if let Some(path) = &a.mcap {
+        let started = std::time::Instant::now();
+        let stats = oils_emulator::mcap_log::export_mcap(&log, path)?;
+        eprintln!(
+            "oils export: {} records to {} ({:.1} MB) in {:.2} s{torn}",
+            stats.records,
+            path.display(),
+            stats.bytes as f64 / 1e6,
+            started.elapsed().as_secs_f64()
         );
     }
     if let Some(path) = &a.profile {

@@ -313,6 +313,17 @@ pub enum RecorderError {
     },
 }
 
+/// Another format for the writer thread to write (the MCAP log): it gets every record,
+/// in order, on the writer thread, never on the stepping thread.
+pub trait RecordSink: Send {
+    /// Writes one record.
+    fn write(&mut self, rec: &Record) -> Result<(), RecorderError>;
+    /// The channel ran dry: hand to the OS what the format can hand over now.
+    fn caught_up(&mut self) -> Result<(), RecorderError>;
+    /// No more records: close the file (summary, index), flush and sync it.
+    fn finish(&mut self) -> Result<(), RecorderError>;
+}
+
 /// Hands records to the writer thread.
 pub struct Recorder {
     tx: Option<Sender<Record>>,
@@ -340,6 +351,37 @@ impl Recorder {
             .name("oils-recorder".into())
             .spawn(move || write_records(rx, out, thread_path))
             .map_err(io)?;
+        Ok(Self {
+            tx: Some(tx),
+            writer: Some(writer),
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// Starts a writer thread that hands every record to `sink` (a format other than
+    /// OILSLOG2, e.g. [`crate::mcap_log::McapSink`]); same channel, same guarantees.
+    pub fn with_sink(path: &Path, mut sink: Box<dyn RecordSink>) -> Result<Self, RecorderError> {
+        let (tx, rx) = bounded::<Record>(CHANNEL_CAPACITY);
+        let writer = std::thread::Builder::new()
+            .name("oils-recorder".into())
+            .spawn(move || {
+                let mut written = 0u64;
+                while let Ok(rec) = rx.recv() {
+                    sink.write(&rec)?;
+                    written += 1;
+                    while let Ok(rec) = rx.try_recv() {
+                        sink.write(&rec)?;
+                        written += 1;
+                    }
+                    sink.caught_up()?;
+                }
+                sink.finish()?;
+                Ok(written)
+            })
+            .map_err(|source| RecorderError::Io {
+                path: path.to_path_buf(),
+                source,
+            })?;
         Ok(Self {
             tx: Some(tx),
             writer: Some(writer),

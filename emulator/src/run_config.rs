@@ -129,9 +129,12 @@ impl ThresholdConfig {
 pub struct LogConfig {
     /// Write a log at all.
     pub enabled: bool,
-    /// The log file; default `oils-out/<run id>.oilslog`.
+    /// The log file; default `oils-out/<run id>.oilslog` (`.mcap` for MCAP).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub path: Option<PathBuf>,
+    /// The log's format: `oilslog` (OILSLOG2, the default) or `mcap`.
+    #[serde(skip_serializing_if = "crate::mcap_log::LogFormat::is_default")]
+    pub format: crate::mcap_log::LogFormat,
 }
 
 impl Default for LogConfig {
@@ -139,6 +142,7 @@ impl Default for LogConfig {
         Self {
             enabled: true,
             path: None,
+            format: Default::default(),
         }
     }
 }

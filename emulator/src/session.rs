@@ -6,10 +6,11 @@
 use crate::clock::{LockstepClock, RealtimeClock, ReplayClock, StepClock};
 use crate::faults::{FaultPlan, PlantFault};
 use crate::link::{InProcLink, Link, ReplayLink};
+use crate::mcap_log::{LogFormat, McapSink};
 use crate::plant::Plant;
 use crate::propulsion::build_configured;
 use crate::propulsion::hifi::HifiParams;
-use crate::recorder::{read_log, Recorder, RecorderError};
+use crate::recorder::{Recorder, RecorderError};
 use crate::report::RunReport;
 use crate::run_config::{LinkKind, RunConfig, RunConfigError};
 use crate::scheduler::{self, Mode, SchedulerConfig, SchedulerError};
@@ -164,18 +165,22 @@ fn open_recorder(cfg: &RunConfig, run_id: u64) -> Result<Option<Recorder>, Sessi
     if !cfg.log.enabled {
         return Ok(None);
     }
-    let path = cfg
-        .log
-        .path
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("oils-out/{run_id:016x}.oilslog")));
+    let path = cfg.log.path.clone().unwrap_or_else(|| {
+        PathBuf::from(format!(
+            "oils-out/{run_id:016x}.{}",
+            cfg.log.format.extension()
+        ))
+    });
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).map_err(|source| RecorderError::Io {
             path: dir.to_path_buf(),
             source,
         })?;
     }
-    Ok(Some(Recorder::create(&path, &log_header(cfg, run_id))?))
+    Ok(Some(match cfg.log.format {
+        LogFormat::Oilslog => Recorder::create(&path, &log_header(cfg, run_id))?,
+        LogFormat::Mcap => McapSink::recorder(&path, &log_header(cfg, run_id))?,
+    }))
 }
 
 /// Runs one bench run. `run_id`: `None` for a fresh one. `launch` is called once the
@@ -296,7 +301,7 @@ pub fn replay(log_path: &Path, stop: &AtomicBool) -> Result<Replay, SessionError
         path: log_path.to_path_buf(),
         why,
     };
-    let log = read_log(log_path)?;
+    let log = crate::mcap_log::read_any(log_path)?;
     if !log.damaged_records.is_empty() {
         return Err(bad(format!(
             "{} damaged records (first at position {})",

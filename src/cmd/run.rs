@@ -86,6 +86,12 @@ pub struct RunArgs {
     /// Do not write a log.
     #[arg(long, conflicts_with = "log")]
     pub no_log: bool,
+    /// Log format: oilslog (binary records) or mcap (opens in Foxglove). [default: oilslog]
+    #[arg(long, value_name = "FORMAT")]
+    pub log_format: Option<oils_emulator::mcap_log::LogFormat>,
+    /// At the end of the run, draw its figures (PNG) from its log into DIR.
+    #[arg(long, value_name = "DIR", conflicts_with = "no_log")]
+    pub plots: Option<PathBuf>,
     /// How the emulator waits for commands over iceoryx2: busy, event or hybrid
     /// (default: busy in lockstep, hybrid in realtime).
     #[arg(long, value_name = "WAIT")]
@@ -201,6 +207,9 @@ impl RunArgs {
             cfg.log.enabled = true;
             cfg.log.path = Some(p.clone());
         }
+        if let Some(f) = self.log_format {
+            cfg.log.format = f;
+        }
         if self.no_stub {
             cfg.fsw = FswSpec::External;
         }
@@ -227,6 +236,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
         print!("{}", cfg.to_toml());
         return Ok(());
     }
+    if args.plots.is_some() && !cfg.log.enabled {
+        bail!("--plots draws from the run's log: the configuration disables it (log.enabled)");
+    }
     let run_id = args.run_id()?;
     let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
     let mut child: Option<Child> = None;
@@ -240,6 +252,9 @@ pub fn run(args: &RunArgs) -> Result<()> {
     });
     let stub_status = child.map(reap_stub);
     let report = result.context("bench run")?;
+    if let Some(dir) = &args.plots {
+        super::plot::after_run(&report, dir)?;
+    }
     oils_emulator::report::finish_run(&report, args.report.as_deref())?;
     if let Some(Err(e)) = stub_status {
         bail!("onboard stub: {e}");
