@@ -128,6 +128,8 @@ pub struct FaultPlan {
     last_tlm: Option<Telemetry>,
     /// A duplicated command waiting to arrive (stale) at the next step.
     duplicate: Option<Command>,
+    /// Any sensor fault declared: without one, the telemetry is never touched or kept.
+    has_sensor_faults: bool,
 }
 
 impl FaultPlan {
@@ -177,6 +179,15 @@ impl FaultPlan {
             })
             .collect();
         Self {
+            has_sensor_faults: specs.iter().any(|f| {
+                matches!(
+                    f.kind,
+                    FaultKind::SensorBias
+                        | FaultKind::SensorNoise
+                        | FaultKind::SensorDropout
+                        | FaultKind::SensorFrozen
+                )
+            }),
             armed,
             last_tlm: None,
             duplicate: None,
@@ -249,6 +260,9 @@ impl FaultPlan {
     /// Sensor faults on the telemetry the flight software is about to see (the truth is
     /// untouched). `fired` is the mask of faults that fired this step.
     pub fn apply_sensors(&mut self, tlm: &mut Telemetry, fired: u64) {
+        if !self.has_sensor_faults {
+            return;
+        }
         let before = *tlm;
         for (i, a) in self.armed.iter_mut().enumerate() {
             if !matches!(a.state, State::Active { .. }) {
