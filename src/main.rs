@@ -37,6 +37,10 @@ enum Cmd {
     Train(cmd::train::TrainArgs),
     /// Validate the surrogate against the hifi model (paper's cases, bounds, plots, uncertainty).
     Validate(cmd::validate::ValidateArgs),
+    /// Monte Carlo campaigns: dispersions, model error and faults over many cases, on
+    /// all local cores or a Slurm cluster.
+    #[command(subcommand)]
+    Mc(cmd::mc::McCmd),
     /// Run the onboard stub (what `oils run` spawns; also usable by hand).
     #[command(hide = true)]
     Stub(StubArgs),
@@ -94,6 +98,7 @@ fn real_main() -> anyhow::Result<()> {
         Cmd::Hifi(a) => cmd::hifi::run(&a),
         Cmd::Train(a) => cmd::train::run(&a),
         Cmd::Validate(a) => cmd::validate::run(&a),
+        Cmd::Mc(c) => cmd::mc::run(&c),
         Cmd::Stub(a) => {
             let stop =
                 oils_shared::signals::termination_flag().context("installing signal handlers")?;

@@ -103,7 +103,7 @@ fn allocations_over<L: Link + ?Sized>(
         thresholds: TimingThresholds::default(),
     };
     let (mut at_from, mut at_last, mut last) = (0u64, 0u64, 0u64);
-    let mut observe = |k: u64| {
+    let mut observe = |k: u64, _: &oils_emulator::plant::Plant| {
         let now = counter.load(Ordering::SeqCst);
         if k == from {
             at_from = now;

@@ -150,6 +150,16 @@ pub struct LanderConfig {
     pub rcs_isp_s: f64,
     /// Height of the centre of mass above the footpads, metres (assumed).
     pub leg_height_m: f64,
+    /// Offset of the true centre of mass from the design one, body axes, metres (a
+    /// dispersion; the flight software does not know it). Engine moment arms are
+    /// measured from the true centre.
+    pub com_offset_body_m: [f64; 3],
+    /// Delivered thrust of each engine over what its propulsion model computes, at the
+    /// same propellant flow (a thrust-coefficient or alignment loss; 1 = as modelled).
+    pub engine_thrust_scale: [f64; 4],
+    /// Misalignment of each engine's thrust axis from body +Z, degrees: rotation about
+    /// body X, then about body Y (a dispersion; 0 = aligned).
+    pub engine_misalignment_deg: [[f64; 2]; 4],
 }
 
 impl Default for LanderConfig {
@@ -168,6 +178,9 @@ impl Default for LanderConfig {
             rcs_moment_arm_m: [1.0, 1.0, 1.0],
             rcs_isp_s: 220.0,
             leg_height_m: 1.2,
+            com_offset_body_m: [0.0; 3],
+            engine_thrust_scale: [1.0; 4],
+            engine_misalignment_deg: [[0.0; 2]; 4],
         }
     }
 }
@@ -227,6 +240,25 @@ impl LanderConfig {
             self.leg_height_m,
             ">= 0",
         )?;
+        for c in self.com_offset_body_m {
+            check(c.abs() <= 1.0, "lander.com_offset_body_m", c, "within 1 m")?;
+        }
+        for k in self.engine_thrust_scale {
+            check(
+                (0.5..=1.5).contains(&k),
+                "lander.engine_thrust_scale",
+                k,
+                "in [0.5, 1.5]",
+            )?;
+        }
+        for a in self.engine_misalignment_deg.iter().flatten() {
+            check(
+                a.abs() <= 10.0,
+                "lander.engine_misalignment_deg",
+                *a,
+                "within 10 deg",
+            )?;
+        }
         Ok(())
     }
 }
@@ -244,6 +276,18 @@ pub struct InitialStateConfig {
     /// Pitch of the thrust axis above the retrograde horizontal, degrees (0: thrust
     /// exactly against the horizontal velocity).
     pub thrust_pitch_deg: f64,
+    /// Start moved along the ground track, metres of surface arc (a dispersion).
+    pub downrange_m: f64,
+    /// Start moved across the ground track (towards the orbit normal), metres of
+    /// surface arc (a dispersion).
+    pub crossrange_m: f64,
+    /// Velocity across the ground track (along the orbit normal), m/s.
+    pub crossrange_speed_m_s: f64,
+    /// Attitude error: rotation of the body from its nominal start attitude about body
+    /// X, Y, Z, degrees (applied in that order).
+    pub attitude_error_deg: [f64; 3],
+    /// Body rates at the start, rad/s.
+    pub body_rate_rad_s: [f64; 3],
 }
 
 impl Default for InitialStateConfig {
@@ -253,6 +297,11 @@ impl Default for InitialStateConfig {
             horizontal_speed_m_s: 1680.0,
             vertical_speed_m_s: 0.0,
             thrust_pitch_deg: 0.0,
+            downrange_m: 0.0,
+            crossrange_m: 0.0,
+            crossrange_speed_m_s: 0.0,
+            attitude_error_deg: [0.0; 3],
+            body_rate_rad_s: [0.0; 3],
         }
     }
 }
@@ -283,6 +332,40 @@ impl InitialStateConfig {
             self.thrust_pitch_deg,
             "in [-90, 90]",
         )?;
+        check(
+            self.downrange_m.abs() <= 1e6,
+            "initial.downrange_m",
+            self.downrange_m,
+            "within 1000 km",
+        )?;
+        check(
+            self.crossrange_m.abs() <= 1e6,
+            "initial.crossrange_m",
+            self.crossrange_m,
+            "within 1000 km",
+        )?;
+        check(
+            self.crossrange_speed_m_s.abs() <= 1e3,
+            "initial.crossrange_speed_m_s",
+            self.crossrange_speed_m_s,
+            "within 1 km/s",
+        )?;
+        for a in self.attitude_error_deg {
+            check(
+                a.abs() <= 90.0,
+                "initial.attitude_error_deg",
+                a,
+                "within 90 deg",
+            )?;
+        }
+        for w in self.body_rate_rad_s {
+            check(
+                w.abs() <= 1.0,
+                "initial.body_rate_rad_s",
+                w,
+                "within 1 rad/s",
+            )?;
+        }
         Ok(())
     }
 }
@@ -356,6 +439,92 @@ pub struct ScenarioConfig {
     pub nav_noise: NavNoiseConfig,
     /// Touchdown limits.
     pub touchdown: TouchdownLimits,
+    /// Injected propulsion model error (the seed paper's Monte Carlo use of the
+    /// surrogate's validated error); off by default.
+    pub model_error: ModelErrorConfig,
+}
+
+/// A seeded per-engine thrust error added to what the propulsion model delivers: how a
+/// Monte Carlo feeds the surrogate's validated error back in as model uncertainty (seed
+/// paper, Section VI). Each firing engine gets `bias_n` (the steady error, drawn once
+/// per case) plus a transient error: at an engine start or a command step larger than
+/// `step_threshold_n`, an amplitude is drawn from N(`transient_mean_n`,
+/// `transient_std_n`) clipped to +-`transient_max_abs_n`, and decays with
+/// `transient_tau_s`. Delivered thrust never goes below zero; propellant flow is the
+/// model's (the error is in thrust, as validated).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ModelErrorConfig {
+    /// Inject at all.
+    pub enabled: bool,
+    /// Steady thrust error of each engine, newtons.
+    pub bias_n: [f64; 4],
+    /// Mean of a transient's starting error, newtons.
+    pub transient_mean_n: f64,
+    /// Standard deviation of a transient's starting error, newtons.
+    pub transient_std_n: f64,
+    /// Largest transient error, newtons.
+    pub transient_max_abs_n: f64,
+    /// Decay time of a transient error, seconds.
+    pub transient_tau_s: f64,
+    /// Command change within one step that starts a transient, newtons.
+    pub step_threshold_n: f64,
+    /// Seed of the transient draws.
+    pub seed: u64,
+}
+
+impl Default for ModelErrorConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            bias_n: [0.0; 4],
+            transient_mean_n: 0.0,
+            transient_std_n: 0.0,
+            transient_max_abs_n: 0.0,
+            transient_tau_s: 0.2,
+            step_threshold_n: 40.0,
+            seed: 0,
+        }
+    }
+}
+
+impl ModelErrorConfig {
+    fn validate(&self) -> Result<(), ConfigError> {
+        for b in self.bias_n {
+            check(b.abs() <= 200.0, "model_error.bias_n", b, "within 200 N")?;
+        }
+        check(
+            self.transient_mean_n.abs() <= 200.0,
+            "model_error.transient_mean_n",
+            self.transient_mean_n,
+            "within 200 N",
+        )?;
+        check(
+            (0.0..=200.0).contains(&self.transient_std_n),
+            "model_error.transient_std_n",
+            self.transient_std_n,
+            "in [0, 200] N",
+        )?;
+        check(
+            (0.0..=800.0).contains(&self.transient_max_abs_n),
+            "model_error.transient_max_abs_n",
+            self.transient_max_abs_n,
+            "in [0, 800] N",
+        )?;
+        check(
+            self.transient_tau_s > 0.0 && self.transient_tau_s <= 100.0,
+            "model_error.transient_tau_s",
+            self.transient_tau_s,
+            "in (0, 100] s",
+        )?;
+        check(
+            self.step_threshold_n > 0.0,
+            "model_error.step_threshold_n",
+            self.step_threshold_n,
+            "> 0",
+        )?;
+        Ok(())
+    }
 }
 
 impl ScenarioConfig {
@@ -376,6 +545,7 @@ impl ScenarioConfig {
         self.lander.validate()?;
         self.propulsion.validate()?;
         self.initial.validate()?;
+        self.model_error.validate()?;
         Ok(())
     }
 

@@ -11,6 +11,7 @@
 //! from a `RunConfig` to a report).
 #![warn(missing_docs)]
 
+pub mod campaign;
 pub mod clock;
 pub mod config;
 pub mod digest;

@@ -147,6 +147,14 @@ impl LogFormat {
         *self == Self::default()
     }
 
+    /// The format a log file name asks for: `.mcap` is MCAP, anything else OILSLOG2.
+    pub fn from_path(path: &std::path::Path) -> Self {
+        match path.extension().and_then(|e| e.to_str()) {
+            Some("mcap") => LogFormat::Mcap,
+            _ => LogFormat::Oilslog,
+        }
+    }
+
     /// File extension of a log in this format.
     pub fn extension(&self) -> &'static str {
         match self {

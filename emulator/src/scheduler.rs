@@ -210,9 +210,10 @@ impl Abort {
     }
 }
 
-/// Called after each integrated step with the step index; a seam for tests and tools
-/// (the allocation proof samples its counter here). Must not allocate or block.
-pub type StepObserver<'a> = &'a mut dyn FnMut(u64);
+/// Called after each integrated step with the step index and the plant; a seam for
+/// tests and tools (the allocation proof samples its counter here, a campaign case
+/// samples its trajectory). Must not allocate or block in the steps it is measured on.
+pub type StepObserver<'a> = &'a mut dyn FnMut(u64, &Plant);
 
 /// Runs one bench run over an established link with the flight software connected,
 /// the plant built.
@@ -422,7 +423,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             abort = Some(Abort::NotFinite { step: k, what });
         }
         if let Some(observe) = observer.as_mut() {
-            observe(k);
+            observe(k, plant);
         }
         steps += 1;
         k += 1;

@@ -192,6 +192,18 @@ pub fn run(
     stop: &AtomicBool,
     launch: &mut dyn FnMut(&StubLaunch) -> Result<(), SessionError>,
 ) -> Result<RunReport, SessionError> {
+    run_observed(cfg, run_id, stop, launch, None)
+}
+
+/// [`run`], calling `observer` after every integrated step (a campaign case samples
+/// its trajectory there).
+pub fn run_observed(
+    cfg: &RunConfig,
+    run_id: Option<u64>,
+    stop: &AtomicBool,
+    launch: &mut dyn FnMut(&StubLaunch) -> Result<(), SessionError>,
+    mut observer: Option<scheduler::StepObserver<'_>>,
+) -> Result<RunReport, SessionError> {
     cfg.validate()?;
     let run_id = run_id.unwrap_or_else(fresh_run_id);
     let mut plant = build_plant(cfg)?;
@@ -222,6 +234,7 @@ pub fn run(
                 &mut faults,
                 recorder,
                 stop,
+                observer.take(),
             )?;
             (summary.0, summary.1, None)
         }
@@ -249,6 +262,7 @@ pub fn run(
                 &mut faults,
                 recorder,
                 stop,
+                observer.take(),
             )?;
             if wait.notifies() && link.wake_counts().peer_never_notified() {
                 warnings.push(format!(
@@ -264,6 +278,7 @@ pub fn run(
 }
 
 /// Runs the scheduler and closes the log (on every path: dropping the recorder syncs).
+#[allow(clippy::too_many_arguments)]
 fn run_and_close<L: Link + ?Sized>(
     sched: &SchedulerConfig,
     plant: &mut Plant,
@@ -272,8 +287,18 @@ fn run_and_close<L: Link + ?Sized>(
     faults: &mut FaultPlan,
     recorder: Option<Recorder>,
     stop: &AtomicBool,
+    observer: Option<scheduler::StepObserver<'_>>,
 ) -> Result<(scheduler::RunSummary, Option<PathBuf>), SessionError> {
-    let mut summary = scheduler::run(sched, plant, link, clock, faults, recorder.as_ref(), stop)?;
+    let mut summary = scheduler::run_observed(
+        sched,
+        plant,
+        link,
+        clock,
+        faults,
+        recorder.as_ref(),
+        stop,
+        observer,
+    )?;
     let path = recorder.as_ref().map(|r| r.path().to_path_buf());
     if let Some(r) = recorder {
         summary.log_records = r.finish()?;

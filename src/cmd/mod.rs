@@ -1,6 +1,7 @@
 //! Subcommands of the `oils` binary.
 
 pub mod hifi;
+pub mod mc;
 pub mod plot;
 pub mod run;
 pub mod train;

@@ -13,6 +13,7 @@
 
 pub mod initial;
 pub mod integrator;
+pub mod model_error;
 pub mod nav_noise;
 pub mod rigid_body;
 
@@ -81,6 +82,9 @@ struct Setup {
     leg_height_m: f64,
     wet_mass_kg: f64,
     engine_pos_body_m: [Vector3<f64>; ENGINE_COUNT],
+    /// Thrust axis of each engine, body axes, when any is misaligned (`None`: all +Z,
+    /// the exact nominal arithmetic).
+    engine_dir_body: Option<[Vector3<f64>; ENGINE_COUNT]>,
     rcs_max_torque_nm: Vector3<f64>,
     rcs_moment_arm_m: Vector3<f64>,
     rcs_exhaust_m_s: f64,
@@ -121,8 +125,13 @@ pub struct Plant {
     noise: Option<NavNoise>,
     /// Engine faults acting on the command.
     engine_faults: [EngineFault; ENGINE_COUNT],
-    /// Output scale of each engine (a degradation the model cannot represent).
+    /// Output scale of each engine (the configured thrust scale times a degradation
+    /// the model cannot represent).
     output_factor: [f64; ENGINE_COUNT],
+    /// The configured thrust scale of each engine.
+    thrust_scale: [f64; ENGINE_COUNT],
+    /// Injected model error, when configured.
+    model_error: Option<model_error::ModelError>,
 }
 
 /// An engine fault acting on the command the engine gets.
@@ -151,7 +160,24 @@ impl Plant {
             moon_radius_m: cfg.moon.radius_m,
             leg_height_m: lander.leg_height_m,
             wet_mass_kg: cfg.wet_mass_kg(),
-            engine_pos_body_m: lander.engine_positions_body_m.map(Vector3::from),
+            // Moment arms from the true centre of mass (offset 0: the design one).
+            engine_pos_body_m: lander
+                .engine_positions_body_m
+                .map(|p| Vector3::from(p) - Vector3::from(lander.com_offset_body_m)),
+            engine_dir_body: (lander.engine_misalignment_deg != [[0.0; 2]; ENGINE_COUNT]).then(
+                || {
+                    lander.engine_misalignment_deg.map(|[about_x, about_y]| {
+                        let tilt = nalgebra::UnitQuaternion::from_axis_angle(
+                            &Vector3::x_axis(),
+                            about_x.to_radians(),
+                        ) * nalgebra::UnitQuaternion::from_axis_angle(
+                            &Vector3::y_axis(),
+                            about_y.to_radians(),
+                        );
+                        tilt * Vector3::z()
+                    })
+                },
+            ),
             rcs_max_torque_nm: Vector3::from(lander.rcs_max_torque_nm()),
             rcs_moment_arm_m: Vector3::from(lander.rcs_moment_arm_m),
             rcs_exhaust_m_s: lander.rcs_isp_s * G0_M_S2,
@@ -176,7 +202,12 @@ impl Plant {
             touchdown: None,
             noise,
             engine_faults: [EngineFault::None; ENGINE_COUNT],
-            output_factor: [1.0; ENGINE_COUNT],
+            output_factor: lander.engine_thrust_scale,
+            thrust_scale: lander.engine_thrust_scale,
+            model_error: cfg
+                .model_error
+                .enabled
+                .then(|| model_error::ModelError::new(&cfg.model_error)),
         })
     }
 
@@ -253,6 +284,9 @@ impl Plant {
                 self.prop_out.chamber_pressure_pa[e] *= factor;
             }
         }
+        if let Some(error) = self.model_error.as_mut() {
+            error.apply(&engines, &mut self.prop_out, dt_s);
+        }
         self.last_engines = engines;
         let main_ejected_kg = (self.prop_out.ejected_kg() - ejected_before_kg).max(0.0);
 
@@ -284,15 +318,25 @@ impl Plant {
 
         // 3. Loads held over the step.
         let mut thrust_n = 0.0;
+        let mut force_body_n = Vector3::zeros();
         let mut torque_nm = rcs_torque_nm;
-        for (pos, &f_n) in setup
+        for (e, (pos, &f_n)) in setup
             .engine_pos_body_m
             .iter()
             .zip(self.prop_out.mean_thrust_n.iter())
+            .enumerate()
         {
-            let force = Vector3::new(0.0, 0.0, f_n);
+            let force = match &setup.engine_dir_body {
+                None => Vector3::new(0.0, 0.0, f_n),
+                Some(dirs) => dirs[e] * f_n,
+            };
             thrust_n += f_n;
+            force_body_n += force;
             torque_nm += pos.cross(&force);
+        }
+        if setup.engine_dir_body.is_none() {
+            // Aligned engines: the nominal arithmetic, bit for bit.
+            force_body_n = Vector3::new(0.0, 0.0, thrust_n);
         }
         let mass_start_kg = self.state.mass_kg;
         // Cumulative accounting keeps the mass exactly "wet - ejected - rcs used", never
@@ -302,7 +346,7 @@ impl Plant {
             .max(dry_mass_kg)
             .min(mass_start_kg);
         let loads = HeldLoads {
-            force_body_n: Vector3::new(0.0, 0.0, thrust_n),
+            force_body_n,
             torque_body_nm: torque_nm,
             mass_start_kg,
             mass_flow_kg_s: if dt_s > 0.0 {
@@ -317,11 +361,20 @@ impl Plant {
         let x1 = self.integrate(&loads, &x0, dt_s);
         let end = RigidBodyState::from_vector(&x1, mass_end_kg);
         self.time_ns = self.time_ns.saturating_add(dt_ns as i64);
-        self.specific_force_body_m_s2 = Vector3::new(
-            0.0,
-            0.0,
-            self.prop_out.thrust_n.iter().sum::<f64>() / mass_end_kg,
-        );
+        self.specific_force_body_m_s2 = match &setup.engine_dir_body {
+            None => Vector3::new(
+                0.0,
+                0.0,
+                self.prop_out.thrust_n.iter().sum::<f64>() / mass_end_kg,
+            ),
+            Some(dirs) => {
+                dirs.iter()
+                    .zip(self.prop_out.thrust_n.iter())
+                    .map(|(d, &f_n)| d * f_n)
+                    .sum::<Vector3<f64>>()
+                    / mass_end_kg
+            }
+        };
 
         if self.footpad_height_m(&end.pos_mci_m) > 0.0 {
             self.state = end;
@@ -501,7 +554,8 @@ impl Plant {
                 if self.propulsion.represents(&f) {
                     self.propulsion.inject(&f, active);
                 } else if let PropulsionFault::ThrustDegraded { engine, factor } = f {
-                    self.output_factor[engine] = if active { factor } else { 1.0 };
+                    let scale = self.thrust_scale[engine];
+                    self.output_factor[engine] = if active { scale * factor } else { scale };
                 }
             }
         }
