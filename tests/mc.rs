@@ -1,0 +1,338 @@
+//! Monte Carlo campaigns end to end with the real `oils` binary: reproducibility of a
+//! case, independence from workers and shards, resume after an interruption, budgets,
+//! and the results files. (The Slurm backend is checked by `tools/slurm-e2e.sh` against
+//! a real single-node Slurm in `.ci/run`.)
+
+mod common;
+
+use common::{oils, run_oils, scratch, text};
+use std::path::Path;
+
+fn read(path: &Path) -> String {
+    std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn mc_run(dir: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["mc", "run", "--out", dir.to_str().unwrap(), "--no-plots"];
+    args.extend_from_slice(extra);
+    let o = run_oils(&args);
+    assert!(o.status.success(), "{}", text(&o));
+    o
+}
+
+fn rows(dir: &Path) -> Vec<Vec<String>> {
+    read(&dir.join("cases.csv"))
+        .lines()
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect()
+}
+
+fn column(rows: &[Vec<String>], name: &str) -> Vec<String> {
+    let i = rows[0]
+        .iter()
+        .position(|c| c == name)
+        .unwrap_or_else(|| panic!("no column {name} in {:?}", rows[0]));
+    rows[1..].iter().map(|r| r[i].clone()).collect()
+}
+
+#[test]
+fn a_case_run_again_alone_reproduces_its_digest_with_the_surrogate_model_error_and_faults() {
+    let dir = scratch("mc-case");
+    mc_run(&dir, &["--cases", "3", "--seed", "3"]);
+    let rows = rows(&dir);
+    assert_eq!(rows.len(), 4, "three cases and a header");
+    let digests = column(&rows, "digest");
+    let bias = column(&rows, "applied_model_error_bias_n[0]");
+    assert!(
+        bias.iter()
+            .all(|b| b.parse::<f64>().is_ok_and(|b| b != 0.0)),
+        "{bias:?}"
+    );
+    for index in 0..3 {
+        let log = dir.join(format!("case{index}.oilslog"));
+        let o = run_oils(&[
+            "mc",
+            "case",
+            dir.to_str().unwrap(),
+            "--index",
+            &index.to_string(),
+            "--log",
+            log.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", text(&o));
+        let out = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            out.contains(&format!("digest {} equals", digests[index])),
+            "{}",
+            text(&o)
+        );
+        assert!(log.metadata().unwrap().len() > 1_000_000);
+    }
+    let o = run_oils(&["mc", "case", dir.to_str().unwrap(), "--index", "3"]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("cases 0-2"), "{}", text(&o));
+    let summary: serde_json::Value =
+        serde_json::from_str(&read(&dir.join("summary.json"))).unwrap();
+    assert_eq!(summary["cases"], 3);
+    assert!(summary["landed_fraction"].as_f64().is_some());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn merged_results_do_not_depend_on_workers_or_shards() {
+    let one = scratch("mc-jobs1");
+    let sharded = scratch("mc-shards");
+    let common_args = ["--cases", "6", "--seed", "11", "--propulsion", "ideal"];
+    let mut a = common_args.to_vec();
+    a.extend(["--jobs", "1"]);
+    mc_run(&one, &a);
+    for shard in ["1/3", "0/3", "2/3"] {
+        let mut a = common_args.to_vec();
+        a.extend(["--jobs", "2", "--shard", shard]);
+        let o = mc_run(&sharded, &a);
+        assert!(text(&o).contains("merge with"), "{}", text(&o));
+    }
+    assert!(
+        !sharded.join("cases.csv").exists(),
+        "a shard does not merge"
+    );
+    let o = run_oils(&["mc", "merge", sharded.to_str().unwrap(), "--no-plots"]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(
+        read(&one.join("cases.csv")),
+        read(&sharded.join("cases.csv"))
+    );
+    assert_eq!(
+        read(&one.join("summary.json")),
+        read(&sharded.join("summary.json"))
+    );
+    let _ = std::fs::remove_dir_all(&one);
+    let _ = std::fs::remove_dir_all(&sharded);
+}
+
+#[test]
+fn a_shard_index_can_come_from_the_environment() {
+    let dir = scratch("mc-env-shard");
+    for (var, index) in [("SLURM_ARRAY_TASK_ID", "0"), ("JOB_COMPLETION_INDEX", "1")] {
+        let o = oils()
+            .args(["mc", "run", "--out", dir.to_str().unwrap(), "--no-plots"])
+            .args(["--cases", "2", "--propulsion", "ideal", "--shard", "auto/2"])
+            .env(var, index)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", text(&o));
+        assert!(
+            text(&o).contains(&format!("shard {index}/2")),
+            "{}",
+            text(&o)
+        );
+    }
+    assert!(dir.join("cases/0000000.json").exists());
+    assert!(dir.join("cases/0000001.json").exists());
+    let o = oils()
+        .args([
+            "mc",
+            "run",
+            "--out",
+            dir.to_str().unwrap(),
+            "--shard",
+            "auto/2",
+        ])
+        .env_remove("SLURM_ARRAY_TASK_ID")
+        .env_remove("PBS_ARRAY_INDEX")
+        .env_remove("JOB_COMPLETION_INDEX")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(text(&o).contains("SLURM_ARRAY_TASK_ID"), "{}", text(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_interrupted_campaign_resumes_and_ends_as_an_uninterrupted_one() {
+    let clean = scratch("mc-clean");
+    let resumed = scratch("mc-resumed");
+    let args = [
+        "--cases",
+        "12",
+        "--seed",
+        "5",
+        "--propulsion",
+        "ideal",
+        "--jobs",
+        "1",
+    ];
+    mc_run(&clean, &args);
+    let mut child = oils()
+        .args([
+            "mc",
+            "run",
+            "--out",
+            resumed.to_str().unwrap(),
+            "--no-plots",
+        ])
+        .args(args)
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let cases = resumed.join("cases");
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while std::fs::read_dir(&cases).map_or(0, |d| d.count()) < 3 {
+        assert!(std::time::Instant::now() < deadline, "no case finished");
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let o = child.wait_with_output().unwrap();
+    assert!(
+        !o.status.success(),
+        "an interrupted campaign exits non-zero: {}",
+        text(&o)
+    );
+    assert!(text(&o).contains("interrupted"), "{}", text(&o));
+    let done = std::fs::read_dir(&cases).unwrap().count();
+    assert!((3..12).contains(&done), "{done} cases done");
+    assert!(!resumed.join("cases.csv").exists());
+    // The same command again runs only what is missing.
+    let o = mc_run(&resumed, &args);
+    assert!(
+        text(&o).contains(&format!("{} cases run", 12 - done)),
+        "{}",
+        text(&o)
+    );
+    assert!(
+        text(&o).contains(&format!("{done} already done")),
+        "{}",
+        text(&o)
+    );
+    assert_eq!(
+        read(&clean.join("cases.csv")),
+        read(&resumed.join("cases.csv"))
+    );
+    assert_eq!(
+        read(&clean.join("summary.json")),
+        read(&resumed.join("summary.json"))
+    );
+    // Another campaign in the same place is refused.
+    let o = run_oils(&[
+        "mc",
+        "run",
+        "--out",
+        resumed.to_str().unwrap(),
+        "--cases",
+        "13",
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("another campaign"), "{}", text(&o));
+    let _ = std::fs::remove_dir_all(&clean);
+    let _ = std::fs::remove_dir_all(&resumed);
+}
+
+#[test]
+fn a_case_over_its_budget_is_recorded_as_timeout_not_dropped() {
+    let dir = scratch("mc-timeout");
+    // hifi takes seconds per descent: 0.2 s of wall time is far too little.
+    mc_run(
+        &dir,
+        &[
+            "--cases",
+            "2",
+            "--propulsion",
+            "hifi",
+            "--case-timeout-s",
+            "0.2",
+        ],
+    );
+    let rows = rows(&dir);
+    assert_eq!(column(&rows, "outcome"), ["timeout", "timeout"]);
+    let summary: serde_json::Value =
+        serde_json::from_str(&read(&dir.join("summary.json"))).unwrap();
+    assert_eq!(summary["outcomes"]["timeout"], 2);
+    assert_eq!(summary["failure_count"], 2);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn results_hold_one_row_per_case_the_summary_and_the_plots() {
+    let dir = scratch("mc-results");
+    let o = run_oils(&[
+        "mc",
+        "run",
+        "--out",
+        dir.to_str().unwrap(),
+        "--cases",
+        "5",
+        "--propulsion",
+        "ideal",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let rows = rows(&dir);
+    for c in [
+        "index",
+        "outcome",
+        "digest",
+        "vertical_speed_mps",
+        "position_error_m",
+        "propellant_used_kg",
+        "applied_altitude_m",
+    ] {
+        assert_eq!(column(&rows, c).len(), 5, "{c}");
+    }
+    assert_eq!(column(&rows, "index"), ["0", "1", "2", "3", "4"]);
+    let summary: serde_json::Value =
+        serde_json::from_str(&read(&dir.join("summary.json"))).unwrap();
+    assert_eq!(summary["cases"], 5);
+    let p50 = summary["figures"]["vertical_speed_mps"]["p50"]
+        .as_f64()
+        .unwrap();
+    assert!(p50 > 0.0 && p50 < 5.0, "{p50}");
+    for png in [
+        "footprint.png",
+        "touchdown-speed.png",
+        "propellant.png",
+        "altitude-speed.png",
+    ] {
+        let bytes = std::fs::read(dir.join("plots").join(png)).unwrap();
+        assert_eq!(&bytes[1..4], b"PNG", "{png}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_campaign_input_is_refused_with_the_reason() {
+    let dir = scratch("mc-bad");
+    let spec = dir.join("bad.toml");
+    std::fs::write(
+        &spec,
+        "cases = 3\nseed = 1\n[[dispersion]]\nname = \"x\"\ntargets = [\"scenario.initial.no_such_field\"]\ndist = { kind = \"normal\", mean = 0.0, std = 1.0 }\n",
+    )
+    .unwrap();
+    let o = run_oils(&[
+        "mc",
+        "run",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--out",
+        dir.join("c").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("no field `no_such_field`"),
+        "{}",
+        text(&o)
+    );
+    let o = run_oils(&[
+        "mc",
+        "run",
+        "--out",
+        dir.join("d").to_str().unwrap(),
+        "--shard",
+        "3/2",
+    ]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("not below"), "{}", text(&o));
+    let o = run_oils(&["mc", "merge", dir.join("nothing").to_str().unwrap()]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("no campaign"), "{}", text(&o));
+    let _ = std::fs::remove_dir_all(&dir);
+}
