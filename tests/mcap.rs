@@ -381,3 +381,64 @@ fn oils_plot_draws_a_run_from_either_log() {
     assert!(!o.status.success());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Every message path `/topic.field[i]` the layout plots or shows.
+fn layout_paths(v: &serde_json::Value, out: &mut Vec<String>) {
+    match v {
+        serde_json::Value::String(s) if s.starts_with("/oils/") => out.push(s.clone()),
+        serde_json::Value::Array(xs) => xs.iter().for_each(|x| layout_paths(x, out)),
+        serde_json::Value::Object(m) => m.values().for_each(|x| layout_paths(x, out)),
+        _ => {}
+    }
+}
+
+#[test]
+fn the_foxglove_layout_names_only_topics_and_fields_the_mcap_has() {
+    let dir = scratch("mcap-layout");
+    short_run(&dir, &["--propulsion", "ideal"]);
+    let out = dir.join("run.mcap");
+    let o = run_oils(&[
+        "export",
+        dir.join("run.oilslog").to_str().unwrap(),
+        "--mcap",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let (msgs, _) = read_mcap(&out);
+    let layout: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/docs/foxglove-layout.json"
+        ))
+        .unwrap(),
+    )
+    .expect("the layout is JSON");
+    let mut paths = Vec::new();
+    layout_paths(&layout, &mut paths);
+    assert!(paths.len() >= 20, "{paths:?}");
+    for p in &paths {
+        let (topic, field) = p.split_once('.').unwrap_or((p.as_str(), ""));
+        let first = &msgs
+            .get(topic)
+            .unwrap_or_else(|| panic!("layout path {p}: no channel {topic}"))[0]
+            .json;
+        if field.is_empty() {
+            continue;
+        }
+        // `name[i]`: the field must exist (its value may be null) and hold element i.
+        let (name, index) = match field.split_once('[') {
+            Some((n, i)) => (n, Some(i.trim_end_matches(']').parse::<usize>().unwrap())),
+            None => (field, None),
+        };
+        let value = first
+            .get(name)
+            .unwrap_or_else(|| panic!("layout path {p}: {topic} has no field {name}: {first}"));
+        if let Some(i) = index {
+            assert!(
+                value.get(i).is_some(),
+                "layout path {p}: no element {i} in {value}"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
