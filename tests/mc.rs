@@ -49,7 +49,9 @@ fn a_case_run_again_alone_reproduces_its_digest_with_the_surrogate_model_error_a
         "{bias:?}"
     );
     for index in 0..3 {
-        let log = dir.join(format!("case{index}.oilslog"));
+        // Case 2 writes MCAP (its format from the extension), the others OILSLOG2.
+        let ext = if index == 2 { "mcap" } else { "oilslog" };
+        let log = dir.join(format!("case{index}.{ext}"));
         let o = run_oils(&[
             "mc",
             "case",
@@ -67,7 +69,17 @@ fn a_case_run_again_alone_reproduces_its_digest_with_the_surrogate_model_error_a
             text(&o)
         );
         assert!(log.metadata().unwrap().len() > 1_000_000);
+        let csv = dir.join(format!("case{index}.csv"));
+        let o = run_oils(&["export", log.to_str().unwrap(), "--csv", csv.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", text(&o));
     }
+    let mut mcap_magic = [0u8; 8];
+    std::io::Read::read_exact(
+        &mut std::fs::File::open(dir.join("case2.mcap")).unwrap(),
+        &mut mcap_magic,
+    )
+    .unwrap();
+    assert_eq!(&mcap_magic, b"\x89MCAP0\r\n");
     let o = run_oils(&["mc", "case", dir.to_str().unwrap(), "--index", "3"]);
     assert!(!o.status.success());
     assert!(text(&o).contains("cases 0-2"), "{}", text(&o));
