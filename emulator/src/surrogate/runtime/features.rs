@@ -531,16 +531,23 @@ impl FeatureSpec {
     /// No allocation: this runs in the surrogate's step.
     #[inline]
     pub fn fill<H: History + ?Sized>(&self, h: &H, engine: usize, out: &mut [f64]) {
+        let out = &mut out[..self.dim()];
+        let mut i = 0;
+        self.fill_with(h, engine, |x| {
+            out[i] = x;
+            i += 1;
+        });
+        debug_assert_eq!(i, self.dim());
+    }
+
+    /// [`FeatureSpec::fill`], handing the features to `put` in order instead (the
+    /// predictor writes each engine's straight into its lane).
+    #[inline]
+    pub fn fill_with<H: History + ?Sized>(&self, h: &H, engine: usize, mut put: impl FnMut(f64)) {
         let n = self.history;
         let (e0, e1) = match self.layout {
             Layout::Mimo => (0, ENGINE_COUNT),
             Layout::PerEngine => (engine, engine + 1),
-        };
-        let out = &mut out[..self.dim()];
-        let mut i = 0;
-        let mut put = |x: f64| {
-            out[i] = x;
-            i += 1;
         };
         for e in e0..e1 {
             put(h.input(0)[e]);
@@ -599,7 +606,6 @@ impl FeatureSpec {
                 put(c.hat(since, j));
             }
         }
-        debug_assert_eq!(i, self.dim());
     }
 }
 
