@@ -49,7 +49,7 @@ fn a_case_run_again_alone_reproduces_its_digest_with_the_surrogate_model_error_a
         "{bias:?}"
     );
     for index in 0..3 {
-        // Case 2 writes MCAP (its format from the extension), the others OILSLOG2.
+        // Case 2 writes MCAP (its format from the extension), the others OILSLOG3.
         let ext = if index == 2 { "mcap" } else { "oilslog" };
         let log = dir.join(format!("case{index}.{ext}"));
         let o = run_oils(&[
@@ -70,7 +70,12 @@ fn a_case_run_again_alone_reproduces_its_digest_with_the_surrogate_model_error_a
         );
         assert!(log.metadata().unwrap().len() > 1_000_000);
         let csv = dir.join(format!("case{index}.csv"));
-        let o = run_oils(&["export", log.to_str().unwrap(), "--csv", csv.to_str().unwrap()]);
+        let o = run_oils(&[
+            "export",
+            log.to_str().unwrap(),
+            "--csv",
+            csv.to_str().unwrap(),
+        ]);
         assert!(o.status.success(), "{}", text(&o));
     }
     let mut mcap_magic = [0u8; 8];

@@ -184,7 +184,19 @@ fn exported_mcap_holds_every_step_of_the_binary_log() {
                 timing["stub_compute_ns"].as_u64(),
                 Some(r.command.stub_compute_ns)
             );
+            // In process: the call is the round trip, there is no transport.
+            let rt = r
+                .timing
+                .round_trip_ns
+                .expect("a received command has a round trip");
+            assert_eq!(timing["round_trip_ns"].as_u64(), Some(rt));
+            assert!(rt >= r.command.stub_compute_ns);
+            assert!(timing["transport_ns"].is_null());
         }
+        assert!(
+            timing["wake_error_ns"].is_null(),
+            "lockstep has no wake error"
+        );
     }
     // Bit for bit through the oils reader: every record equal to the binary log's.
     let back = oils_emulator::mcap_log::read_mcap(&out).unwrap();
@@ -249,15 +261,22 @@ fn the_same_run_gives_the_same_mcap_and_replays_from_it() {
     assert!(files[0].len() > 100_000, "{} bytes", files[0].len());
     assert_eq!(digests[0], digests[1]);
     // Two runs differ only where the log holds wall-clock measurements (the stub's
-    // compute time, as the digest leaves it out): every message equal once that is
-    // removed.
+    // compute time, as the digest leaves it out, and the step's round trip, wake error
+    // and transport): every message equal once those are removed.
     let strip = |path: &Path| -> Vec<(String, u64, serde_json::Value)> {
         let (msgs, _) = read_mcap(path);
         let mut out = Vec::new();
         for (topic, list) in msgs {
             for mut m in list {
                 if let Some(o) = m.json.as_object_mut() {
-                    o.remove("stub_compute_ns");
+                    for wall_clock in [
+                        "stub_compute_ns",
+                        "round_trip_ns",
+                        "wake_error_ns",
+                        "transport_ns",
+                    ] {
+                        o.remove(wall_clock);
+                    }
                 }
                 out.push((topic.clone(), m.log_time, m.json));
             }

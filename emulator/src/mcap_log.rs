@@ -1,4 +1,4 @@
-//! A run as an MCAP file that opens in Foxglove: the same records as the OILSLOG2 log
+//! A run as an MCAP file that opens in Foxglove: the same records as the OILSLOG3 log
 //! ([`crate::recorder`]), one message per record on each per-step channel, stamped with
 //! simulated time (`log_time` = `publish_time` = `t_ns`).
 //!
@@ -134,7 +134,7 @@ impl From<McapLogError> for RecorderError {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum LogFormat {
-    /// OILSLOG2: fixed-size binary records with a CRC each ([`crate::recorder`]).
+    /// OILSLOG3: fixed-size binary records with a CRC each ([`crate::recorder`]).
     #[default]
     Oilslog,
     /// MCAP with JSON messages (this module): opens in Foxglove.
@@ -147,7 +147,7 @@ impl LogFormat {
         *self == Self::default()
     }
 
-    /// The format a log file name asks for: `.mcap` is MCAP, anything else OILSLOG2.
+    /// The format a log file name asks for: `.mcap` is MCAP, anything else OILSLOG3.
     pub fn from_path(path: &std::path::Path) -> Self {
         match path.extension().and_then(|e| e.to_str()) {
             Some("mcap") => LogFormat::Mcap,
@@ -435,8 +435,8 @@ struct PropulsionMsg {
     ox_valve_position: [F; ENGINE_COUNT],
 }
 
-/// Per-step timing, nanoseconds. Round trip and wake error are `None` while the log
-/// format does not carry them per step (the run report has their percentiles).
+/// Per-step timing, nanoseconds; `None` where a step has no such figure (no command
+/// received; wake error outside realtime; transport in process).
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct StepTiming {
     /// Step index.
@@ -453,19 +453,16 @@ pub struct StepTiming {
     pub transport_ns: Option<u64>,
 }
 
-/// The timing of one record. Today's records carry the stub's compute time only;
-/// when `Record` gains the exchange times (publish and receive instants, or round trip
-/// and wake error), fill `round_trip_ns`, `wake_error_ns` and `transport_ns` here: the
-/// MCAP channel and `oils plot`'s histograms pick them up with no other change.
+/// The timing of one record (wall-clock measurements the scheduler took at that step).
 pub fn step_timing(r: &Record) -> StepTiming {
     let received = r.flags & REC_COMMAND_RECEIVED != 0;
     StepTiming {
         step: r.telemetry.header.step,
         t_s: r.telemetry.header.t_ns as f64 * 1e-9,
         stub_compute_ns: received.then_some(r.command.stub_compute_ns),
-        round_trip_ns: None,
-        wake_error_ns: None,
-        transport_ns: None,
+        round_trip_ns: r.timing.round_trip_ns,
+        wake_error_ns: r.timing.wake_error_ns,
+        transport_ns: r.timing.transport_ns,
     }
 }
 
@@ -1235,7 +1232,7 @@ pub struct McapStats {
     pub bytes: u64,
 }
 
-/// Writes a log (read from an OILSLOG2 file) as MCAP.
+/// Writes a log (read from an OILSLOG3 file) as MCAP.
 pub fn export_mcap(log: &Log, path: &Path) -> Result<McapStats, McapLogError> {
     let mut sink = McapSink::create(path, &log.header_json)?;
     for r in &log.records {
@@ -1454,6 +1451,15 @@ pub fn read_mcap(path: &Path) -> Result<Log, McapLogError> {
                     valve_position: std::array::from_fn(|e| [fuel[e], ox[e]]),
                 };
             }
+            topic::TIMING => {
+                let m: StepTiming = serde_json::from_slice(&msg.data).map_err(bad)?;
+                let i = slot(u64::from(msg.sequence), &mut records);
+                records[i].timing = crate::recorder::StepTimes {
+                    round_trip_ns: m.round_trip_ns,
+                    wake_error_ns: m.wake_error_ns,
+                    transport_ns: m.transport_ns,
+                };
+            }
             _ => {}
         }
     }
@@ -1490,7 +1496,7 @@ pub fn read_mcap_timing(path: &Path) -> Result<Vec<StepTiming>, McapLogError> {
     Ok(out)
 }
 
-/// Reads a run log in either format: OILSLOG2 or MCAP (by the file's magic).
+/// Reads a run log in either format: OILSLOG3 or MCAP (by the file's magic).
 pub fn read_any(path: &Path) -> Result<Log, RecorderError> {
     if is_mcap(path) {
         Ok(read_mcap(path)?)

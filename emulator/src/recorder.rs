@@ -4,12 +4,13 @@
 //!
 //! File layout (little-endian):
 //! ```text
-//! magic      8 bytes  "OILSLOG2"
+//! magic      8 bytes  "OILSLOG3"
 //! header_len u32      length of the JSON header that follows
 //! header     JSON     the run's whole configuration (RunConfig), run id, protocol version
 //! records    RECORD_SIZE bytes each, until the end of the file:
 //!            flags u32 | crc32 u32 | Telemetry (304 bytes) | Command (120 bytes)
-//!            | applied command and true state: TRUTH_VALUES f64s (see TRUTH_COLUMNS)
+//!            | applied command, true state and the step's timing: TRUTH_VALUES f64s
+//!              (see TRUTH_COLUMNS; a timing figure the step has not is NaN)
 //! ```
 //! The CRC-32 covers the flags and everything after the CRC, so a damaged record is
 //! found and named by its position, never read as data.
@@ -31,7 +32,9 @@ use std::thread::JoinHandle;
 use thiserror::Error;
 
 /// File magic of this format.
-pub const MAGIC: &[u8; 8] = b"OILSLOG2";
+pub const MAGIC: &[u8; 8] = b"OILSLOG3";
+/// Magic of the format before per-step timing, refused with a clear message.
+const MAGIC_V2: &[u8; 8] = b"OILSLOG2";
 /// Magic of the first format (wire packets only), refused with a clear message.
 const MAGIC_V1: &[u8; 8] = b"OILSLOG1";
 /// Columns of the applied command and the true state, in record order, with units.
@@ -94,9 +97,12 @@ pub const TRUTH_COLUMNS: [&str; TRUTH_VALUES] = [
     "true_fuel_valve4",
     "true_ox_valve4",
     "faults_active",
+    "round_trip_ns",
+    "wake_error_ns",
+    "transport_ns",
 ];
 /// Number of f64 values after the packets in a record.
-pub const TRUTH_VALUES: usize = 58;
+pub const TRUTH_VALUES: usize = 61;
 const TLM_SIZE: usize = core::mem::size_of::<Telemetry>();
 const CMD_SIZE: usize = core::mem::size_of::<Command>();
 /// Bytes per record.
@@ -132,6 +138,19 @@ pub struct Record {
     pub truth: TruthState,
     /// Faults active at this step: bit i for the i-th declared fault.
     pub faults_active: u64,
+    /// This step's timing (wall-clock measurements: outside the digest).
+    pub timing: StepTimes,
+}
+
+/// One step's timing, nanoseconds; `None` where the step has no such figure.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct StepTimes {
+    /// Telemetry(k) published until Command(k) received (in process: the call).
+    pub round_trip_ns: Option<u64>,
+    /// Step start minus its scheduled start (realtime only).
+    pub wake_error_ns: Option<i64>,
+    /// Round trip minus the stub's compute (across processes only).
+    pub transport_ns: Option<u64>,
 }
 
 impl Record {
@@ -174,6 +193,13 @@ impl Record {
         }
         // Exact: at most 64 faults, and masks stay below 2^53 for up to 53 of them.
         put(&[self.faults_active as f64]);
+        // Exact below 2^53 ns (104 days).
+        let tm = &self.timing;
+        put(&[
+            tm.round_trip_ns.map_or(f64::NAN, |v| v as f64),
+            tm.wake_error_ns.map_or(f64::NAN, |v| v as f64),
+            tm.transport_ns.map_or(f64::NAN, |v| v as f64),
+        ]);
         debug_assert_eq!(n, TRUTH_VALUES);
         v
     }
@@ -221,6 +247,13 @@ impl Record {
             *valves = [s[0], s[1]];
         }
         self.faults_active = take(1)[0] as u64;
+        let tm = take(3);
+        let finite = |x: f64| x.is_finite().then_some(x);
+        self.timing = StepTimes {
+            round_trip_ns: finite(tm[0]).map(|v| v as u64),
+            wake_error_ns: finite(tm[1]).map(|v| v as i64),
+            transport_ns: finite(tm[2]).map(|v| v as u64),
+        };
         self.applied = applied;
         self.truth = TruthState {
             pos_mci_m,
@@ -359,7 +392,7 @@ impl Recorder {
     }
 
     /// Starts a writer thread that hands every record to `sink` (a format other than
-    /// OILSLOG2, e.g. [`crate::mcap_log::McapSink`]); same channel, same guarantees.
+    /// OILSLOG3, e.g. [`crate::mcap_log::McapSink`]); same channel, same guarantees.
     pub fn with_sink(path: &Path, mut sink: Box<dyn RecordSink>) -> Result<Self, RecorderError> {
         let (tx, rx) = bounded::<Record>(CHANNEL_CAPACITY);
         let writer = std::thread::Builder::new()
@@ -499,11 +532,16 @@ pub fn read_log(path: &Path) -> Result<Log, RecorderError> {
         .map_err(io)?;
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V1 {
         return Err(not_log(
-            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG2 log",
+            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG3 log",
+        ));
+    }
+    if bytes.len() >= 8 && &bytes[..8] == MAGIC_V2 {
+        return Err(not_log(
+            "an OILSLOG2 log, the format before per-step timing was recorded; run again (`oils run --config-from` its report) to get an OILSLOG3 log",
         ));
     }
     if bytes.len() < 12 || &bytes[..8] != MAGIC {
-        return Err(not_log("missing OILSLOG2 magic"));
+        return Err(not_log("missing OILSLOG3 magic"));
     }
     let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
     let body_start = 12usize
@@ -656,7 +694,7 @@ mod tests {
             read_log(&path),
             Err(RecorderError::NotALog { .. })
         ));
-        std::fs::write(&path, b"OILSLOG2\xff\xff\xff\x00").unwrap();
+        std::fs::write(&path, b"OILSLOG3\xff\xff\xff\x00").unwrap();
         assert!(matches!(
             read_log(&path),
             Err(RecorderError::NotALog { .. })

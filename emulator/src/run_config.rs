@@ -132,7 +132,7 @@ pub struct LogConfig {
     /// The log file; default `oils-out/<run id>.oilslog` (`.mcap` for MCAP).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub path: Option<PathBuf>,
-    /// The log's format: `oilslog` (OILSLOG2, the default) or `mcap`.
+    /// The log's format: `oilslog` (OILSLOG3, the default) or `mcap`.
     #[serde(skip_serializing_if = "crate::mcap_log::LogFormat::is_default")]
     pub format: crate::mcap_log::LogFormat,
 }

@@ -19,8 +19,8 @@ use crate::faults::{FaultPlan, FaultReport, PlantFault};
 use crate::link::{ExchangeError, Link};
 use crate::plant::{ActuatorCommand, Plant, PlantStatus, TouchdownState};
 use crate::recorder::{
-    Record, Recorder, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN, REC_FAULT_CLEARED,
-    REC_FAULT_FIRED, REC_REJECTED_VALUES,
+    Record, Recorder, StepTimes, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN,
+    REC_FAULT_CLEARED, REC_FAULT_FIRED, REC_REJECTED_VALUES,
 };
 use crate::sanitize::sanitize;
 use crate::timing::{TimingMonitor, TimingThresholds};
@@ -255,8 +255,10 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     let mut k: u64 = 0;
 
     loop {
+        let mut step_times = StepTimes::default();
         if let Some(late_ns) = clock.wait_for_step(k, stop) {
             timing.record_wake_error(late_ns);
+            step_times.wake_error_ns = Some(late_ns.min(i64::MAX as u64) as i64);
         }
         let t_ns = plant.time_ns();
         if abort.is_none() && stop.load(Ordering::Relaxed) {
@@ -299,6 +301,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     applied: ActuatorCommand::default(),
                     truth: plant.truth(),
                     faults_active,
+                    timing: step_times,
                 })?;
             }
             break;
@@ -355,8 +358,11 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                 }
                 last_command_ns = received_ns;
                 let round_trip_ns = received_ns - published_ns;
+                step_times.round_trip_ns = Some(round_trip_ns);
                 if with_transport {
                     timing.record_exchange(round_trip_ns, cmd.stub_compute_ns);
+                    step_times.transport_ns =
+                        Some(round_trip_ns.saturating_sub(cmd.stub_compute_ns));
                 } else {
                     timing.record_in_process(round_trip_ns, cmd.stub_compute_ns);
                 }
@@ -416,6 +422,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                 applied,
                 truth: plant.truth(),
                 faults_active,
+                timing: step_times,
             })?;
         }
         status = plant.step(&applied, cfg.dt_ns);
