@@ -10,6 +10,7 @@
 //! not allocate: iceoryx2 loans come from shared memory set up at creation.
 
 use crate::clock::monotonic_ns;
+use crate::domain::{Domain, DomainError};
 use crate::service::RunServices;
 use crate::{Command, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH};
 use core::fmt::Debug;
@@ -119,6 +120,9 @@ pub enum LinkError {
     /// Unknown wait strategy name.
     #[error("unknown wait strategy (expected busy, event or hybrid)")]
     BadWaitStrategy,
+    /// The oils iceoryx2 domain is unusable.
+    #[error(transparent)]
+    Domain(#[from] DomainError),
 }
 
 fn ice<E: Debug>(what: &'static str) -> impl FnOnce(E) -> LinkError {
@@ -138,18 +142,23 @@ pub mod attribute_keys {
     pub const WAIT: &str = "oils.wait";
 }
 
-/// Creates an iceoryx2 node for one side of the link.
+/// Creates an iceoryx2 node for one side of the link, in the oils domain this
+/// environment selects ([`crate::domain::Domain::from_env`]: a directory private to the
+/// user, a prefix of its own).
 ///
 /// Signal handling is left to the caller (both binaries install their own SIGINT and
 /// SIGTERM flag before tick 0, so a signal is seen even before any iceoryx2 wait). Dead
-/// nodes of earlier crashed runs are cleaned up on creation (iceoryx2's default config).
+/// nodes of earlier crashed runs are cleaned up on creation.
 pub fn create_node(name: &str) -> Result<Node<ipc::Service>, LinkError> {
+    create_node_in(name, &Domain::from_env()?)
+}
+
+/// Creates an iceoryx2 node in `domain`.
+pub fn create_node_in(name: &str, domain: &Domain) -> Result<Node<ipc::Service>, LinkError> {
     iceoryx2::prelude::set_log_level_from_env_or(LogLevel::Error);
     let node_name = NodeName::new(name).map_err(ice("node name"))?;
-    // An explicit default config: no config-file lookup, so no warning at every start.
-    let mut config = Config::default();
-    config.global.node.cleanup_dead_nodes_on_creation = true;
-    config.global.node.cleanup_dead_nodes_on_destruction = true;
+    // An explicit config: no config-file lookup, so no warning at every start.
+    let config = domain.iceoryx2_config()?;
     NodeBuilder::new()
         .name(&node_name)
         .config(&config)
