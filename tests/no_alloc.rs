@@ -18,7 +18,7 @@
 use oils_emulator::clock::LockstepClock;
 use oils_emulator::config::{NavNoiseConfig, ScenarioConfig};
 use oils_emulator::faults::FaultPlan;
-use oils_emulator::link::{InProcLink, Link};
+use oils_emulator::link::{BoundLink, InProcLink, Link};
 use oils_emulator::plant::Plant;
 use oils_emulator::propulsion::{build, PropulsionKind};
 use oils_emulator::recorder::Recorder;
@@ -135,7 +135,7 @@ fn allocations_through_descent(
 ) -> (u64, u64, u64, Outcome) {
     let stop = AtomicBool::new(false);
     let node = create_node("no-alloc-emulator").unwrap();
-    let mut link = EmulatorLink::create(&node, run_id, wait).unwrap();
+    let link = EmulatorLink::create(&node, run_id, wait).unwrap();
     let stub = std::thread::spawn(move || {
         let stop = AtomicBool::new(false);
         let node = create_node("no-alloc-stub").unwrap();
@@ -144,7 +144,9 @@ fn allocations_through_descent(
         STEPPING.with(|s| s.set(true));
         serve(&link, &mut gnc, 10_000, &stop).unwrap()
     });
-    link.wait_for_peer(10_000, &stop).unwrap();
+    let joined = link.wait_for_peer(10_000, &stop).unwrap();
+    // As a session runs it: bound to the stub that joined (checked on every command).
+    let mut link = BoundLink::new(link, joined, false);
     STEPPING.with(|s| s.set(true));
     let out = allocations_over(&mut link, run_id, from, &STEPPING_ALLOCATIONS);
     STEPPING.with(|s| s.set(false));

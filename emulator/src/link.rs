@@ -13,7 +13,7 @@
 use crate::recorder::{Log, REC_COMMAND_RECEIVED, REC_END_OF_RUN};
 use oils_onboard_stub::fsw::FlightSoftware;
 use oils_onboard_stub::runner::answer;
-use oils_shared::link::{EmulatorLink, LinkError};
+use oils_shared::link::{EmulatorLink, LinkError, PeerPort};
 use oils_shared::{AsBytes, Command, Telemetry};
 use std::sync::atomic::AtomicBool;
 
@@ -26,6 +26,18 @@ pub enum ExchangeError {
     /// The in-process flight software reported a failed step.
     #[error("flight software: {0}")]
     FlightSoftware(#[from] oils_onboard_stub::fsw::FswFailure),
+    /// A command came from another flight-software process than the one bound to the run.
+    #[error(
+        "flight software changed: the command for step {step} came from another process ({from}) than the one that joined the run ({bound}); the flight software restarted, or a second one joined. The run is bound to the process that joined it (--allow-reattach lets a new one take over)"
+    )]
+    ForeignFlightSoftware {
+        /// The step the command claimed to answer.
+        step: u64,
+        /// Who sent it.
+        from: PeerPort,
+        /// Who the run is bound to.
+        bound: PeerPort,
+    },
     /// A replayed run produced telemetry other than the recorded one.
     #[error("replay diverged at step {step}: the emulator's telemetry differs from the log's")]
     ReplayDiverged {
@@ -51,9 +63,67 @@ pub trait Link {
     fn has_transport(&self) -> bool;
 }
 
-impl Link for EmulatorLink {
+/// A flight software that took a run over under `--allow-reattach`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Reattachment {
+    /// The step whose command first came from the new process.
+    pub step: u64,
+    /// The process the run was bound to.
+    pub from: PeerPort,
+    /// The process it is bound to now.
+    pub to: PeerPort,
+}
+
+/// Most re-attachments a run keeps a record of (more are counted, not kept), so that
+/// recording one never allocates on the step path.
+pub const MAX_REATTACHMENTS_KEPT: usize = 16;
+
+/// The iceoryx2 link of a run, bound to the flight-software process that joined it: every
+/// command must come from the publisher [`EmulatorLink::wait_for_peer`] saw join (iceoryx2
+/// stamps the publisher on each sample). A command from any other publisher (a restarted
+/// stub, a second process after the first vanished) is
+/// [`ExchangeError::ForeignFlightSoftware`], unless re-attachment is allowed: then the run
+/// is bound to the newcomer and the change recorded.
+pub struct BoundLink {
+    link: EmulatorLink,
+    bound: PeerPort,
+    allow_reattach: bool,
+    reattachments: Vec<Reattachment>,
+    reattach_count: u64,
+}
+
+impl BoundLink {
+    /// Binds `link` to `joined` (from [`EmulatorLink::wait_for_peer`]).
+    pub fn new(link: EmulatorLink, joined: PeerPort, allow_reattach: bool) -> Self {
+        Self {
+            link,
+            bound: joined,
+            allow_reattach,
+            reattachments: Vec::with_capacity(MAX_REATTACHMENTS_KEPT),
+            reattach_count: 0,
+        }
+    }
+
+    /// The underlying link.
+    pub fn link(&self) -> &EmulatorLink {
+        &self.link
+    }
+
+    /// The process the run is bound to now.
+    pub fn bound(&self) -> PeerPort {
+        self.bound
+    }
+
+    /// Re-attachments so far (only with `allow_reattach`), and the first
+    /// [`MAX_REATTACHMENTS_KEPT`] of them.
+    pub fn reattachments(&self) -> (u64, &[Reattachment]) {
+        (self.reattach_count, &self.reattachments)
+    }
+}
+
+impl Link for BoundLink {
     fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {
-        Ok(EmulatorLink::publish(self, tlm)?)
+        Ok(self.link.publish(tlm)?)
     }
 
     fn receive_until(
@@ -61,7 +131,32 @@ impl Link for EmulatorLink {
         deadline_ns: u64,
         stop: &AtomicBool,
     ) -> Result<Option<Command>, ExchangeError> {
-        Ok(EmulatorLink::receive_until(self, deadline_ns, stop)?)
+        let Some((cmd, publisher)) = self.link.receive_until_from(deadline_ns, stop)? else {
+            return Ok(None);
+        };
+        if publisher != self.bound.publisher {
+            let from = PeerPort {
+                publisher,
+                pid: self.link.command_publisher_pid(publisher),
+            };
+            if !self.allow_reattach {
+                return Err(ExchangeError::ForeignFlightSoftware {
+                    step: cmd.header.step,
+                    from,
+                    bound: self.bound,
+                });
+            }
+            if self.reattachments.len() < MAX_REATTACHMENTS_KEPT {
+                self.reattachments.push(Reattachment {
+                    step: cmd.header.step,
+                    from: self.bound,
+                    to: from,
+                });
+            }
+            self.reattach_count += 1;
+            self.bound = from;
+        }
+        Ok(Some(cmd))
     }
 
     fn has_transport(&self) -> bool {

@@ -36,8 +36,12 @@ pub struct RunReport {
     pub log: Option<String>,
     /// The whole run configuration: `oils run --config-from REPORT.json` repeats the run.
     pub config: RunConfig,
-    /// Things the run noticed that do not fail it (a peer that never notifies, ...).
+    /// Things the run noticed that do not fail it (a peer that never notifies, a flight
+    /// software that re-attached, ...).
     pub warnings: Vec<String>,
+    /// With `--allow-reattach`: how often a new flight-software process took the run over.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reattachments: Option<u64>,
     /// The run's figures.
     #[serde(flatten)]
     pub summary: RunSummary,
@@ -66,6 +70,7 @@ impl RunReport {
             log: log.map(|p| p.display().to_string()),
             config: cfg.clone(),
             warnings: Vec::new(),
+            reattachments: None,
             summary,
         }
     }

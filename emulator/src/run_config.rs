@@ -194,6 +194,11 @@ pub struct RunConfig {
     pub link_timeout_ms: u64,
     /// How long to wait for the flight software to connect, ms.
     pub startup_timeout_ms: u64,
+    /// iceoryx2 link: let a new flight-software process take the run over when commands
+    /// come from another process than the one that joined (a restarted stub). Off: such a
+    /// command aborts the run. Each take-over is reported.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub allow_reattach: bool,
     /// SCHED_FIFO priority (1-99) with memory locked; needs root or CAP_SYS_NICE.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rt_priority: Option<i32>,
@@ -235,6 +240,7 @@ impl Default for RunConfig {
             wake_spin_us: 200,
             link_timeout_ms: 2000,
             startup_timeout_ms: 10_000,
+            allow_reattach: false,
             rt_priority: None,
             thresholds: ThresholdConfig::default(),
             log: LogConfig::default(),

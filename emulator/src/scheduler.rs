@@ -328,6 +328,11 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     abort = Some(Abort::Interrupted);
                     break None;
                 }
+                // Once, at the end of the run: the message may allocate.
+                Err(e @ ExchangeError::ForeignFlightSoftware { .. }) => {
+                    abort = Some(Abort::Protocol(e.to_string()));
+                    break None;
+                }
                 Err(e) => return Err(e.into()),
             }
         };

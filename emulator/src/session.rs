@@ -5,7 +5,7 @@
 
 use crate::clock::{LockstepClock, RealtimeClock, ReplayClock, StepClock};
 use crate::faults::{FaultPlan, PlantFault};
-use crate::link::{InProcLink, Link, ReplayLink};
+use crate::link::{BoundLink, InProcLink, Link, ReplayLink};
 use crate::mcap_log::{LogFormat, McapSink};
 use crate::plant::Plant;
 use crate::propulsion::build_configured;
@@ -15,7 +15,8 @@ use crate::report::RunReport;
 use crate::run_config::{LinkKind, RunConfig, RunConfigError};
 use crate::scheduler::{self, Mode, SchedulerConfig, SchedulerError};
 use oils_onboard_stub::cli::{build_fsw, StubCliError};
-use oils_shared::link::{create_node, EmulatorLink, LinkError, WaitStrategy};
+use oils_shared::domain::Domain;
+use oils_shared::link::{create_node_in, EmulatorLink, LinkError, WaitStrategy};
 use oils_shared::PROTOCOL_VERSION;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -216,6 +217,7 @@ pub fn run_observed(
             .map_err(|source| SessionError::RealtimePriority { priority, source })?;
     }
     let mut warnings = Vec::new();
+    let mut reattachments = None;
     let (summary, log_path, wait) = match cfg.link {
         LinkKind::Inproc => {
             let fsw = build_fsw(
@@ -249,11 +251,14 @@ pub fn run_observed(
                 })?;
             }
             let wait = cfg.wait_strategy();
-            let node = create_node("oils-emulator")?;
-            let mut link = EmulatorLink::create(&node, run_id, wait)?;
+            let domain = Domain::from_env().map_err(LinkError::from)?;
+            warnings.extend(domain.notes().iter().cloned());
+            let node = create_node_in("oils-emulator", &domain)?;
+            let link = EmulatorLink::create(&node, run_id, wait)?;
             let recorder = open_recorder(cfg, run_id)?;
             launch(&StubLaunch { run_id, wait })?;
-            link.wait_for_peer(cfg.startup_timeout_ms, stop)?;
+            let joined = link.wait_for_peer(cfg.startup_timeout_ms, stop)?;
+            let mut link = BoundLink::new(link, joined, cfg.allow_reattach);
             let summary = run_and_close(
                 &sched,
                 &mut plant,
@@ -264,16 +269,33 @@ pub fn run_observed(
                 stop,
                 observer.take(),
             )?;
-            if wait.notifies() && link.wake_counts().peer_never_notified() {
+            if wait.notifies() && link.link().wake_counts().peer_never_notified() {
                 warnings.push(format!(
                     "the flight software never notified oils/{run_id:016x}/command-ready; each step waited for the 1 ms re-poll (docs/protocol.md, wait strategies)"
                 ));
+            }
+            if cfg.allow_reattach {
+                let (count, kept) = link.reattachments();
+                reattachments = Some(count);
+                for r in kept {
+                    warnings.push(format!(
+                        "flight software re-attached at step {}: {} took over from {} (--allow-reattach)",
+                        r.step, r.to, r.from
+                    ));
+                }
+                if count > kept.len() as u64 {
+                    warnings.push(format!(
+                        "{} more re-attachments not listed",
+                        count - kept.len() as u64
+                    ));
+                }
             }
             (summary.0, summary.1, Some(wait))
         }
     };
     let mut report = RunReport::new(cfg, run_id, wait, log_path, summary);
     report.warnings = warnings;
+    report.reattachments = reattachments;
     Ok(report)
 }
 

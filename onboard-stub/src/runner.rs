@@ -25,6 +25,16 @@ pub enum StubError {
     /// Link failure (includes a protocol mismatch and interruption by a signal).
     #[error(transparent)]
     Link(#[from] LinkError),
+    /// The emulator's process exited without an end-of-run telemetry.
+    #[error("the emulator (pid {pid}) exited without ending the run, after step {last_step}; noticed {waited_ms} ms into the wait for the next telemetry")]
+    EmulatorGone {
+        /// The emulator's process id.
+        pid: i32,
+        /// Last step answered.
+        last_step: u64,
+        /// How long we had waited.
+        waited_ms: u64,
+    },
     /// No telemetry for too long: the emulator is gone.
     #[error("emulator silent for {waited_ms} ms after step {last_step} (did it die?)")]
     EmulatorSilent {
@@ -55,7 +65,21 @@ pub fn answer<F: FlightSoftware + ?Sized>(fsw: &mut F, tlm: &Telemetry) -> Comma
     cmd
 }
 
+/// While it waits for telemetry, the stub checks this often (wall time) whether the
+/// emulator's process still runs: a dead emulator is noticed within this bound, whatever
+/// the speed factor stretches the period to.
+pub const EMULATOR_CHECK_MS: u64 = 100;
+
+/// Longest silence the stub waits out when it cannot watch the emulator's process (no
+/// pidfd, or the emulator in another pid namespace): `timeout_ms` is capped to this, so
+/// even then a dead emulator is given up within 10 s of wall time.
+pub const BLIND_TIMEOUT_CAP_MS: u64 = 10_000;
+
 /// Serves one run until the emulator sends its end-of-run telemetry.
+///
+/// Waiting for Telemetry(k), the stub gives up when the emulator's process exits (checked
+/// every [`EMULATOR_CHECK_MS`]) or after `timeout_ms` of silence from a live emulator (an
+/// emulator that cannot be watched: at most [`BLIND_TIMEOUT_CAP_MS`]).
 pub fn serve(
     link: &StubLink,
     fsw: &mut dyn FlightSoftware,
@@ -68,13 +92,38 @@ pub fn serve(
     };
     loop {
         let waited_from = monotonic_ns();
-        let tlm = match link.receive_until(waited_from + timeout_ms * 1_000_000, stop)? {
-            Some(t) => t,
-            None => {
+        let blind_ms = timeout_ms.min(BLIND_TIMEOUT_CAP_MS);
+        let tlm = loop {
+            let watched = link.emulator_process();
+            let limit_ms = if watched.is_some() {
+                timeout_ms
+            } else {
+                blind_ms
+            };
+            let deadline_ns = waited_from.saturating_add(limit_ms.saturating_mul(1_000_000));
+            let slice_end_ns = monotonic_ns()
+                .saturating_add(EMULATOR_CHECK_MS * 1_000_000)
+                .min(deadline_ns);
+            if let Some(t) = link.receive_until(slice_end_ns, stop)? {
+                break t;
+            }
+            let waited_ms = (monotonic_ns() - waited_from) / 1_000_000;
+            if let Some(p) = watched.filter(|p| !p.alive()) {
+                // A last look: it may have sent its final telemetry just before exiting.
+                if let Some(t) = link.try_receive()? {
+                    break t;
+                }
+                return Err(StubError::EmulatorGone {
+                    pid: p.pid(),
+                    last_step: summary.last_step,
+                    waited_ms,
+                });
+            }
+            if monotonic_ns() >= deadline_ns {
                 return Err(StubError::EmulatorSilent {
                     last_step: summary.last_step,
-                    waited_ms: (monotonic_ns() - waited_from) / 1_000_000,
-                })
+                    waited_ms,
+                });
             }
         };
         tlm.header.check_peer()?;

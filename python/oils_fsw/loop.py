@@ -14,6 +14,7 @@ from typing import Callable, Optional
 
 import iceoryx2 as iox2
 
+from . import domain
 from .packets import (
     PROTOCOL_VERSION,
     SCHEMA_HASH,
@@ -80,7 +81,8 @@ def fly(
     ``time.perf_counter_ns``).
     """
     iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
-    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+    # The user's private oils domain, as the emulator's (docs/protocol.md, "Domain").
+    node = iox2.NodeBuilder.new().config(domain.config()).create(iox2.ServiceType.Ipc)
     names = service_names(run_id)
 
     tlm_event = _open_telemetry_event(node, names["telemetry_event"], startup_timeout_s)

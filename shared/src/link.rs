@@ -10,6 +10,7 @@
 //! not allocate: iceoryx2 loans come from shared memory set up at creation.
 
 use crate::clock::monotonic_ns;
+use crate::domain::{Domain, DomainError};
 use crate::service::RunServices;
 use crate::{Command, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH};
 use core::fmt::Debug;
@@ -119,6 +120,9 @@ pub enum LinkError {
     /// Unknown wait strategy name.
     #[error("unknown wait strategy (expected busy, event or hybrid)")]
     BadWaitStrategy,
+    /// The oils iceoryx2 domain is unusable.
+    #[error(transparent)]
+    Domain(#[from] DomainError),
 }
 
 fn ice<E: Debug>(what: &'static str) -> impl FnOnce(E) -> LinkError {
@@ -138,18 +142,23 @@ pub mod attribute_keys {
     pub const WAIT: &str = "oils.wait";
 }
 
-/// Creates an iceoryx2 node for one side of the link.
+/// Creates an iceoryx2 node for one side of the link, in the oils domain this
+/// environment selects ([`crate::domain::Domain::from_env`]: a directory private to the
+/// user, a prefix of its own).
 ///
 /// Signal handling is left to the caller (both binaries install their own SIGINT and
 /// SIGTERM flag before tick 0, so a signal is seen even before any iceoryx2 wait). Dead
-/// nodes of earlier crashed runs are cleaned up on creation (iceoryx2's default config).
+/// nodes of earlier crashed runs are cleaned up on creation.
 pub fn create_node(name: &str) -> Result<Node<ipc::Service>, LinkError> {
+    create_node_in(name, &Domain::from_env()?)
+}
+
+/// Creates an iceoryx2 node in `domain`.
+pub fn create_node_in(name: &str, domain: &Domain) -> Result<Node<ipc::Service>, LinkError> {
     iceoryx2::prelude::set_log_level_from_env_or(LogLevel::Error);
     let node_name = NodeName::new(name).map_err(ice("node name"))?;
-    // An explicit default config: no config-file lookup, so no warning at every start.
-    let mut config = Config::default();
-    config.global.node.cleanup_dead_nodes_on_creation = true;
-    config.global.node.cleanup_dead_nodes_on_destruction = true;
+    // An explicit config: no config-file lookup, so no warning at every start.
+    let config = domain.iceoryx2_config()?;
     NodeBuilder::new()
         .name(&node_name)
         .config(&config)
@@ -180,6 +189,70 @@ where
     _rx_event: EventFactory<ipc::Service>,
     sleeps: AtomicU64,
     wake_notifications: AtomicU64,
+    /// The peer process, watched through a pidfd (the stub watches the emulator).
+    peer_process: std::sync::OnceLock<PeerProcess>,
+}
+
+/// A peer's iceoryx2 publisher: who sent a packet. iceoryx2 stamps it on every sample
+/// from the publisher's port, so a flight software cannot forge or forget it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PeerPort {
+    /// iceoryx2's unique publisher id.
+    pub publisher: u128,
+    /// The process that created it, if iceoryx2 still lists the port.
+    pub pid: Option<i32>,
+}
+
+impl core::fmt::Display for PeerPort {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self.pid {
+            Some(pid) => write!(f, "pid {pid}, publisher {:x}", self.publisher),
+            None => write!(f, "publisher {:x}, process gone", self.publisher),
+        }
+    }
+}
+
+/// A peer process watched through a Linux pidfd: readable once it has exited.
+#[derive(Debug)]
+pub struct PeerProcess {
+    pid: i32,
+    fd: std::os::fd::OwnedFd,
+}
+
+impl PeerProcess {
+    /// Watches process `pid`; `None` where the kernel cannot (no pidfd_open, another
+    /// pid namespace, no such process).
+    pub fn watch(pid: i32) -> Option<Self> {
+        if pid <= 0 {
+            return None;
+        }
+        // SAFETY: pidfd_open takes a pid and flags and returns a new descriptor or -1.
+        let fd = unsafe { libc::syscall(libc::SYS_pidfd_open, pid, 0) };
+        if fd < 0 {
+            return None;
+        }
+        // SAFETY: a fresh descriptor that nothing else owns.
+        let fd =
+            unsafe { <std::os::fd::OwnedFd as std::os::fd::FromRawFd>::from_raw_fd(fd as i32) };
+        Some(Self { pid, fd })
+    }
+
+    /// The process id.
+    pub fn pid(&self) -> i32 {
+        self.pid
+    }
+
+    /// Whether the process still runs (one non-blocking poll; no allocation).
+    pub fn alive(&self) -> bool {
+        let mut p = libc::pollfd {
+            fd: std::os::fd::AsRawFd::as_raw_fd(&self.fd),
+            events: libc::POLLIN,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd, zero timeout.
+        let n = unsafe { libc::poll(&mut p, 1, 0) };
+        !(n > 0 && p.revents & (libc::POLLIN | libc::POLLHUP | libc::POLLERR) != 0)
+    }
 }
 
 /// How often a receiver slept on the peer's event, and how many notifications it saw.
@@ -262,17 +335,19 @@ impl EmulatorLink {
         Self::from_services(run_id, wait, tlm_service, cmd_service, tlm_event, cmd_event)
     }
 
-    /// Waits until the stub has subscribed to telemetry and publishes commands.
-    pub fn wait_for_peer(&self, timeout_ms: u64, stop: &AtomicBool) -> Result<(), LinkError> {
+    /// Waits until the stub has subscribed to telemetry and publishes commands; returns
+    /// the command publisher that joined (the run is bound to it: the command service
+    /// admits one publisher at a time, and every command sample names its publisher).
+    pub fn wait_for_peer(&self, timeout_ms: u64, stop: &AtomicBool) -> Result<PeerPort, LinkError> {
         let start = monotonic_ns();
         loop {
             let subscribed = self.tx_service.dynamic_config().number_of_subscribers() >= 1;
-            let publishing = self.rx_service.dynamic_config().number_of_publishers() >= 1;
-            if subscribed && publishing {
+            let joined = self.command_publisher();
+            if let (true, Some(port)) = (subscribed, joined) {
                 self.publisher
                     .update_connections()
                     .map_err(ice("update connections"))?;
-                return Ok(());
+                return Ok(port);
             }
             if stop.load(Ordering::Relaxed) {
                 return Err(LinkError::Interrupted);
@@ -287,6 +362,34 @@ impl EmulatorLink {
             }
             std::thread::sleep(Duration::from_millis(2));
         }
+    }
+}
+
+impl EmulatorLink {
+    /// The command service's publisher (the first one listed), if any.
+    pub fn command_publisher(&self) -> Option<PeerPort> {
+        let mut found = None;
+        self.rx_service.dynamic_config().list_publishers(|p| {
+            found = Some(PeerPort {
+                publisher: p.publisher_id.value(),
+                pid: p.node_id.pid::<ipc::Service>().ok().map(|pid| pid.value()),
+            });
+            CallbackProgression::Stop
+        });
+        found
+    }
+
+    /// The process behind command publisher `publisher`, if iceoryx2 still lists it.
+    pub fn command_publisher_pid(&self, publisher: u128) -> Option<i32> {
+        let mut pid = None;
+        self.rx_service.dynamic_config().list_publishers(|p| {
+            if p.publisher_id.value() == publisher {
+                pid = p.node_id.pid::<ipc::Service>().ok().map(|pid| pid.value());
+                return CallbackProgression::Stop;
+            }
+            CallbackProgression::Continue
+        });
+        pid
     }
 }
 
@@ -373,7 +476,26 @@ impl StubLink {
             .event()
             .open()
             .map_err(ice("open command event"))?;
-        Self::from_services(run_id, wait, cmd_service, tlm_service, cmd_event, tlm_event)
+        let link =
+            Self::from_services(run_id, wait, cmd_service, tlm_service, cmd_event, tlm_event)?;
+        link.emulator_process();
+        Ok(link)
+    }
+
+    /// The emulator's process (the telemetry publisher's), watched through a pidfd from
+    /// the first call that finds it listed; `None` while it is not, or where it cannot be
+    /// watched (see [`PeerProcess::watch`]). No allocation.
+    pub fn emulator_process(&self) -> Option<&PeerProcess> {
+        if let Some(p) = self.peer_process.get() {
+            return Some(p);
+        }
+        let mut pid = None;
+        self.rx_service.dynamic_config().list_publishers(|p| {
+            pid = p.node_id.pid::<ipc::Service>().ok().map(|pid| pid.value());
+            CallbackProgression::Stop
+        });
+        let watched = PeerProcess::watch(pid?)?;
+        Some(self.peer_process.get_or_init(|| watched))
     }
 }
 
@@ -445,6 +567,7 @@ where
             _rx_event: rx_event,
             sleeps: AtomicU64::new(0),
             wake_notifications: AtomicU64::new(0),
+            peer_process: std::sync::OnceLock::new(),
         })
     }
 
@@ -488,8 +611,17 @@ where
 
     /// Takes the next packet, if one is waiting.
     pub fn try_receive(&self) -> Result<Option<Rx>, LinkError> {
+        Ok(self.try_receive_from()?.map(|(p, _)| p))
+    }
+
+    /// Takes the next packet, if one is waiting, with the id of the iceoryx2 publisher
+    /// that sent it (stamped by iceoryx2 on the sample).
+    pub fn try_receive_from(&self) -> Result<Option<(Rx, u128)>, LinkError> {
         match self.subscriber.receive().map_err(ice("receive"))? {
-            Some(sample) => Ok(Some(*sample.payload())),
+            Some(sample) => Ok(Some((
+                *sample.payload(),
+                sample.header().publisher_id().value(),
+            ))),
             None => Ok(None),
         }
     }
@@ -502,6 +634,15 @@ where
         deadline_ns: u64,
         stop: &AtomicBool,
     ) -> Result<Option<Rx>, LinkError> {
+        Ok(self.receive_until_from(deadline_ns, stop)?.map(|(p, _)| p))
+    }
+
+    /// [`Link::receive_until`], with the id of the publisher that sent the packet.
+    pub fn receive_until_from(
+        &self,
+        deadline_ns: u64,
+        stop: &AtomicBool,
+    ) -> Result<Option<(Rx, u128)>, LinkError> {
         let started_ns = monotonic_ns();
         let yield_after_ns = started_ns.saturating_add(WaitStrategy::BUSY_YIELD_AFTER_NS);
         let spin_until_ns = match self.wait {
@@ -512,7 +653,7 @@ where
             }
         };
         loop {
-            if let Some(p) = self.try_receive()? {
+            if let Some(p) = self.try_receive_from()? {
                 return Ok(Some(p));
             }
             let now = monotonic_ns();

@@ -67,7 +67,7 @@ impl RunServices {
         };
         let id = self.run_id;
         format!(
-            "oils: run {id:016x} waits for flight software on its iceoryx2 {} services (ipc, default config):\n\
+            "oils: run {id:016x} waits for flight software on its iceoryx2 {} services (ipc, in your oils domain: docs/protocol.md \"Domain\"):\n\
              \x20   {:<38} publish-subscribe oils.v1.Telemetry, 304 bytes: subscribe\n\
              \x20   {:<38} publish-subscribe oils.v1.Command, 120 bytes: publish\n\
              \x20   {:<38} event: {woken}\n\

@@ -136,6 +136,11 @@ pub struct RunArgs {
     /// engine-off:2@t=400 (README "Faults"). Added to the configuration's faults.
     #[arg(long = "fault", value_name = "SPEC")]
     pub faults: Vec<oils_emulator::faults::FaultSpec>,
+    /// iceoryx2: let a new flight-software process take the run over when commands come
+    /// from another process than the one that joined (a restarted stub); each take-over
+    /// is reported. Default: such a command aborts the run.
+    #[arg(long)]
+    pub allow_reattach: bool,
     /// Do not spawn a stub: wait for flight software started by hand on the run's
     /// services (prints them); the report says `fsw: external`.
     #[arg(long)]
@@ -213,6 +218,9 @@ impl RunArgs {
         if self.no_stub {
             cfg.fsw = FswSpec::External;
         }
+        if self.allow_reattach {
+            cfg.allow_reattach = true;
+        }
         cfg.faults.extend(self.faults.iter().cloned());
         cfg.validate()?;
         Ok(cfg)
@@ -268,6 +276,15 @@ fn print_services(launch: &StubLaunch) {
         "{}",
         RunServices::new(launch.run_id).client_guide(launch.wait)
     );
+    // The emulator has just opened it; a client must use the same one.
+    if let Ok(d) = oils_shared::domain::Domain::from_env() {
+        eprintln!(
+            "  iceoryx2 domain: root {}, prefix {} (set {} alike for your client)",
+            d.root().display(),
+            d.prefix(),
+            oils_shared::domain::ROOT_ENV
+        );
+    }
 }
 
 /// Starts `oils stub` for this run, as a separate OS process.
@@ -281,8 +298,10 @@ fn spawn_stub(cfg: &RunConfig, launch: &StubLaunch) -> Result<Child> {
         .arg(launch.wait.as_str())
         .arg("--fsw")
         .arg(cfg.fsw.to_string())
-        // A realtime run slowed down by a speed factor has long periods: never time out
-        // sooner than three of them.
+        // The stub's patience with a live but silent emulator: a realtime run slowed
+        // down by a speed factor has long periods, so never sooner than three of them (at
+        // most 185 s: a period is at most 60 s). A dead emulator the stub notices within
+        // about 0.1 s whatever this is (it watches the emulator's process).
         .arg("--timeout-ms")
         .arg((5000 + 3 * (cfg.dt_ms as f64 / cfg.speed) as u64).to_string())
         .stdin(Stdio::null());
