@@ -111,6 +111,16 @@ pub fn quoted(s: &str) -> String {
     }
 }
 
+/// A number as an error shows it: plain when short, else in exponent form (a 1e300 in
+/// plain form is 301 digits).
+fn shown(v: f64) -> String {
+    if v == 0.0 || (1e-3..1e9).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
 fn whole(message: impl Into<String>) -> ProfileError {
     ProfileError {
         line: 0,
@@ -161,7 +171,7 @@ impl ThrustProfile {
         if !(rules.max_thrust_n.is_finite() && rules.max_thrust_n > 0.0) {
             return Err(whole(format!(
                 "engine rating {} N is not a positive number",
-                rules.max_thrust_n
+                shown(rules.max_thrust_n)
             )));
         }
         if text.len() as u64 > MAX_PROFILE_BYTES {
@@ -223,7 +233,8 @@ impl ThrustProfile {
             let t_s = num(fields[0], "t")?;
             if !(0.0..=MAX_PROFILE_END_S).contains(&t_s) {
                 return Err(err(format!(
-                    "t: {t_s} s is outside [0, {MAX_PROFILE_END_S}] s"
+                    "t: {} s is outside [0, {MAX_PROFILE_END_S}] s",
+                    shown(t_s)
                 )));
             }
             let t_ns = (t_s * 1e9).round() as i64;
@@ -239,8 +250,9 @@ impl ThrustProfile {
                 let c = num(fields[1 + e], &what)?;
                 if !(0.0..=rules.max_thrust_n).contains(&c) {
                     return Err(err(format!(
-                        "{what}: {c} N is outside [0, {}] N (the engine rating)",
-                        rules.max_thrust_n
+                        "{what}: {} N is outside [0, {}] N (the engine rating)",
+                        shown(c),
+                        shown(rules.max_thrust_n)
                     )));
                 }
                 row.thrust_cmd_n[e] = c;
@@ -471,6 +483,19 @@ mod tests {
         // Rows that round to the same nanosecond are not increasing.
         let same = format!("{H}1,1,1,1,1,1,1,1,1\n1.0000000001,1,1,1,1,1,1,1,1\n");
         assert_eq!(ThrustProfile::parse(&same).unwrap_err().line, 3);
+    }
+
+    /// Found by the property test: a time of 1e300 was printed as 301 digits.
+    #[test]
+    fn huge_numbers_are_shown_short() {
+        for text in [
+            format!("{H}1e300,0,0,0,0,0,0,0,0\n"),
+            format!("{H}0,1e300,0,0,0,0,0,0,0\n"),
+            format!("{H}0,-1e-300,0,0,0,0,0,0,0\n"),
+        ] {
+            let e = ThrustProfile::parse(&text).unwrap_err().to_string();
+            assert!(e.len() < 100, "{e}");
+        }
     }
 
     /// Issue #24: an error echoed a 20 MB field whole.
