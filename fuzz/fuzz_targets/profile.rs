@@ -14,7 +14,10 @@ fuzz_target!(|data: &[u8]| {
             assert!(rows.windows(2).all(|w| w[0].t_ns < w[1].t_ns));
             for r in rows {
                 assert!(r.t_ns >= 0 && r.t_ns as f64 <= MAX_PROFILE_END_S * 1e9);
-                assert!(r.thrust_cmd_n.iter().all(|c| (0.0..=RATED_THRUST_N).contains(c)));
+                assert!(r
+                    .thrust_cmd_n
+                    .iter()
+                    .all(|c| (0.0..=RATED_THRUST_N).contains(c)));
             }
             assert_eq!(ThrustProfile::parse(&p.to_csv()).unwrap(), p);
         }
