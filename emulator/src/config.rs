@@ -31,6 +31,27 @@ fn check(ok: bool, field: &'static str, value: f64, why: &'static str) -> Result
     }
 }
 
+/// `value` finite and in `[lo, hi]`; `why` states the bound (with its unit).
+fn within(
+    field: &'static str,
+    value: f64,
+    lo: f64,
+    hi: f64,
+    why: &'static str,
+) -> Result<(), ConfigError> {
+    check((lo..=hi).contains(&value), field, value, why)
+}
+
+/// `value` finite and in `(0, hi]`.
+fn positive_at_most(
+    field: &'static str,
+    value: f64,
+    hi: f64,
+    why: &'static str,
+) -> Result<(), ConfigError> {
+    check(value > 0.0 && value <= hi, field, value, why)
+}
+
 /// The Moon as a spherical central body.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -93,11 +114,11 @@ impl Default for PropulsionConfig {
 impl PropulsionConfig {
     /// Checks every field.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        check(
-            self.max_thrust_n > 0.0,
+        positive_at_most(
             "propulsion.max_thrust_n",
             self.max_thrust_n,
-            "> 0",
+            1e6,
+            "in (0, 1e6] N",
         )?;
         check(
             (0.0..1.0).contains(&self.throttle_min_frac),
@@ -105,25 +126,36 @@ impl PropulsionConfig {
             self.throttle_min_frac,
             "in [0, 1)",
         )?;
-        check(self.isp_s > 0.0, "propulsion.isp_s", self.isp_s, "> 0")?;
-        check(
-            self.mixture_ratio > 0.0,
+        positive_at_most("propulsion.isp_s", self.isp_s, 1e4, "in (0, 1e4] s")?;
+        positive_at_most(
             "propulsion.mixture_ratio",
             self.mixture_ratio,
-            "> 0",
+            100.0,
+            "in (0, 100]",
         )?;
-        check(
-            self.propellant_kg >= 0.0,
+        within(
             "propulsion.propellant_kg",
             self.propellant_kg,
-            ">= 0",
+            0.0,
+            1e6,
+            "in [0, 1e6] kg",
         )?;
-        check(
-            self.thrust_lag_s > 0.0,
+        positive_at_most(
             "propulsion.thrust_lag_s",
             self.thrust_lag_s,
-            "> 0",
+            100.0,
+            "in (0, 100] s",
         )?;
+        for (field, v) in [
+            ("propulsion.gas_pressure_pa", self.gas_pressure_pa),
+            ("propulsion.tank_pressure_pa", self.tank_pressure_pa),
+            (
+                "propulsion.chamber_pressure_max_pa",
+                self.chamber_pressure_max_pa,
+            ),
+        ] {
+            within(field, v, 0.0, 1e8, "in [0, 1e8] Pa (1000 bar)")?;
+        }
         Ok(())
     }
 }
@@ -193,52 +225,55 @@ impl LanderConfig {
     }
 
     fn validate(&self) -> Result<(), ConfigError> {
-        check(
-            self.dry_mass_kg > 0.0,
+        positive_at_most(
             "lander.dry_mass_kg",
             self.dry_mass_kg,
-            "> 0",
+            1e6,
+            "in (0, 1e6] kg",
         )?;
         for i in 0..3 {
-            check(
-                self.inertia_wet_kg_m2[i] > 0.0,
+            positive_at_most(
                 "lander.inertia_wet_kg_m2",
                 self.inertia_wet_kg_m2[i],
-                "> 0",
+                1e9,
+                "in (0, 1e9] kg m^2",
             )?;
-            check(
-                self.inertia_dry_kg_m2[i] > 0.0,
+            positive_at_most(
                 "lander.inertia_dry_kg_m2",
                 self.inertia_dry_kg_m2[i],
-                "> 0",
+                1e9,
+                "in (0, 1e9] kg m^2",
             )?;
-            check(
-                self.rcs_moment_arm_m[i] > 0.0,
+            positive_at_most(
                 "lander.rcs_moment_arm_m",
                 self.rcs_moment_arm_m[i],
-                "> 0",
+                100.0,
+                "in (0, 100] m",
             )?;
         }
         for p in self.engine_positions_body_m.iter().flatten() {
-            check(true, "lander.engine_positions_body_m", *p, "finite")?;
+            within(
+                "lander.engine_positions_body_m",
+                *p,
+                -100.0,
+                100.0,
+                "in [-100, 100] m",
+            )?;
         }
-        check(
-            self.rcs_thrust_n >= 0.0,
+        within(
             "lander.rcs_thrust_n",
             self.rcs_thrust_n,
-            ">= 0",
+            0.0,
+            1e5,
+            "in [0, 1e5] N",
         )?;
-        check(
-            self.rcs_isp_s > 0.0,
-            "lander.rcs_isp_s",
-            self.rcs_isp_s,
-            "> 0",
-        )?;
-        check(
-            self.leg_height_m >= 0.0,
+        positive_at_most("lander.rcs_isp_s", self.rcs_isp_s, 1e4, "in (0, 1e4] s")?;
+        within(
             "lander.leg_height_m",
             self.leg_height_m,
-            ">= 0",
+            0.0,
+            100.0,
+            "in [0, 100] m",
         )?;
         for c in self.com_offset_body_m {
             check(c.abs() <= 1.0, "lander.com_offset_body_m", c, "within 1 m")?;
@@ -308,23 +343,20 @@ impl Default for InitialStateConfig {
 
 impl InitialStateConfig {
     fn validate(&self) -> Result<(), ConfigError> {
-        check(
-            self.altitude_m > 0.0,
-            "initial.altitude_m",
-            self.altitude_m,
-            "> 0",
-        )?;
-        check(
-            true,
+        positive_at_most("initial.altitude_m", self.altitude_m, 1e7, "in (0, 1e7] m")?;
+        within(
             "initial.horizontal_speed_m_s",
             self.horizontal_speed_m_s,
-            "finite",
+            -1e4,
+            1e4,
+            "in [-1e4, 1e4] m/s",
         )?;
-        check(
-            true,
+        within(
             "initial.vertical_speed_m_s",
             self.vertical_speed_m_s,
-            "finite",
+            -1e4,
+            1e4,
+            "in [-1e4, 1e4] m/s",
         )?;
         check(
             self.thrust_pitch_deg.abs() <= 90.0,
@@ -401,6 +433,49 @@ impl Default for NavNoiseConfig {
     }
 }
 
+impl NavNoiseConfig {
+    /// Checks every sigma: finite, not negative, and below a size that would make the
+    /// telemetry meaningless (checked whether or not the noise is enabled).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        within(
+            "nav_noise.position_m",
+            self.position_m,
+            0.0,
+            1e4,
+            "in [0, 1e4] m",
+        )?;
+        within(
+            "nav_noise.velocity_m_s",
+            self.velocity_m_s,
+            0.0,
+            100.0,
+            "in [0, 100] m/s",
+        )?;
+        within(
+            "nav_noise.rate_rad_s",
+            self.rate_rad_s,
+            0.0,
+            1.0,
+            "in [0, 1] rad/s",
+        )?;
+        within(
+            "nav_noise.accel_m_s2",
+            self.accel_m_s2,
+            0.0,
+            100.0,
+            "in [0, 100] m/s^2",
+        )?;
+        within(
+            "nav_noise.altitude_m",
+            self.altitude_m,
+            0.0,
+            1e4,
+            "in [0, 1e4] m",
+        )?;
+        Ok(())
+    }
+}
+
 /// What counts as a safe landing (sourced design limits, tilt tightened to 10 deg).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -420,6 +495,27 @@ impl Default for TouchdownLimits {
             horizontal_speed_mps: 0.5,
             tilt_deg: 10.0,
         }
+    }
+}
+
+impl TouchdownLimits {
+    /// Checks every limit: finite and positive (a NaN limit would call every landing a
+    /// crash).
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        positive_at_most(
+            "touchdown.vertical_speed_mps",
+            self.vertical_speed_mps,
+            100.0,
+            "in (0, 100] m/s",
+        )?;
+        positive_at_most(
+            "touchdown.horizontal_speed_mps",
+            self.horizontal_speed_mps,
+            100.0,
+            "in (0, 100] m/s",
+        )?;
+        positive_at_most("touchdown.tilt_deg", self.tilt_deg, 90.0, "in (0, 90] deg")?;
+        Ok(())
     }
 }
 
@@ -530,22 +626,19 @@ impl ModelErrorConfig {
 impl ScenarioConfig {
     /// Checks every field; run before tick 0.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        check(
-            self.moon.mu_m3_s2 > 0.0,
+        positive_at_most(
             "moon.mu_m3_s2",
             self.moon.mu_m3_s2,
-            "> 0",
+            1e18,
+            "in (0, 1e18] m^3/s^2",
         )?;
-        check(
-            self.moon.radius_m > 0.0,
-            "moon.radius_m",
-            self.moon.radius_m,
-            "> 0",
-        )?;
+        positive_at_most("moon.radius_m", self.moon.radius_m, 1e8, "in (0, 1e8] m")?;
         self.lander.validate()?;
         self.propulsion.validate()?;
         self.initial.validate()?;
         self.model_error.validate()?;
+        self.nav_noise.validate()?;
+        self.touchdown.validate()?;
         Ok(())
     }
 
@@ -580,6 +673,79 @@ mod tests {
         c.propulsion.isp_s = f64::NAN;
         let e = c.validate().unwrap_err();
         assert_eq!(e.field, "propulsion.isp_s");
+    }
+
+    /// Issue #24: `[nav_noise] position_m = nan` and `[touchdown] vertical_speed_mps =
+    /// nan` were accepted (every command rejected, a perfect landing called a crash).
+    #[test]
+    fn every_field_is_checked_finite_and_in_range() {
+        type Set = fn(&mut ScenarioConfig, f64);
+        let fields: &[(&str, Set)] = &[
+            ("nav_noise.position_m", |c, v| c.nav_noise.position_m = v),
+            ("nav_noise.velocity_m_s", |c, v| {
+                c.nav_noise.velocity_m_s = v
+            }),
+            ("nav_noise.rate_rad_s", |c, v| c.nav_noise.rate_rad_s = v),
+            ("nav_noise.accel_m_s2", |c, v| c.nav_noise.accel_m_s2 = v),
+            ("nav_noise.altitude_m", |c, v| c.nav_noise.altitude_m = v),
+            ("touchdown.vertical_speed_mps", |c, v| {
+                c.touchdown.vertical_speed_mps = v
+            }),
+            ("touchdown.horizontal_speed_mps", |c, v| {
+                c.touchdown.horizontal_speed_mps = v
+            }),
+            ("touchdown.tilt_deg", |c, v| c.touchdown.tilt_deg = v),
+            ("propulsion.gas_pressure_pa", |c, v| {
+                c.propulsion.gas_pressure_pa = v
+            }),
+            ("propulsion.tank_pressure_pa", |c, v| {
+                c.propulsion.tank_pressure_pa = v
+            }),
+            ("propulsion.chamber_pressure_max_pa", |c, v| {
+                c.propulsion.chamber_pressure_max_pa = v
+            }),
+            ("propulsion.max_thrust_n", |c, v| {
+                c.propulsion.max_thrust_n = v
+            }),
+            ("propulsion.propellant_kg", |c, v| {
+                c.propulsion.propellant_kg = v
+            }),
+            ("moon.mu_m3_s2", |c, v| c.moon.mu_m3_s2 = v),
+            ("moon.radius_m", |c, v| c.moon.radius_m = v),
+            ("lander.dry_mass_kg", |c, v| c.lander.dry_mass_kg = v),
+            ("lander.rcs_thrust_n", |c, v| c.lander.rcs_thrust_n = v),
+            ("initial.altitude_m", |c, v| c.initial.altitude_m = v),
+            ("initial.horizontal_speed_m_s", |c, v| {
+                c.initial.horizontal_speed_m_s = v
+            }),
+            ("initial.vertical_speed_m_s", |c, v| {
+                c.initial.vertical_speed_m_s = v
+            }),
+        ];
+        for (field, set) in fields {
+            for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, 1e300, -1e300] {
+                let mut c = ScenarioConfig::default();
+                set(&mut c, bad);
+                let e = c
+                    .validate()
+                    .expect_err(&format!("{field} = {bad} was accepted"));
+                assert_eq!(e.field, *field, "{e}");
+                assert!(!e.why.is_empty(), "{e}");
+            }
+        }
+    }
+
+    #[test]
+    fn a_nan_in_a_scenario_file_is_refused_by_name() {
+        let c: ScenarioConfig = toml::from_str("[nav_noise]\nposition_m = nan\n").unwrap();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("nav_noise.position_m") && e.contains("NaN"),
+            "{e}"
+        );
+        let c: ScenarioConfig = toml::from_str("[touchdown]\nvertical_speed_mps = nan\n").unwrap();
+        let e = c.validate().unwrap_err().to_string();
+        assert!(e.contains("touchdown.vertical_speed_mps"), "{e}");
     }
 }
 

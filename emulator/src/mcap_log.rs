@@ -121,6 +121,11 @@ impl From<McapLogError> for RecorderError {
     fn from(e: McapLogError) -> Self {
         match e {
             McapLogError::Io { path, source } => RecorderError::Io { path, source },
+            // A write that failed (a full disk) is an I/O error, not a damaged file.
+            McapLogError::Mcap {
+                path,
+                source: mcap::McapError::Io(source),
+            } => RecorderError::Io { path, source },
             McapLogError::Mcap { path, source } => RecorderError::NotALog {
                 path,
                 why: format!("damaged MCAP: {source}"),

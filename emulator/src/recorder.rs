@@ -521,15 +521,21 @@ pub fn read_log(path: &Path) -> Result<Log, RecorderError> {
         path: path.to_path_buf(),
         source,
     };
-    let not_log = |why: &str| RecorderError::NotALog {
-        path: path.to_path_buf(),
-        why: why.into(),
-    };
     let mut bytes = Vec::new();
     File::open(path)
         .map_err(io)?
         .read_to_end(&mut bytes)
         .map_err(io)?;
+    parse_log(path, &bytes)
+}
+
+/// Parses a whole log file's bytes (`path` names it in errors). Never panics: any bytes
+/// give a log or an error (fuzzed, see `fuzz/`).
+pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
+    let not_log = |why: &str| RecorderError::NotALog {
+        path: path.to_path_buf(),
+        why: why.into(),
+    };
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V1 {
         return Err(not_log(
             "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG3 log",

@@ -191,6 +191,16 @@ fn diagnostics_lines(out: &mut String, d: &crate::propulsion::PropulsionDiagnost
             "surrogate   {n} steps outside the training envelope (inputs clamped)"
         );
     }
+    if let Some(g) = &d.surrogate_guards {
+        let _ = writeln!(
+            out,
+            "guards      surrogate: {} steps with commands clamped to the on-range, {} with a non-finite prediction (previous value kept), {} with a prediction clamped to be physical",
+            g.clamped_commands, g.non_finite_predictions, g.clamped_predictions
+        );
+    }
+    if let Some(n) = d.hifi_non_finite_rollbacks {
+        let _ = writeln!(out, "quarantine  hifi: {n} non-finite steps rolled back");
+    }
     if let Some(s) = &d.shadow {
         let thrust_max = s.thrust_n.iter().map(|t| t.max_abs).fold(0.0, f64::max);
         let thrust_rms = (s.thrust_n.iter().map(|t| t.rms * t.rms).sum::<f64>()

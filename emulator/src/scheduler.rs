@@ -192,6 +192,7 @@ enum Abort {
     Protocol(String),
     TooManyMisses(u64),
     NotFinite { step: u64, what: &'static str },
+    LogFailed { step: u64 },
 }
 
 impl Abort {
@@ -205,6 +206,9 @@ impl Abort {
             Abort::TooManyMisses(n) => format!("aborted after {n} deadline misses (miss policy)"),
             Abort::NotFinite { step, what } => format!(
                 "the plant's {what} is not finite after step {step}; the physics broke down (check the scenario and model parameters)"
+            ),
+            Abort::LogFailed { step } => format!(
+                "the log writer failed at step {step}; the run was stopped there"
             ),
         }
     }
@@ -250,6 +254,9 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     let mut rejected_values = 0u64;
     let mut abort: Option<Abort> = None;
     let mut steps = 0u64;
+    // A failed log (a full disk, ...) ends the run like any abort: the flight software
+    // is told, the summary is made, and the session names the writer's error.
+    let mut recorder = recorder;
     clock.start();
     let mut last_command_ns = monotonic_ns();
     let mut k: u64 = 0;
@@ -294,7 +301,8 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             let _ = link.publish(&tlm);
             digest.add_telemetry(&tlm);
             if let Some(r) = recorder {
-                r.record(&Record {
+                // Best effort too: a failed writer already ended the run.
+                let _ = r.record(&Record {
                     flags: REC_END_OF_RUN | fault_flags,
                     telemetry: tlm,
                     command: Command::default(),
@@ -302,7 +310,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     truth: plant.truth(),
                     faults_active,
                     timing: step_times,
-                })?;
+                });
             }
             break;
         }
@@ -420,7 +428,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             }
         }
         if let Some(r) = recorder {
-            r.record(&Record {
+            let logged = r.record(&Record {
                 flags,
                 telemetry: tlm,
                 command: logged_cmd,
@@ -428,7 +436,12 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                 truth: plant.truth(),
                 faults_active,
                 timing: step_times,
-            })?;
+            });
+            if logged.is_err() {
+                recorder = None;
+                abort = Some(Abort::LogFailed { step: k });
+                continue;
+            }
         }
         status = plant.step(&applied, cfg.dt_ns);
         if let Some(what) = plant.first_non_finite() {

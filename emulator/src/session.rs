@@ -17,6 +17,7 @@ use crate::scheduler::{self, Mode, SchedulerConfig, SchedulerError};
 use oils_onboard_stub::cli::{build_fsw, StubCliError};
 use oils_shared::domain::Domain;
 use oils_shared::link::{create_node_in, EmulatorLink, LinkError, WaitStrategy};
+use oils_shared::profile::ProfileRules;
 use oils_shared::PROTOCOL_VERSION;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -220,9 +221,10 @@ pub fn run_observed(
     let mut reattachments = None;
     let (summary, log_path, wait) = match cfg.link {
         LinkKind::Inproc => {
+            let rules = ProfileRules::rated(cfg.scenario.propulsion.max_thrust_n);
             let fsw = build_fsw(
                 &cfg.fsw,
-                cfg.profile.as_deref(),
+                cfg.profile.as_deref().map(|p| (p, &rules)),
                 cfg.fsw_params.as_deref(),
                 run_id,
             )?;
@@ -243,7 +245,8 @@ pub fn run_observed(
         LinkKind::Iceoryx2 => {
             if let Some(profile) = &cfg.profile {
                 // Fail here, before any process or service exists, not in the spawned stub.
-                oils_shared::profile::ThrustProfile::load(profile).map_err(|e| {
+                let rules = ProfileRules::rated(cfg.scenario.propulsion.max_thrust_n);
+                oils_shared::profile::ThrustProfile::load_with(profile, &rules).map_err(|e| {
                     RunConfigError::File {
                         path: profile.clone(),
                         why: e.to_string(),
@@ -323,9 +326,35 @@ fn run_and_close<L: Link + ?Sized>(
     )?;
     let path = recorder.as_ref().map(|r| r.path().to_path_buf());
     if let Some(r) = recorder {
-        summary.log_records = r.finish()?;
+        match r.finish() {
+            Ok(n) => summary.log_records = n,
+            // The writer failed (a full disk: "No space left on device"), during the run
+            // (which then stopped) or while closing: the run is aborted, with the
+            // writer's own error, and still reported.
+            Err(e) => {
+                summary.outcome = scheduler::Outcome::Aborted;
+                summary.touchdown = None;
+                let why = error_chain(&e);
+                summary.error = Some(match summary.error.take() {
+                    Some(first) => format!("{first}: {why}"),
+                    None => why,
+                });
+            }
+        }
     }
     Ok((summary, path))
+}
+
+/// An error and its causes on one line (`a: b: c`).
+fn error_chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut source = e.source();
+    while let Some(cause) = source {
+        s.push_str(": ");
+        s.push_str(&cause.to_string());
+        source = cause.source();
+    }
+    s
 }
 
 /// What a replay found.

@@ -443,3 +443,38 @@ fn a_centre_of_mass_offset_gives_the_engines_a_moment_arm() {
     // Linear in the offset (one short step: the rate is torque / I * dt).
     assert!((large.y / small.y - 2.0).abs() < 1e-6, "{small} {large}");
 }
+
+/// Issue #24: a hifi model whose state became non-finite rolled the step back and then
+/// froze its outputs, and the run went on to COMPLETED. A propulsion failure is now a
+/// non-finite quantity the scheduler aborts on, by name.
+#[test]
+fn a_failed_propulsion_model_is_named_by_the_plant() {
+    use oils_emulator::propulsion::{Propulsion, PropulsionOutput};
+    #[derive(Debug)]
+    struct FailsAfter(u32, IdealPropulsion);
+    impl Propulsion for FailsAfter {
+        fn name(&self) -> &'static str {
+            "fails"
+        }
+        fn step(&mut self, cmd: &EngineCommand, dt_ns: u64) -> PropulsionOutput {
+            self.0 = self.0.saturating_sub(1);
+            self.1.step(cmd, dt_ns)
+        }
+        fn output(&self) -> PropulsionOutput {
+            self.1.output()
+        }
+        fn failure(&self) -> Option<&'static str> {
+            (self.0 == 0).then_some("test propulsion state")
+        }
+    }
+    let cfg = ScenarioConfig::default();
+    let prop = FailsAfter(3, IdealPropulsion::new(&cfg.propulsion));
+    let mut plant = Plant::new(&cfg, Box::new(prop), 1).unwrap();
+    let cmd = ActuatorCommand::default();
+    for _ in 0..2 {
+        plant.step(&cmd, 10_000_000);
+        assert_eq!(plant.first_non_finite(), None);
+    }
+    plant.step(&cmd, 10_000_000);
+    assert_eq!(plant.first_non_finite(), Some("test propulsion state"));
+}

@@ -740,3 +740,37 @@ fn trained_on_a_first_order_lag_the_paper_variant_recovers_its_pole() {
         }
     }
 }
+
+/// Issue #24: a coefficient of 1e300 loaded, and the plant turned NaN after one step.
+/// Every number in a model file is bounded, and named when it is not.
+#[test]
+fn huge_model_numbers_are_refused_by_name() {
+    let good = DEFAULT_MODEL_JSON;
+    type Edit = fn(&mut serde_json::Value);
+    let edits: [(&str, Edit); 5] = [
+        ("coefficient", |v| {
+            v["model"]["submodels"][0]["rows"][0]["terms"][0]["coef"] = serde_json::json!(1e300)
+        }),
+        ("intercept", |v| {
+            v["model"]["submodels"][1]["rows"][0]["intercept"] = serde_json::json!(-1e300)
+        }),
+        ("scaling or envelope", |v| {
+            v["model"]["submodels"][0]["feature_std"][0] = serde_json::json!(1e-300)
+        }),
+        ("scaling or envelope", |v| {
+            v["model"]["submodels"][0]["envelope_hi"][0] = serde_json::json!(1e200)
+        }),
+        ("initial state", |v| {
+            v["model"]["initial_state"][0] = serde_json::json!(1e200)
+        }),
+    ];
+    for (what, edit) in edits {
+        let mut v: serde_json::Value = serde_json::from_str(good).unwrap();
+        edit(&mut v);
+        let e = refusal(&v.to_string(), 10_000_000);
+        assert!(
+            matches!(e, ModelFileError::Invalid(_)) && e.to_string().contains(what),
+            "{what}: {e}"
+        );
+    }
+}

@@ -151,10 +151,19 @@ fn bad_profiles_are_refused_with_a_clear_error() {
         "t,cmd1,cmd2,cmd3,cmd4,on1,on2,on3,on4\n0,600,600,600,600,1,1,1,1\n1,abc,600,600,600,1,1,1,1\n",
     )
     .unwrap();
-    let e = cases::from_path(&garbled, CaseKind::Profile, 800.0)
-        .unwrap_err()
-        .to_string();
+    // The path, then the reader's error as the source (printed once, by the chain).
+    let chain = |e: &dyn std::error::Error| {
+        let mut s = e.to_string();
+        let mut source = e.source();
+        while let Some(c) = source {
+            s = format!("{s}: {c}");
+            source = c.source();
+        }
+        s
+    };
+    let e = chain(&cases::from_path(&garbled, CaseKind::Profile, 800.0).unwrap_err());
     assert!(e.contains("garbled.csv") && e.contains("line 3"), "{e}");
+    assert_eq!(e.matches("line 3").count(), 1, "{e}");
     let missing = dir.join("missing.csv");
     let e = cases::from_path(&missing, CaseKind::Profile, 800.0)
         .unwrap_err()
@@ -166,10 +175,8 @@ fn bad_profiles_are_refused_with_a_clear_error() {
         "t,cmd1,cmd2,cmd3,cmd4,on1,on2,on3,on4\n0,600,600,600,1600,1,1,1,1\n",
     )
     .unwrap();
-    let e = cases::from_path(&too_high, CaseKind::Profile, 800.0)
-        .unwrap_err()
-        .to_string();
-    assert!(e.contains("engine 4") && e.contains("1600"), "{e}");
+    let e = chain(&cases::from_path(&too_high, CaseKind::Profile, 800.0).unwrap_err());
+    assert!(e.contains("cmd4") && e.contains("1600"), "{e}");
     let ok = dir.join("ok.csv");
     std::fs::write(
         &ok,

@@ -7,7 +7,7 @@ use crate::gnc::{GncConfig, GncConfigError, ReferenceGnc};
 use crate::playback::ProfilePlayback;
 use crate::runner::{serve, StubError, StubSummary};
 use oils_shared::link::{create_node, LinkError, StubLink, WaitStrategy};
-use oils_shared::profile::{ProfileError, ThrustProfile};
+use oils_shared::profile::{ProfileError, ProfileRules, ThrustProfile, RATED_THRUST_N};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 
@@ -23,6 +23,10 @@ pub struct StubArgs {
     /// Thrust-command profile CSV for `--fsw playback`.
     #[arg(long)]
     pub profile: Option<PathBuf>,
+    /// Engine rating the profile's commands are checked against, newtons (the run's
+    /// `scenario.propulsion.max_thrust_n`; `oils run` passes it).
+    #[arg(long, default_value_t = RATED_THRUST_N)]
+    pub max_thrust_n: f64,
     /// For `--fsw c:PATH`: a text file handed to the library's `oils_fsw_init` as its
     /// parameters (any format the library reads; default: empty).
     #[arg(long)]
@@ -65,12 +69,16 @@ pub enum StubCliError {
     Serve(#[from] StubError),
 }
 
+/// Largest `--fsw-params` file, bytes.
+pub const MAX_FSW_PARAMS_BYTES: u64 = 1 << 20;
+
 /// Builds the flight software asked for (allocation happens here, before tick 0).
-/// `profile` is for playback; `fsw_params` (a text file) and `run_id` are handed to a C
-/// library's `oils_fsw_init`.
+/// `profile` is for playback (the file and the rules it is read with, see
+/// `oils_shared::profile`); `fsw_params` (a text file of at most
+/// [`MAX_FSW_PARAMS_BYTES`]) and `run_id` are handed to a C library's `oils_fsw_init`.
 pub fn build_fsw(
     spec: &FswSpec,
-    profile: Option<&Path>,
+    profile: Option<(&Path, &ProfileRules)>,
     fsw_params: Option<&Path>,
     run_id: u64,
 ) -> Result<Box<dyn FlightSoftware>, StubCliError> {
@@ -78,9 +86,7 @@ pub fn build_fsw(
         FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(GncConfig::default())?)),
         FswSpec::CLibrary(path) => {
             let params = match fsw_params {
-                Some(p) => std::fs::read_to_string(p).map_err(|e| {
-                    StubCliError::Argument(format!("--fsw-params {}: {e}", p.display()))
-                })?,
+                Some(p) => read_params(p)?,
                 None => String::new(),
             };
             Ok(Box::new(CLibraryFsw::load(path, run_id, &params)?))
@@ -89,12 +95,31 @@ pub fn build_fsw(
             "--fsw external is flown by a client started by hand, not by this stub".into(),
         )),
         FswSpec::Playback => {
-            let path = profile.ok_or_else(|| {
+            let (path, rules) = profile.ok_or_else(|| {
                 StubCliError::Argument("--fsw playback needs --profile CSV".into())
             })?;
-            Ok(Box::new(ProfilePlayback::new(ThrustProfile::load(path)?)))
+            Ok(Box::new(ProfilePlayback::new(ThrustProfile::load_with(
+                path, rules,
+            )?)))
         }
     }
+}
+
+/// A flight software parameter file: text of at most [`MAX_FSW_PARAMS_BYTES`].
+fn read_params(p: &Path) -> Result<String, StubCliError> {
+    use std::io::Read;
+    let bad = |why: String| StubCliError::Argument(format!("--fsw-params {}: {why}", p.display()));
+    let file = std::fs::File::open(p).map_err(|e| bad(e.to_string()))?;
+    let mut bytes = Vec::new();
+    file.take(MAX_FSW_PARAMS_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| bad(e.to_string()))?;
+    if bytes.len() as u64 > MAX_FSW_PARAMS_BYTES {
+        return Err(bad(format!(
+            "larger than {MAX_FSW_PARAMS_BYTES} bytes, the largest parameter file"
+        )));
+    }
+    String::from_utf8(bytes).map_err(|_| bad("not UTF-8 text".into()))
 }
 
 /// Joins the run and serves it to the end.
@@ -115,9 +140,16 @@ pub fn run_stub(args: &StubArgs, stop: &AtomicBool) -> Result<StubSummary, StubC
             ))
         })?;
     }
+    if !(args.max_thrust_n.is_finite() && args.max_thrust_n > 0.0) {
+        return Err(StubCliError::Argument(format!(
+            "--max-thrust-n {}: a finite number > 0 expected",
+            args.max_thrust_n
+        )));
+    }
+    let rules = ProfileRules::rated(args.max_thrust_n);
     let mut fsw = build_fsw(
         &args.fsw,
-        args.profile.as_deref(),
+        args.profile.as_deref().map(|p| (p, &rules)),
         args.fsw_params.as_deref(),
         run_id,
     )?;

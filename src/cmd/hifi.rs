@@ -4,9 +4,16 @@
 use anyhow::{bail, Context, Result};
 use oils_emulator::config::PropulsionConfig;
 use oils_emulator::propulsion::hifi::{figures, runner, HifiParams, HifiPropulsion};
-use oils_shared::profile::ThrustProfile;
+use oils_shared::profile::{ProfileRules, ThrustProfile, MAX_PROFILE_END_S};
 use std::io::BufWriter;
 use std::path::PathBuf;
+
+/// Seconds simulated after a profile's last row unless `--duration-s` says otherwise.
+const TAIL_S: f64 = 2.0;
+/// Longest `--duration-s` (and implied duration): the latest profile row plus the tail.
+const MAX_DURATION_S: f64 = MAX_PROFILE_END_S + TAIL_S;
+/// Most output rows (`duration / dt`): ~1 kB each, so at most ~4 GB of CSV.
+const MAX_STEPS: u64 = 4_000_000;
 
 /// Arguments of `oils hifi`.
 #[derive(Debug, clap::Args)]
@@ -49,17 +56,25 @@ pub fn run(args: &HifiArgs) -> Result<()> {
     let cfg = PropulsionConfig::default();
     let profile = match &args.profile {
         Some(p) => Some(
-            ThrustProfile::load(p).with_context(|| format!("reading profile {}", p.display()))?,
+            ThrustProfile::load_with(p, &ProfileRules::rated(cfg.max_thrust_n))
+                .with_context(|| format!("reading profile {}", p.display()))?,
         ),
         None => None,
     };
 
     if let (Some(profile), Some(out)) = (&profile, &args.out) {
         let duration_s = match args.duration_s {
-            Some(d) if d.is_finite() && d > 0.0 && d < 1e6 => d,
-            Some(d) => bail!("--duration-s must be > 0 and finite, got {d}"),
-            None => profile.end_ns() as f64 * 1e-9 + 2.0,
+            Some(d) if d.is_finite() && d > 0.0 && d <= MAX_DURATION_S => d,
+            Some(d) => bail!("--duration-s must be in (0, {MAX_DURATION_S}] s, got {d}"),
+            None => profile.end_ns() as f64 * 1e-9 + TAIL_S,
         };
+        let steps = (duration_s * 1e9 / dt_ns as f64).ceil();
+        if steps > MAX_STEPS as f64 {
+            bail!(
+                "{duration_s} s at --dt-ms {} is {steps} output rows; at most {MAX_STEPS} (shorten the profile or --duration-s, or lengthen --dt-ms)",
+                args.dt_ms
+            );
+        }
         let mut model = HifiPropulsion::new(&params, &cfg).context("building the hifi model")?;
         let file =
             std::fs::File::create(out).with_context(|| format!("creating {}", out.display()))?;

@@ -306,7 +306,10 @@ fn spawn_stub(cfg: &RunConfig, launch: &StubLaunch) -> Result<Child> {
         .arg((5000 + 3 * (cfg.dt_ms as f64 / cfg.speed) as u64).to_string())
         .stdin(Stdio::null());
     if let Some(profile) = &cfg.profile {
-        p.arg("--profile").arg(profile);
+        p.arg("--profile")
+            .arg(profile)
+            .arg("--max-thrust-n")
+            .arg(cfg.scenario.propulsion.max_thrust_n.to_string());
     }
     if let Some(params) = &cfg.fsw_params {
         p.arg("--fsw-params").arg(params);

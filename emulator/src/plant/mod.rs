@@ -590,7 +590,7 @@ impl Plant {
         } else if !finite(&[p.ejected_fuel_kg, p.ejected_ox_kg]) {
             Some("ejected propellant mass")
         } else {
-            None
+            self.propulsion.failure()
         }
     }
 

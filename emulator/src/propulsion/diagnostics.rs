@@ -41,8 +41,29 @@ pub struct PropulsionDiagnostics {
     /// Steps on which a surrogate input left the training envelope and was clamped
     /// (`None`: the model has no envelope).
     pub out_of_envelope_steps: Option<u64>,
+    /// Steps on which the surrogate's physical guards acted: a prediction that was not
+    /// finite (the previous value was kept) or not physical (a negative thrust or
+    /// pressure set to 0, an ejected mass that would fall held). `None`: not a surrogate.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub surrogate_guards: Option<SurrogateGuards>,
+    /// Hifi: steps whose state became non-finite and was rolled back (the quarantine;
+    /// the run then ends aborted). `None`: not hifi.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hifi_non_finite_rollbacks: Option<u64>,
     /// Shadow mode: divergence of the shadowing surrogate from the driving model.
     pub shadow: Option<ShadowDivergence>,
+}
+
+/// How often the surrogate's guards acted, in steps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize)]
+pub struct SurrogateGuards {
+    /// Steps with a command of an engine that is on outside the on-range (clamped).
+    pub clamped_commands: u64,
+    /// Steps with a prediction that was not finite (the previous value was kept).
+    pub non_finite_predictions: u64,
+    /// Steps with a prediction clamped to be physical (thrust and pressure >= 0,
+    /// ejected masses never falling).
+    pub clamped_predictions: u64,
 }
 
 /// Number of outputs a [`DivergenceAccumulator`] tracks: 4 thrusts, gas pressure, ejected

@@ -159,6 +159,12 @@ pub trait Propulsion: Send {
     }
     /// Starts (`active`) or clears a fault the model represents; a no-op otherwise.
     fn inject(&mut self, _fault: &PropulsionFault, _active: bool) {}
+    /// Why the model can no longer step (its state became non-finite and was rolled
+    /// back, ...), naming the quantity; `None` while it is sound. Checked after every
+    /// step (no allocation): the scheduler ends the run aborted on the first failure.
+    fn failure(&self) -> Option<&'static str> {
+        None
+    }
 }
 
 /// Which propulsion model a run uses.

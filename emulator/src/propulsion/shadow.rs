@@ -64,12 +64,21 @@ impl<T: Propulsion, M: Propulsion> Propulsion for ShadowPropulsion<T, M> {
         self.truth.inject(fault, active)
     }
 
+    fn failure(&self) -> Option<&'static str> {
+        self.truth.failure()
+    }
+
     fn diagnostics(&self) -> Option<PropulsionDiagnostics> {
         Some(PropulsionDiagnostics {
             out_of_envelope_steps: self
                 .model
                 .diagnostics()
                 .and_then(|d| d.out_of_envelope_steps),
+            surrogate_guards: self.model.diagnostics().and_then(|d| d.surrogate_guards),
+            hifi_non_finite_rollbacks: self
+                .truth
+                .diagnostics()
+                .and_then(|d| d.hifi_non_finite_rollbacks),
             shadow: Some(self.stats.summary()),
         })
     }

@@ -106,8 +106,9 @@ pub struct Case {
 /// A profile is unusable for validation.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum CaseError {
-    /// The CSV could not be read or parsed.
-    #[error("{path}: {source}")]
+    /// The CSV could not be read or parsed. (The parser's error is the source, shown
+    /// once by whoever prints the chain.)
+    #[error("{path}")]
     Profile {
         /// The file.
         path: String,
@@ -359,11 +360,11 @@ pub fn from_path(
     max_thrust_n: f64,
 ) -> Result<Case, CaseError> {
     let shown = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|e| CaseError::Io {
-        path: shown.clone(),
-        message: e.to_string(),
-    })?;
-    let profile = ThrustProfile::parse(&text).map_err(|source| CaseError::Profile {
+    let profile = ThrustProfile::load_with(
+        path,
+        &oils_shared::profile::ProfileRules::rated(max_thrust_n),
+    )
+    .map_err(|source| CaseError::Profile {
         path: shown.clone(),
         source,
     })?;
@@ -432,8 +433,9 @@ mod tests {
 
     #[test]
     fn bad_commands_are_refused_with_the_row() {
-        let p = ThrustProfile::parse(
+        let p = ThrustProfile::parse_with(
             "t,cmd1,cmd2,cmd3,cmd4,on1,on2,on3,on4\n0,600,600,600,600,1,1,1,1\n2,900,600,600,600,1,1,1,1\n",
+            &oils_shared::profile::ProfileRules::rated(1000.0),
         )
         .unwrap();
         let e = from_profile("x", CaseKind::Profile, p, "x.csv", 800.0).unwrap_err();

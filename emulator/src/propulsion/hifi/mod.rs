@@ -616,6 +616,19 @@ impl Propulsion for HifiPropulsion {
         }
     }
 
+    fn failure(&self) -> Option<&'static str> {
+        self.fault
+            .is_some()
+            .then_some("hifi propulsion state (non-finite; the step was rolled back)")
+    }
+
+    fn diagnostics(&self) -> Option<super::PropulsionDiagnostics> {
+        Some(super::PropulsionDiagnostics {
+            hifi_non_finite_rollbacks: Some(u64::from(self.fault.is_some())),
+            ..Default::default()
+        })
+    }
+
     fn step(&mut self, cmd: &EngineCommand, dt_ns: u64) -> PropulsionOutput {
         if dt_ns == 0 || self.fault.is_some() {
             return self.out;

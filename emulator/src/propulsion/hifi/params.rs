@@ -40,11 +40,52 @@ fn fraction(field: &'static str, value: f64) -> Result<(), ParamError> {
 }
 
 fn check(ok: bool, field: &'static str, value: f64, why: &'static str) -> Result<(), ParamError> {
-    if ok && value.is_finite() {
-        Ok(())
-    } else {
-        Err(ParamError { field, value, why })
+    if !(ok && value.is_finite()) {
+        return Err(ParamError { field, value, why });
     }
+    let (bound, bound_why) = physical_bound(field);
+    if value.abs() > bound {
+        return Err(ParamError {
+            field,
+            value,
+            why: bound_why,
+        });
+    }
+    Ok(())
+}
+
+/// The largest magnitude a parameter may have, from its unit (the field's suffix) or
+/// its kind: far beyond any real pressure-fed lander, and small enough that the model's
+/// products and powers of these numbers stay finite (a bottle at 1e300 Pa turned the
+/// state into NaN on the first step).
+fn physical_bound(field: &str) -> (f64, &'static str) {
+    const BOUNDS: &[(&str, f64, &str)] = &[
+        ("_pa_s_kg", 1e12, "at most 1e12 Pa s/kg"),
+        ("_kg_m3", 3e4, "at most 3e4 kg/m^3"),
+        ("_j_kg_k", 1e5, "at most 1e5 J/(kg K)"),
+        ("_m3_kg", 1.0, "at most 1 m^3/kg"),
+        ("_m6_kg2", 1.0, "at most 1 m^6/kg^2"),
+        ("_w_k", 1e6, "at most 1e6 W/K"),
+        ("_n_m", 1e9, "at most 1e9 N/m"),
+        ("_m_s", 1e5, "at most 1e5 m/s"),
+        ("_pa", 1e8, "at most 1e8 Pa (1000 bar)"),
+        ("_k", 2000.0, "at most 2000 K"),
+        ("_m3", 10.0, "at most 10 m^3"),
+        ("_m2", 1.0, "at most 1 m^2"),
+        ("_m", 100.0, "at most 100 m"),
+        ("_s", 100.0, "at most 100 s"),
+        ("_kg", 1e4, "at most 1e4 kg"),
+        ("coefficient", 10.0, "at most 10"),
+        ("friction_factor", 10.0, "at most 10"),
+        ("minor_loss", 1e4, "at most 1e4"),
+        ("damping_ratio", 100.0, "at most 100"),
+        ("gamma", 3.0, "at most 3"),
+        ("mixture_ratio", 100.0, "at most 100"),
+    ];
+    BOUNDS
+        .iter()
+        .find(|(suffix, _, _)| field.ends_with(suffix))
+        .map_or((1e9, "at most 1e9 in magnitude"), |&(_, b, why)| (b, why))
 }
 
 /// Fixed-step integration.
@@ -819,6 +860,30 @@ mod tests {
             p.validate().unwrap_err().field,
             "engine.fuel.injector_area_m2"
         );
+        // Issue #24: a bottle at 1e300 Pa was accepted, and the first step was NaN.
+        for (field, set) in [
+            (
+                "bottle.initial_pressure_pa",
+                (|p: &mut HifiParams| p.bottle.initial_pressure_pa = 1e300) as fn(&mut _),
+            ),
+            ("bottle.initial_temperature_k", |p| {
+                p.bottle.initial_temperature_k = 1e300
+            }),
+            ("bottle.volume_m3", |p| p.bottle.volume_m3 = 1e300),
+            ("engine.throat_area_m2", |p| p.engine.throat_area_m2 = 1e30),
+            ("feed.fuel.main_line_length_m", |p| {
+                p.feed.fuel.main_line_length_m = 1e30
+            }),
+            ("engine.thrust_coefficient", |p| {
+                p.engine.thrust_coefficient = 1e300
+            }),
+        ] {
+            let mut p = HifiParams::default();
+            set(&mut p);
+            let e = p.validate().unwrap_err();
+            assert_eq!(e.field, field, "{e}");
+            assert!(e.to_string().contains("at most"), "{e}");
+        }
         let mut p = HifiParams::default();
         p.regulator.lockup_pressure_pa = 10e5;
         assert_eq!(

@@ -200,6 +200,8 @@ impl Propulsion for SurrogatePropulsion {
     fn diagnostics(&self) -> Option<crate::propulsion::PropulsionDiagnostics> {
         Some(crate::propulsion::PropulsionDiagnostics {
             out_of_envelope_steps: Some(self.out_of_envelope_steps()),
+            surrogate_guards: Some(self.predictor.guards()),
+            hifi_non_finite_rollbacks: None,
             shadow: None,
         })
     }

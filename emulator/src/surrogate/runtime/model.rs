@@ -188,26 +188,39 @@ impl Model {
                 }
                 covered[o] += 1;
             }
-            let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+            let finite = |v: &[f64]| v.iter().all(|x| bounded(*x));
             if !finite(&s.feature_mean)
                 || !finite(&s.envelope_lo)
                 || !finite(&s.envelope_hi)
-                || !s.feature_std.iter().all(|x| x.is_finite() && *x > 0.0)
+                || !s
+                    .feature_std
+                    .iter()
+                    .all(|x| bounded(*x) && *x >= MIN_FEATURE_STD)
             {
-                return Err(ctx(
-                    "scaling or envelope has a non-finite or non-positive value",
-                ));
+                return Err(ctx(&format!(
+                    "scaling or envelope has a value that is not finite, above {MAX_MAGNITUDE:e} in magnitude, or (feature_std) below {MIN_FEATURE_STD:e}"
+                )));
+            }
+            if s.envelope_lo
+                .iter()
+                .zip(&s.envelope_hi)
+                .any(|(lo, hi)| lo > hi)
+            {
+                return Err(ctx("envelope_lo is above envelope_hi"));
             }
             let roles = s.features.roles();
             for r in &s.rows {
-                if !r.intercept.is_finite() {
-                    return Err(ctx(&format!("{}: intercept is not finite", r.output)));
+                if !bounded(r.intercept) {
+                    return Err(ctx(&format!(
+                        "{}: intercept {} is not finite or above {MAX_MAGNITUDE:e} in magnitude",
+                        r.output, r.intercept
+                    )));
                 }
                 for t in &r.terms {
-                    if !t.coef.is_finite() {
+                    if !bounded(t.coef) {
                         return Err(ctx(&format!(
-                            "{}: coefficient of {} is not finite",
-                            r.output, t.name
+                            "{}: coefficient of {} is {}: not finite or above {MAX_MAGNITUDE:e} in magnitude",
+                            r.output, t.name, t.coef
                         )));
                     }
                     if t.factors.iter().any(|&f| f as usize > dim) {
@@ -236,11 +249,13 @@ impl Model {
             ));
         }
         let [lo, hi] = self.on_command_range_n;
-        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-            return Err("on_command_range_n must be finite and ordered".into());
+        if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi && hi <= 1e6) {
+            return Err("on_command_range_n must be finite, ordered and in [0, 1e6] N".into());
         }
-        if !self.initial_state.iter().all(|x| x.is_finite()) {
-            return Err("initial state is not finite".into());
+        if !self.initial_state.iter().all(|x| bounded(*x)) {
+            return Err(format!(
+                "initial state is not finite or above {MAX_MAGNITUDE:e} in magnitude"
+            ));
         }
         Ok(())
     }
@@ -318,6 +333,17 @@ pub fn active_terms_of(
 /// extended by one slot that always holds 1.0; lower-degree terms are padded with that slot.
 /// Highest supported polynomial degree.
 pub const MAX_DEGREE: usize = 3;
+
+/// Largest magnitude of any number in a model (coefficients, intercepts, scaling,
+/// envelope, initial state). With features clamped to the envelope and scaled, and terms
+/// of degree at most [`MAX_DEGREE`], every prediction then stays finite.
+pub const MAX_MAGNITUDE: f64 = 1e12;
+/// Smallest feature standard deviation (training writes 1.0 for a constant feature).
+pub const MIN_FEATURE_STD: f64 = 1e-15;
+
+fn bounded(x: f64) -> bool {
+    x.is_finite() && x.abs() <= MAX_MAGNITUDE
+}
 
 /// One monomial: the product of three entries of the extended feature vector.
 pub type Term = [u16; MAX_DEGREE];

@@ -198,7 +198,44 @@ impl ModelFile {
         if file.model.sample_time_ns == 0 {
             return Err(ModelFileError::Invalid("sample_time_ns is 0".into()));
         }
+        file.check_nominal_steps()?;
         Ok(file)
+    }
+
+    /// Steps a predictor from the model's initial state with every engine off, then
+    /// at the top of the on-range, then at its bottom: every state must stay finite
+    /// (bounded numbers make that likely, this makes it certain for the nominal path).
+    fn check_nominal_steps(&self) -> Result<(), ModelFileError> {
+        use super::features::INPUT_DIM;
+        use oils_shared::ENGINE_COUNT;
+        let mut p = super::predictor::Predictor::new(&self.model);
+        let [lo, hi] = self.model.on_command_range_n;
+        let mut on = [0.0; INPUT_DIM];
+        for e in 0..ENGINE_COUNT {
+            on[ENGINE_COUNT + e] = 1.0;
+        }
+        let (mut at_hi, mut at_lo) = (on, on);
+        for e in 0..ENGINE_COUNT {
+            at_hi[e] = hi;
+            at_lo[e] = lo;
+        }
+        let phases = [
+            ([0.0; INPUT_DIM], "engines off"),
+            (at_hi, "engines on at the top of the on-range"),
+            (at_lo, "engines on at the bottom of the on-range"),
+        ];
+        for (input, what) in phases {
+            for step in 0..20 {
+                let state = p.step(&input);
+                if let Some(i) = (0..STATE_DIM).find(|&i| !state[i].is_finite()) {
+                    return Err(ModelFileError::Invalid(format!(
+                        "the prediction of state {i} is not finite after {} nominal steps ({what})",
+                        step + 1
+                    )));
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Reads and checks a file.

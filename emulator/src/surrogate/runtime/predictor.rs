@@ -85,6 +85,7 @@ pub struct Predictor {
     /// The same for the four engines of a per-engine submodel, side by side.
     lanes: Vec<Lanes>,
     out_of_envelope_steps: u64,
+    guards: crate::propulsion::diagnostics::SurrogateGuards,
 }
 
 impl Predictor {
@@ -108,6 +109,7 @@ impl Predictor {
             x: vec![0.0; max_dim + 1],
             lanes: vec![[0.0; ENGINE_COUNT]; max_dim + 1],
             out_of_envelope_steps: 0,
+            guards: Default::default(),
         };
         p.reset_to(&model.initial_state);
         p
@@ -125,6 +127,7 @@ impl Predictor {
         self.ring.states.fill(*state);
         self.ring.head = 0;
         self.out_of_envelope_steps = 0;
+        self.guards = Default::default();
     }
 
     /// Loads a true history (the last state is the latest known) so that a free run can
@@ -152,6 +155,11 @@ impl Predictor {
         self.out_of_envelope_steps
     }
 
+    /// How often the guards acted (clamped commands, non-finite and clamped predictions).
+    pub fn guards(&self) -> crate::propulsion::diagnostics::SurrogateGuards {
+        self.guards
+    }
+
     /// The latest state.
     pub fn state(&self) -> StateVec {
         *self.ring.state(0)
@@ -175,6 +183,8 @@ impl Predictor {
                 outside |= u[e] != input[e];
             }
         }
+        self.guards.clamped_commands += u64::from(outside);
+        let mut guard = Guard::default();
         self.ring.advance();
         let head = self.ring.head;
         self.ring.inputs[head] = u;
@@ -192,7 +202,7 @@ impl Predictor {
                     let y = sum_engines(&s.rows[0], &u.groups[0], &self.lanes);
                     for (engine, &o) in s.outputs.iter().enumerate() {
                         let v = s.target.apply(prev[o], y[engine]);
-                        next[o] = guarded(o, v, prev[o], &mut outside);
+                        next[o] = guarded(o, v, prev[o], &mut guard);
                     }
                 }
                 // One feature vector, one row per output.
@@ -200,11 +210,14 @@ impl Predictor {
                     outside |= gather(s, u, &self.ring, 0, &mut self.x);
                     for (r, &o) in s.outputs.iter().enumerate() {
                         let y = sum(&s.rows[r], &u.groups[r], &self.x);
-                        next[o] = guarded(o, s.target.apply(prev[o], y), prev[o], &mut outside);
+                        next[o] = guarded(o, s.target.apply(prev[o], y), prev[o], &mut guard);
                     }
                 }
             }
         }
+        outside |= guard.non_finite;
+        self.guards.non_finite_predictions += u64::from(guard.non_finite);
+        self.guards.clamped_predictions += u64::from(guard.clamped);
         self.out_of_envelope_steps += u64::from(outside);
         self.ring.states[head] = next;
         next
@@ -400,18 +413,27 @@ fn sum_engines(row: &OutputRow, groups: &[TermGroup], x: &[Lanes]) -> Lanes {
 /// The physical guards: thrust and gas pressure never negative, ejected masses never
 /// falling; a prediction that is not finite keeps the previous value and sets
 /// `nonfinite`, so the step is counted.
-fn guarded(o: usize, v: f64, prev: f64, nonfinite: &mut bool) -> f64 {
+/// What the guards did on one step.
+#[derive(Debug, Clone, Copy, Default)]
+struct Guard {
+    non_finite: bool,
+    clamped: bool,
+}
+
+fn guarded(o: usize, v: f64, prev: f64, guard: &mut Guard) -> f64 {
     let v = if v.is_finite() {
         v
     } else {
-        *nonfinite = true;
+        guard.non_finite = true;
         prev
     };
-    if o == STATE_MF || o == STATE_MO {
+    let g = if o == STATE_MF || o == STATE_MO {
         v.max(prev)
     } else {
         v.max(0.0)
-    }
+    };
+    guard.clamped |= g != v;
+    g
 }
 
 #[cfg(test)]

@@ -1,0 +1,203 @@
+//! Issue #24 item 7: property tests of the loaders (the longer fuzz runs are in `fuzz/`).
+//! Whatever the input, the profile reader, the configuration loaders, the model file
+//! loader and the log reader return a value or an error, never panic; what they accept
+//! obeys their rules.
+
+use oils_emulator::config::ScenarioConfig;
+use oils_emulator::propulsion::hifi::HifiParams;
+use oils_emulator::recorder::{parse_log, Record, Recorder};
+use oils_emulator::run_config::RunConfig;
+use oils_emulator::surrogate::runtime::model_file::ModelFile;
+use oils_emulator::surrogate::runtime::DEFAULT_MODEL_JSON;
+use oils_shared::profile::{ThrustProfile, MAX_PROFILE_END_S, RATED_THRUST_N};
+use proptest::prelude::*;
+use std::path::Path;
+
+/// Numbers as files hold them: ordinary, huge, tiny, negative, not finite, not numbers.
+fn number_text() -> impl Strategy<Value = String> {
+    prop_oneof![
+        (-1e4f64..1e4).prop_map(|v| v.to_string()),
+        any::<f64>().prop_map(|v| format!("{v:e}")),
+        Just("nan".to_string()),
+        Just("inf".to_string()),
+        Just("-inf".to_string()),
+        Just("1e300".to_string()),
+        Just("-0".to_string()),
+        Just("".to_string()),
+        "[0-9eE.+-]{1,12}",
+    ]
+}
+
+fn profile_line() -> impl Strategy<Value = String> {
+    prop_oneof![
+        4 => (
+            number_text(),
+            prop::collection::vec(number_text(), 4),
+            prop::collection::vec(prop_oneof![Just("0"), Just("1"), Just("2"), Just("x")], 4),
+        )
+            .prop_map(|(t, c, o)| format!("{t},{},{}", c.join(","), o.join(","))),
+        1 => Just(String::new()),
+        1 => ".{0,40}",
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 300, ..ProptestConfig::default() })]
+
+    #[test]
+    fn profile_reader_never_panics_and_keeps_its_rules(
+        lines in prop::collection::vec(profile_line(), 0..30),
+        header in prop::bool::weighted(0.9),
+    ) {
+        let mut text = String::new();
+        if header {
+            text.push_str("t,cmd1,cmd2,cmd3,cmd4,on1,on2,on3,on4\n");
+        }
+        for l in &lines {
+            text.push_str(l);
+            text.push('\n');
+        }
+        match ThrustProfile::parse(&text) {
+            Ok(p) => {
+                let rows = p.rows();
+                prop_assert!(!rows.is_empty());
+                for w in rows.windows(2) {
+                    prop_assert!(w[0].t_ns < w[1].t_ns);
+                }
+                for r in rows {
+                    prop_assert!(r.t_ns >= 0 && r.t_ns as f64 <= MAX_PROFILE_END_S * 1e9);
+                    prop_assert!(r.thrust_cmd_n.iter().all(|c| (0.0..=RATED_THRUST_N).contains(c)));
+                }
+                prop_assert_eq!(ThrustProfile::parse(&p.to_csv()).unwrap(), p);
+            }
+            Err(e) => {
+                prop_assert!(e.line <= text.lines().count());
+                prop_assert!(e.to_string().len() < 300, "{}", e);
+            }
+        }
+    }
+
+    #[test]
+    fn profile_reader_takes_any_text(text in ".{0,300}") {
+        let _ = ThrustProfile::parse(&text);
+    }
+
+    #[test]
+    fn scenario_and_run_config_loaders_never_panic(
+        fields in prop::collection::vec(
+            (prop::sample::select(vec![
+                "[nav_noise]\nposition_m", "[nav_noise]\naltitude_m", "[touchdown]\nvertical_speed_mps",
+                "[touchdown]\ntilt_deg", "[initial]\naltitude_m", "[initial]\nhorizontal_speed_m_s",
+                "[moon]\nmu_m3_s2", "[propulsion]\nmax_thrust_n", "[propulsion]\ngas_pressure_pa",
+                "[lander]\ndry_mass_kg", "[lander]\ninertia_wet_kg_m2",
+            ]), number_text()),
+            0..4,
+        ),
+        run_fields in prop::collection::vec(
+            (prop::sample::select(vec!["speed", "duration_s", "deadline_frac", "dt_ms", "link_timeout_ms"]), number_text()),
+            0..3,
+        ),
+    ) {
+        let scenario: String = fields.iter().map(|(k, v)| format!("{k} = {v}\n")).collect();
+        if let Ok(c) = toml::from_str::<ScenarioConfig>(&scenario) {
+            if c.validate().is_ok() {
+                prop_assert!(c.nav_noise.position_m.is_finite() && c.touchdown.tilt_deg.is_finite());
+                prop_assert!(c.initial.altitude_m.is_finite() && c.moon.mu_m3_s2.is_finite());
+            }
+        }
+        let mut run: String = run_fields.iter().map(|(k, v)| format!("{k} = {v}\n")).collect();
+        run.push_str(&scenario.replace("\n[", "\n[scenario.").replacen('[', "[scenario.", usize::from(scenario.starts_with('['))));
+        if let Ok(c) = toml::from_str::<RunConfig>(&run) {
+            if c.validate().is_ok() {
+                prop_assert!(c.speed.is_finite() && c.duration_s.is_finite());
+            }
+        }
+    }
+
+    #[test]
+    fn hifi_parameter_loader_never_panics(
+        fields in prop::collection::vec(
+            (prop::sample::select(vec![
+                "[bottle]\ninitial_pressure_pa", "[bottle]\nvolume_m3", "[bottle]\ninitial_temperature_k",
+                "[regulator]\nlockup_pressure_pa", "[tanks]\nnominal_pressure_pa", "[engine]\nthroat_area_m2",
+                "[integration]\nsubstep_s", "[helium]\ngamma", "[feed]\nlaminar_flow_frac",
+            ]), number_text()),
+            0..4,
+        ),
+    ) {
+        let text: String = fields.iter().map(|(k, v)| format!("{k} = {v}\n")).collect();
+        if let Ok(p) = toml::from_str::<HifiParams>(&text) {
+            if p.validate().is_ok() {
+                prop_assert!(p.bottle.initial_pressure_pa <= 1e8);
+            }
+        }
+    }
+
+    #[test]
+    fn model_file_loader_never_panics(
+        edits in prop::collection::vec((0usize..200_000, number_text()), 1..4),
+    ) {
+        // Replace the number that starts at or after each offset with another.
+        let mut text = DEFAULT_MODEL_JSON.to_string();
+        for (at, v) in edits {
+            let at = at % text.len();
+            let Some(start) = text[at..].find(|c: char| c.is_ascii_digit()).map(|i| i + at) else { continue };
+            let end = text[start..]
+                .find(|c: char| !(c.is_ascii_digit() || "eE.+-".contains(c)))
+                .map_or(text.len(), |i| i + start);
+            text.replace_range(start..end, &v);
+        }
+        if let Ok(f) = ModelFile::parse(&text) {
+            prop_assert!(f.model.check().is_ok());
+        }
+    }
+
+    #[test]
+    fn model_file_loader_takes_any_bytes(prefix in 0usize..140_000, tail in ".{0,20}") {
+        let cut = prefix.min(DEFAULT_MODEL_JSON.len());
+        let cut = (0..=cut).rev().find(|&i| DEFAULT_MODEL_JSON.is_char_boundary(i)).unwrap_or(0);
+        let text = format!("{}{tail}", &DEFAULT_MODEL_JSON[..cut]);
+        let _ = ModelFile::parse(&text);
+    }
+
+    #[test]
+    fn log_reader_never_panics(
+        flips in prop::collection::vec((any::<usize>(), any::<u8>()), 0..8),
+        cut in any::<usize>(),
+        garbage in prop::collection::vec(any::<u8>(), 0..64),
+    ) {
+        let good = good_log();
+        let mut bytes = good.clone();
+        for (at, b) in flips {
+            let i = at % bytes.len();
+            bytes[i] ^= b;
+        }
+        bytes.truncate(cut % (bytes.len() + 1));
+        bytes.extend_from_slice(&garbage);
+        if let Ok(log) = parse_log(Path::new("fuzz.oilslog"), &bytes) {
+            prop_assert!(log.records.len() + log.damaged_records.len() <= 5);
+        }
+        let _ = parse_log(Path::new("fuzz.oilslog"), &garbage);
+    }
+}
+
+/// A valid OILSLOG2 log of five records, as bytes.
+fn good_log() -> Vec<u8> {
+    use std::sync::OnceLock;
+    static LOG: OnceLock<Vec<u8>> = OnceLock::new();
+    LOG.get_or_init(|| {
+        let path = std::env::temp_dir().join(format!("oils-prop-{}.oilslog", std::process::id()));
+        let rec = Recorder::create(&path, r#"{"config":{}}"#).unwrap();
+        for k in 0..5u64 {
+            let mut r = Record::default();
+            r.telemetry.header.step = k;
+            r.command.thrust_cmd_n[0] = 400.0;
+            rec.record(&r).unwrap();
+        }
+        rec.finish().unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::remove_file(&path).ok();
+        bytes
+    })
+    .clone()
+}
