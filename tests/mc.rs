@@ -48,7 +48,7 @@ fn a_case_run_again_alone_reproduces_its_digest_with_the_surrogate_model_error_a
             .all(|b| b.parse::<f64>().is_ok_and(|b| b != 0.0)),
         "{bias:?}"
     );
-    for index in 0..3 {
+    for (index, digest) in digests.iter().enumerate() {
         // Case 2 writes MCAP (its format from the extension), the others OILSLOG3.
         let ext = if index == 2 { "mcap" } else { "oilslog" };
         let log = dir.join(format!("case{index}.{ext}"));
@@ -64,7 +64,7 @@ fn a_case_run_again_alone_reproduces_its_digest_with_the_surrogate_model_error_a
         assert!(o.status.success(), "{}", text(&o));
         let out = String::from_utf8_lossy(&o.stdout);
         assert!(
-            out.contains(&format!("digest {} equals", digests[index])),
+            out.contains(&format!("digest {digest} equals")),
             "{}",
             text(&o)
         );
@@ -180,7 +180,7 @@ fn an_interrupted_campaign_resumes_and_ends_as_an_uninterrupted_one() {
         "1",
     ];
     mc_run(&clean, &args);
-    let mut child = oils()
+    let child = oils()
         .args([
             "mc",
             "run",
