@@ -5,6 +5,7 @@
 use super::case::CaseResult;
 use super::summary::Merged;
 use crate::plot::{register_font, PlotError, FONT_FAMILY};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -25,6 +26,33 @@ fn backend_err(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> PlotError + '_
         path: path.display().to_string(),
         message: e.to_string(),
     }
+}
+
+type Chart<'a> = ChartContext<'a, BitMapBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// Axes, labels and grid in the style of every oils figure.
+fn mesh(chart: &mut Chart, x_desc: &str, y_desc: &str, path: &Path) -> Result<(), PlotError> {
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style((FONT_FAMILY, 15).into_font())
+        .axis_desc_style((FONT_FAMILY, 16).into_font())
+        .light_line_style(RGBColor(235, 235, 235))
+        .draw()
+        .map_err(|e| backend_err(path)(&e))
+}
+
+/// The legend box.
+fn legend(chart: &mut Chart, position: SeriesLabelPosition, path: &Path) -> Result<(), PlotError> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font((FONT_FAMILY, 15).into_font())
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| backend_err(path)(&e))
 }
 
 fn range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
@@ -152,15 +180,12 @@ fn footprint(merged: &Merged, path: &Path, title: &str) -> Result<(), PlotError>
         .y_label_area_size(90)
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(|e| err(&e))?;
-    chart
-        .configure_mesh()
-        .x_desc("downrange from nominal touchdown [m]")
-        .y_desc("crossrange [m]")
-        .label_style((FONT_FAMILY, 15).into_font())
-        .axis_desc_style((FONT_FAMILY, 16).into_font())
-        .light_line_style(RGBColor(235, 235, 235))
-        .draw()
-        .map_err(|e| err(&e))?;
+    mesh(
+        &mut chart,
+        "downrange from nominal touchdown [m]",
+        "crossrange [m]",
+        path,
+    )?;
     chart
         .draw_series(
             pts.iter()
@@ -191,14 +216,7 @@ fn footprint(merged: &Merged, path: &Path, title: &str) -> Result<(), PlotError>
         .map_err(|e| err(&e))?
         .label("nominal")
         .legend(|(x, y)| Cross::new((x + 10, y), 5, BLACK.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT_FAMILY, 15).into_font())
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| err(&e))?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight, path)?;
     root.present().map_err(|e| err(&e))
 }
 
@@ -228,15 +246,7 @@ fn histograms(path: &Path, title: &str, panels: &[Histogram]) -> Result<(), Plot
             .y_label_area_size(70)
             .build_cartesian_2d(lo..hi, 0.0..top)
             .map_err(|e| err(&e))?;
-        chart
-            .configure_mesh()
-            .x_desc(*label)
-            .y_desc("cases")
-            .label_style((FONT_FAMILY, 15).into_font())
-            .axis_desc_style((FONT_FAMILY, 16).into_font())
-            .light_line_style(RGBColor(235, 235, 235))
-            .draw()
-            .map_err(|e| err(&e))?;
+        mesh(&mut chart, label, "cases", path)?;
         chart
             .draw_series(counts.iter().enumerate().map(|(i, &c)| {
                 let x0 = lo + i as f64 * width;
@@ -249,14 +259,7 @@ fn histograms(path: &Path, title: &str, panels: &[Histogram]) -> Result<(), Plot
                 .map_err(|e| err(&e))?
                 .label("landing limit")
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font((FONT_FAMILY, 15).into_font())
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| err(&e))?;
+            legend(&mut chart, SeriesLabelPosition::UpperRight, path)?;
         }
     }
     root.present().map_err(|e| err(&e))
@@ -288,15 +291,7 @@ fn traces(merged: &Merged, path: &Path, title: &str) -> Result<(), PlotError> {
         .y_label_area_size(90)
         .build_cartesian_2d(x0.max(0.0)..x1, y0.max(0.0)..y1)
         .map_err(|e| err(&e))?;
-    chart
-        .configure_mesh()
-        .x_desc("speed [m/s]")
-        .y_desc("altitude [m]")
-        .label_style((FONT_FAMILY, 15).into_font())
-        .axis_desc_style((FONT_FAMILY, 16).into_font())
-        .light_line_style(RGBColor(235, 235, 235))
-        .draw()
-        .map_err(|e| err(&e))?;
+    mesh(&mut chart, "speed [m/s]", "altitude [m]", path)?;
     let line = |r: &CaseResult| -> Vec<(f64, f64)> {
         (0..r.trace.t_s.len())
             .map(|i| (speed(r, i), r.trace.altitude_m[i] as f64))
@@ -317,13 +312,6 @@ fn traces(merged: &Merged, path: &Path, title: &str) -> Result<(), PlotError> {
         .map_err(|e| err(&e))?
         .label("nominal")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(3)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font((FONT_FAMILY, 15).into_font())
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| err(&e))?;
+    legend(&mut chart, SeriesLabelPosition::UpperLeft, path)?;
     root.present().map_err(|e| err(&e))
 }
