@@ -31,6 +31,19 @@ fn short_run(dir: &Path, extra: &[&str]) -> Log {
     read_log(&log).unwrap()
 }
 
+/// `oils export DIR/run.oilslog --mcap DIR/run.mcap`; the MCAP's path.
+fn export_mcap(dir: &Path) -> std::path::PathBuf {
+    let out = dir.join("run.mcap");
+    let o = run_oils(&[
+        "export",
+        dir.join("run.oilslog").to_str().unwrap(),
+        "--mcap",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    out
+}
+
 struct Msg {
     log_time: u64,
     sequence: u32,
@@ -92,14 +105,7 @@ fn exported_mcap_holds_every_step_of_the_binary_log() {
     let log = short_run(&dir, &["--propulsion", "hifi"]);
     let n = log.records.len();
     assert!(n > 6000, "{n} records");
-    let out = dir.join("run.mcap");
-    let o = run_oils(&[
-        "export",
-        dir.join("run.oilslog").to_str().unwrap(),
-        "--mcap",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let out = export_mcap(dir.as_path());
     let (msgs, channels) = read_mcap(&out);
 
     let expected = [
@@ -415,14 +421,7 @@ fn layout_paths(v: &serde_json::Value, out: &mut Vec<String>) {
 fn the_foxglove_layout_names_only_topics_and_fields_the_mcap_has() {
     let dir = scratch("mcap-layout");
     short_run(&dir, &["--propulsion", "ideal"]);
-    let out = dir.join("run.mcap");
-    let o = run_oils(&[
-        "export",
-        dir.join("run.oilslog").to_str().unwrap(),
-        "--mcap",
-        out.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", text(&o));
+    let out = export_mcap(dir.as_path());
     let (msgs, _) = read_mcap(&out);
     let layout: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(concat!(
