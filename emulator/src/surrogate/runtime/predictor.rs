@@ -302,6 +302,7 @@ impl SubmodelUse {
                 };
                 groups[g].coefs.push(t.coef);
                 groups[g].factors.push(t.factors);
+                groups[g].cubic |= t.factors[2] as usize != dim;
             }
             groups
         };
@@ -349,16 +350,17 @@ fn gather_engines(s: &Submodel, u: &SubmodelUse, h: &Ring, lanes: &mut [Lanes]) 
             i += 1;
         });
     }
-    // Lane by lane with the flags kept apart, so the four lanes are clamped and scaled
-    // as vectors.
-    let mut outside = [false; ENGINE_COUNT];
+    // Feature by feature, the four lanes clamped and scaled together with one flag for
+    // them, so they compile to vector instructions.
+    let mut outside = false;
     for (l, f) in lanes[..dim].iter_mut().zip(&u.scaling) {
-        for (v, o) in l.iter_mut().zip(outside.iter_mut()) {
-            *v = f.scale(*v, o);
+        let mut clamped = false;
+        for v in l.iter_mut() {
+            *v = f.scale(*v, &mut clamped);
         }
+        outside |= clamped;
     }
     lanes[dim] = [1.0; ENGINE_COUNT];
-    let outside = outside.iter().any(|&o| o);
     outside
 }
 
@@ -369,6 +371,10 @@ struct TermGroup {
     gate: Option<usize>,
     coefs: Vec<f64>,
     factors: Vec<Term>,
+    /// Some term has a third factor that is a feature, not the 1.0 pad. Otherwise the
+    /// group's products skip the pad: `a * b * 1.0` is `a * b` bit for bit, and a
+    /// degree-2 model (the committed one) then does a third fewer loads and products.
+    cubic: bool,
 }
 
 /// A row's intercept plus its active terms, group by group (see [`SubmodelUse`]),
@@ -379,8 +385,14 @@ fn sum(row: &OutputRow, groups: &[TermGroup], x: &[f64]) -> f64 {
         if g.gate.is_some_and(|f| x[f] == 0.0) {
             continue;
         }
-        for (c, t) in g.coefs.iter().zip(&g.factors) {
-            y += c * eval_term(t, x);
+        if g.cubic {
+            for (c, t) in g.coefs.iter().zip(&g.factors) {
+                y += c * eval_term(t, x);
+            }
+        } else {
+            for (c, &[i, j, _]) in g.coefs.iter().zip(&g.factors) {
+                y += c * (x[i as usize] * x[j as usize]);
+            }
         }
     }
     y
@@ -400,10 +412,19 @@ fn sum_engines(row: &OutputRow, groups: &[TermGroup], x: &[Lanes]) -> Lanes {
         if g.gate.is_some_and(|f| x[f] == [0.0; ENGINE_COUNT]) {
             continue;
         }
-        for (c, t) in g.coefs.iter().zip(&g.factors) {
-            let [a, b, d] = t.map(|f| &x[f as usize]);
-            for e in 0..ENGINE_COUNT {
-                y[e] += c * (a[e] * b[e] * d[e]);
+        if g.cubic {
+            for (c, t) in g.coefs.iter().zip(&g.factors) {
+                let [a, b, d] = t.map(|f| &x[f as usize]);
+                for e in 0..ENGINE_COUNT {
+                    y[e] += c * (a[e] * b[e] * d[e]);
+                }
+            }
+        } else {
+            for (c, &[i, j, _]) in g.coefs.iter().zip(&g.factors) {
+                let (a, b) = (&x[i as usize], &x[j as usize]);
+                for e in 0..ENGINE_COUNT {
+                    y[e] += c * (a[e] * b[e]);
+                }
             }
         }
     }
@@ -489,9 +510,10 @@ pub(crate) mod tests {
     }
 
     /// A model with every library term active (pseudo-random coefficients), so every
-    /// feature, phase indicator and term degree is exercised. With `mimo_degree` 1 the
-    /// MIMO submodel is linear.
-    fn dense_model(mimo_degree: usize) -> Model {
+    /// feature, phase indicator and term degree is exercised. `engine_degree` is the
+    /// per-engine submodel's (3 exercises three-factor terms, 2 the two-factor sums the
+    /// committed model takes). With `mimo_degree` 1 the MIMO submodel is linear.
+    fn dense_model(engine_degree: usize, mimo_degree: usize) -> Model {
         let mut seed = 12345u64;
         let mut rnd = move || {
             seed = seed
@@ -510,7 +532,7 @@ pub(crate) mod tests {
                     valve_sum: true,
                     ..FeatureSpec::per_engine(2)
                 },
-                3,
+                engine_degree,
                 (0..ENGINE_COUNT).collect::<Vec<_>>(),
             ),
             (
@@ -589,8 +611,8 @@ pub(crate) mod tests {
     /// rounding.
     #[test]
     fn free_run_equals_full_evaluation() {
-        for mimo_degree in [1, 2] {
-            free_run_equals_full_evaluation_of(&dense_model(mimo_degree));
+        for (engine_degree, mimo_degree) in [(3, 1), (3, 2), (2, 1)] {
+            free_run_equals_full_evaluation_of(&dense_model(engine_degree, mimo_degree));
         }
     }
 
@@ -598,7 +620,7 @@ pub(crate) mod tests {
     /// with the other's in-phase constant: refused.
     #[test]
     fn a_term_with_two_phase_features_is_refused() {
-        let mut m = dense_model(1);
+        let mut m = dense_model(3, 1);
         m.check().unwrap();
         let s = &mut m.submodels[0];
         let names = s.features.names();
@@ -700,7 +722,7 @@ pub(crate) mod tests {
     #[test]
     fn one_step_from_history_equals_full_evaluation() {
         for mimo_degree in [1, 2] {
-            let mut model = dense_model(mimo_degree);
+            let mut model = dense_model(3, mimo_degree);
             for r in &mut model.submodels[1].rows {
                 for t in &mut r.terms {
                     t.coef *= 1e16;
