@@ -350,15 +350,17 @@ fn gather_engines(s: &Submodel, u: &SubmodelUse, h: &Ring, lanes: &mut [Lanes]) 
             i += 1;
         });
     }
-    // Feature by feature, the four lanes clamped and scaled together with one flag for
-    // them, so they compile to vector instructions.
+    // Feature by feature, the four lanes clamped and scaled together, each operation
+    // over the whole lane (the same operations on each value as `Scaling::scale`), so
+    // they compile to vector instructions; value by value they compiled to branches.
     let mut outside = false;
     for (l, f) in lanes[..dim].iter_mut().zip(&u.scaling) {
-        let mut clamped = false;
-        for v in l.iter_mut() {
-            *v = f.scale(*v, &mut clamped);
-        }
-        outside |= clamped;
+        let raw = *l;
+        let moved = raw.map(|r| (r < f.lo) | (r > f.hi));
+        outside |= f.used & moved.iter().any(|&m| m);
+        let above_lo = raw.map(|r| if r < f.lo { f.lo } else { r });
+        let clamped = above_lo.map(|r| if r > f.hi { f.hi } else { r });
+        *l = clamped.map(|c| (c - f.mean) * f.inv_std);
     }
     lanes[dim] = [1.0; ENGINE_COUNT];
     outside
