@@ -646,6 +646,35 @@ pub(crate) mod tests {
         .model
     }
 
+    /// A per-engine feature outside its training envelope is clamped and the step
+    /// counted, whichever engine's lane it is in.
+    #[test]
+    fn a_per_engine_feature_outside_its_envelope_is_counted() {
+        let mut model = committed_model();
+        let s = &mut model.submodels[0];
+        assert_eq!(s.features.layout, Layout::PerEngine);
+        let t_r = s.feature_names.iter().position(|n| n == "T_r[t]").unwrap();
+        s.envelope_hi[t_r] = 650.0;
+        let mut p = Predictor::new(&model);
+        let mut cmd = [600.0, 600.0, 600.0, 600.0, 1.0, 1.0, 1.0, 1.0];
+        for _ in 0..50 {
+            p.step(&cmd);
+        }
+        assert_eq!(p.out_of_envelope_steps(), 0);
+        for engine in 0..ENGINE_COUNT {
+            cmd[engine] = 700.0;
+            p.step(&cmd);
+            assert_eq!(
+                p.out_of_envelope_steps(),
+                engine as u64 + 1,
+                "engine {engine}"
+            );
+            cmd[engine] = 600.0;
+            p.step(&cmd);
+        }
+        assert_eq!(p.out_of_envelope_steps(), ENGINE_COUNT as u64);
+    }
+
     /// The guards, applied as each output is written: a command that is not a number
     /// makes predictions that are not finite; those outputs keep their previous values,
     /// nothing goes negative or backwards, and the step is counted.
