@@ -59,8 +59,6 @@ pub const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 pub const METADATA_NAME: &str = "oils";
 /// Uncompressed chunk size, bytes (the crate's default; 4 MiB saved only 0.5 %).
 const CHUNK_SIZE: u64 = 1 << 20;
-/// Readers check every chunk's CRC (the crate's reader does not by default).
-const CHECK_CRCS: mcap::read::Options = mcap::read::Options::ValidateChunkCrcs;
 /// zstd level of the chunks.
 const ZSTD_LEVEL: u32 = 1;
 
@@ -1345,6 +1343,91 @@ impl RecordSink for McapSink {
 // ---------------------------------------------------------------------------------------
 // Reading.
 
+/// The longest record the readers accept, inside a chunk or not: the file's own length,
+/// or 16 MiB for a small file (an oils message is a few kilobytes).
+fn record_length_limit(file_len: usize) -> usize {
+    file_len.max(16 << 20)
+}
+
+/// One message of an MCAP file.
+#[derive(Debug)]
+struct McapMessage {
+    topic: std::sync::Arc<str>,
+    sequence: u32,
+    log_time: u64,
+    data: Vec<u8>,
+}
+
+/// The messages of an MCAP file in file order, chunk CRCs checked.
+///
+/// Not `mcap::MessageStream`: in mcap 0.26 it reads chunk contents with no bound on a
+/// record's declared length, so a damaged length makes it try to allocate exabytes and
+/// abort the process (found by the `mcap` fuzz target, `docs/fuzzing.md`). This drives the
+/// same crate's sans-io reader with a bound ([`record_length_limit`]); a record over it
+/// is an error.
+struct McapMessages<'a> {
+    rest: &'a [u8],
+    reader: mcap::sans_io::LinearReader,
+    topics: BTreeMap<u16, std::sync::Arc<str>>,
+}
+
+impl<'a> McapMessages<'a> {
+    fn new(bytes: &'a [u8]) -> Self {
+        let options = mcap::sans_io::LinearReaderOptions::default()
+            .with_record_length_limit(record_length_limit(bytes.len()))
+            .with_validate_chunk_crcs(true);
+        Self {
+            rest: bytes,
+            reader: mcap::sans_io::LinearReader::new_with_options(options),
+            topics: BTreeMap::new(),
+        }
+    }
+}
+
+impl Iterator for McapMessages<'_> {
+    type Item = Result<McapMessage, mcap::McapError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        use mcap::records::Record as R;
+        use mcap::sans_io::LinearReadEvent as E;
+        while let Some(event) = self.reader.next_event() {
+            let (opcode, data) = match event {
+                Ok(E::ReadRequest(need)) => {
+                    let n = need.min(self.rest.len());
+                    self.reader.insert(n).copy_from_slice(&self.rest[..n]);
+                    self.reader.notify_read(n);
+                    self.rest = &self.rest[n..];
+                    continue;
+                }
+                Ok(E::Record { opcode, data }) => (opcode, data),
+                Err(e) => return Some(Err(e)),
+            };
+            match mcap::parse_record(opcode, data) {
+                Ok(R::Channel(c)) => {
+                    self.topics.insert(c.id, c.topic.as_str().into());
+                }
+                Ok(R::Message { header, data }) => {
+                    let Some(topic) = self.topics.get(&header.channel_id) else {
+                        return Some(Err(mcap::McapError::UnknownChannel(
+                            header.sequence,
+                            header.channel_id,
+                        )));
+                    };
+                    return Some(Ok(McapMessage {
+                        topic: topic.clone(),
+                        sequence: header.sequence,
+                        log_time: header.log_time,
+                        data: data.into_owned(),
+                    }));
+                }
+                Ok(_) => {}
+                Err(e) => return Some(Err(e)),
+            }
+        }
+        None
+    }
+}
+
 /// Is this file an MCAP file (by its magic)?
 pub fn is_mcap(path: &Path) -> bool {
     use std::io::Read;
@@ -1363,6 +1446,12 @@ pub fn read_mcap(path: &Path) -> Result<Log, McapLogError> {
         path: path.to_path_buf(),
         source,
     })?;
+    parse_mcap(path, &bytes)
+}
+
+/// [`read_mcap`] of bytes already read (`path` names them in errors); the fuzz target
+/// `mcap` feeds it arbitrary bytes.
+pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
     let mcap_err = |source| McapLogError::Mcap {
         path: path.to_path_buf(),
         source,
@@ -1390,9 +1479,9 @@ pub fn read_mcap(path: &Path) -> Result<Log, McapLogError> {
             records.len() - 1
         })
     };
-    for msg in mcap::MessageStream::new_with_options(&bytes, CHECK_CRCS.into()).map_err(mcap_err)? {
+    for msg in McapMessages::new(bytes) {
         let msg = msg.map_err(mcap_err)?;
-        let topic = msg.channel.topic.as_str();
+        let topic = &*msg.topic;
         let bad = |e: serde_json::Error| not(format!("{topic} at t = {} ns: {e}", msg.log_time));
         match topic {
             topic::TELEMETRY => {
@@ -1487,9 +1576,9 @@ pub fn read_mcap_timing(path: &Path) -> Result<Vec<StepTiming>, McapLogError> {
         source,
     };
     let mut out = Vec::new();
-    for msg in mcap::MessageStream::new_with_options(&bytes, CHECK_CRCS.into()).map_err(mcap_err)? {
+    for msg in McapMessages::new(&bytes) {
         let msg = msg.map_err(mcap_err)?;
-        if msg.channel.topic == topic::TIMING {
+        if &*msg.topic == topic::TIMING {
             out.push(
                 serde_json::from_slice(&msg.data).map_err(|e| McapLogError::NotOils {
                     path: path.to_path_buf(),
@@ -1586,6 +1675,80 @@ mod tests {
         // East is mci +Y at this point.
         let e = site.site_of(&Vector3::new(1_737_400.0, 50.0, 0.0));
         assert!((e - Vector3::new(50.0, 0.0, 0.0)).norm() < 1e-6, "{e}");
+    }
+
+    /// The records of an MCAP byte range: (position, opcode, body range).
+    fn records_in(bytes: &[u8], from: usize) -> Vec<(usize, u8, std::ops::Range<usize>)> {
+        let mut out = Vec::new();
+        let mut at = from;
+        while at + 9 <= bytes.len() {
+            let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+            out.push((at, bytes[at], at + 9..at + 9 + len));
+            at += 9 + len;
+        }
+        out
+    }
+
+    /// A message inside a zstd chunk whose declared length is absurd is an error, not an
+    /// attempt to allocate it: mcap 0.26's MessageStream reserved the declared length and
+    /// aborted the process (found by the `mcap` fuzz target).
+    #[test]
+    fn a_huge_record_length_inside_a_chunk_is_an_error() {
+        // A one-message file, chunked but not compressed, so its records can be edited.
+        let mut plain = Vec::new();
+        {
+            let mut w = WriteOptions::new()
+                .compression(None)
+                .create(std::io::Cursor::new(&mut plain))
+                .unwrap();
+            let channel = w.add_channel(0, "/t", "json", &BTreeMap::new()).unwrap();
+            let header = mcap::records::MessageHeader {
+                channel_id: channel,
+                sequence: 7,
+                log_time: 1,
+                publish_time: 1,
+            };
+            w.write_to_known_channel(&header, b"{}").unwrap();
+            w.finish().unwrap();
+        }
+        let intact: Vec<_> = McapMessages::new(&plain).collect::<Result<_, _>>().unwrap();
+        assert_eq!(
+            (intact.len(), &*intact[0].topic, intact[0].sequence),
+            (1, "/t", 7)
+        );
+
+        // Rebuild its chunk as zstd (crc 0: unchecked) with the message's length set to
+        // 2^61 bytes. Chunk body: start, end, uncompressed size, crc, compression, records.
+        let (at, _, body) = records_in(&plain, 8)
+            .into_iter()
+            .find(|r| r.1 == 0x06)
+            .expect("a chunk");
+        let b = &plain[body.clone()];
+        let compression_len = u32::from_le_bytes(b[28..32].try_into().unwrap()) as usize;
+        let mut inner = b[32 + compression_len + 8..].to_vec();
+        let (msg, _, _) = records_in(&inner, 0)
+            .into_iter()
+            .find(|r| r.1 == 0x05)
+            .expect("the message in the chunk");
+        inner[msg + 1..msg + 9].copy_from_slice(&(1u64 << 61).to_le_bytes());
+        let packed = zstd::bulk::compress(&inner, 1).unwrap();
+        let mut chunk = b[..16].to_vec();
+        chunk.extend((inner.len() as u64).to_le_bytes());
+        chunk.extend(0u32.to_le_bytes());
+        chunk.extend(4u32.to_le_bytes());
+        chunk.extend(b"zstd");
+        chunk.extend((packed.len() as u64).to_le_bytes());
+        chunk.extend(&packed);
+        let mut bytes = plain[..at].to_vec();
+        bytes.push(0x06);
+        bytes.extend((chunk.len() as u64).to_le_bytes());
+        bytes.extend(&chunk);
+        bytes.extend(&plain[body.end..]);
+
+        let err = McapMessages::new(&bytes)
+            .collect::<Result<Vec<_>, _>>()
+            .expect_err("a damaged length is an error");
+        assert!(err.to_string().contains("exceeds limit"), "{err}");
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! The OILSLOG2 log reader: any bytes give a log (records whose CRC matched, damaged
+//! The OILSLOG3 log reader: any bytes give a log (records whose CRC matched, damaged
 //! positions, trailing bytes) or an error.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
