@@ -1358,24 +1358,44 @@ struct McapMessage {
     data: Vec<u8>,
 }
 
-/// The messages of an MCAP file in file order, chunk CRCs checked.
+/// What the oils readers take from an MCAP file.
+#[derive(Debug)]
+enum McapItem {
+    Message(McapMessage),
+    Metadata(mcap::records::Metadata),
+}
+
+/// The messages (with chunks read) or the metadata records (chunks skipped) of an MCAP
+/// file, in file order, chunk CRCs checked; other records are skipped unparsed.
 ///
-/// Not `mcap::MessageStream`: in mcap 0.26 it reads chunk contents with no bound on a
-/// record's declared length, so a damaged length makes it try to allocate exabytes and
-/// abort the process (found by the `mcap` fuzz target, `docs/fuzzing.md`). This drives the
-/// same crate's sans-io reader with a bound ([`record_length_limit`]); a record over it
-/// is an error.
-struct McapMessages<'a> {
+/// Not `mcap::MessageStream` or `mcap::read::LinearReader`: in mcap 0.26 the first reads
+/// chunk contents with no bound on a record's declared length, so a damaged length makes
+/// it try to allocate exabytes and abort the process, and both parse every record, and a
+/// short attachment record panics. Both found by the `mcap` fuzz target
+/// (`docs/fuzzing.md`). This drives the same crate's sans-io reader with a bound on record
+/// lengths ([`record_length_limit`]) and parses only channels, messages and metadata.
+struct McapReader<'a> {
     rest: &'a [u8],
     reader: mcap::sans_io::LinearReader,
     topics: BTreeMap<u16, std::sync::Arc<str>>,
 }
 
-impl<'a> McapMessages<'a> {
-    fn new(bytes: &'a [u8]) -> Self {
+impl<'a> McapReader<'a> {
+    /// Messages, from inside the chunks.
+    fn messages(bytes: &'a [u8]) -> Self {
+        Self::new(bytes, false)
+    }
+
+    /// Metadata records, without decompressing a chunk.
+    fn metadata(bytes: &'a [u8]) -> Self {
+        Self::new(bytes, true)
+    }
+
+    fn new(bytes: &'a [u8], skip_chunks: bool) -> Self {
         let options = mcap::sans_io::LinearReaderOptions::default()
             .with_record_length_limit(record_length_limit(bytes.len()))
-            .with_validate_chunk_crcs(true);
+            .with_validate_chunk_crcs(true)
+            .with_emit_chunks(skip_chunks);
         Self {
             rest: bytes,
             reader: mcap::sans_io::LinearReader::new_with_options(options),
@@ -1384,11 +1404,11 @@ impl<'a> McapMessages<'a> {
     }
 }
 
-impl Iterator for McapMessages<'_> {
-    type Item = Result<McapMessage, mcap::McapError>;
+impl Iterator for McapReader<'_> {
+    type Item = Result<McapItem, mcap::McapError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        use mcap::records::Record as R;
+        use mcap::records::{op, Record as R};
         use mcap::sans_io::LinearReadEvent as E;
         while let Some(event) = self.reader.next_event() {
             let (opcode, data) = match event {
@@ -1402,6 +1422,9 @@ impl Iterator for McapMessages<'_> {
                 Ok(E::Record { opcode, data }) => (opcode, data),
                 Err(e) => return Some(Err(e)),
             };
+            if ![op::CHANNEL, op::MESSAGE, op::METADATA].contains(&opcode) {
+                continue;
+            }
             match mcap::parse_record(opcode, data) {
                 Ok(R::Channel(c)) => {
                     self.topics.insert(c.id, c.topic.as_str().into());
@@ -1413,19 +1436,29 @@ impl Iterator for McapMessages<'_> {
                             header.channel_id,
                         )));
                     };
-                    return Some(Ok(McapMessage {
+                    return Some(Ok(McapItem::Message(McapMessage {
                         topic: topic.clone(),
                         sequence: header.sequence,
                         log_time: header.log_time,
                         data: data.into_owned(),
-                    }));
+                    })));
                 }
+                Ok(R::Metadata(m)) => return Some(Ok(McapItem::Metadata(m))),
                 Ok(_) => {}
                 Err(e) => return Some(Err(e)),
             }
         }
         None
     }
+}
+
+/// The messages of an MCAP file (see [`McapReader`]).
+fn mcap_messages(bytes: &[u8]) -> impl Iterator<Item = Result<McapMessage, mcap::McapError>> + '_ {
+    McapReader::messages(bytes).filter_map(|item| match item {
+        Ok(McapItem::Message(m)) => Some(Ok(m)),
+        Ok(McapItem::Metadata(_)) => None,
+        Err(e) => Some(Err(e)),
+    })
 }
 
 /// Is this file an MCAP file (by its magic)?
@@ -1461,8 +1494,8 @@ pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
         why,
     };
     let mut header_json = None;
-    for rec in mcap::read::LinearReader::new(&bytes).map_err(mcap_err)? {
-        if let mcap::records::Record::Metadata(m) = rec.map_err(mcap_err)? {
+    for item in McapReader::metadata(bytes) {
+        if let McapItem::Metadata(m) = item.map_err(mcap_err)? {
             if m.name == METADATA_NAME {
                 header_json = m.metadata.get("header_json").cloned();
             }
@@ -1479,7 +1512,7 @@ pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
             records.len() - 1
         })
     };
-    for msg in McapMessages::new(bytes) {
+    for msg in mcap_messages(bytes) {
         let msg = msg.map_err(mcap_err)?;
         let topic = &*msg.topic;
         let bad = |e: serde_json::Error| not(format!("{topic} at t = {} ns: {e}", msg.log_time));
@@ -1576,7 +1609,7 @@ pub fn read_mcap_timing(path: &Path) -> Result<Vec<StepTiming>, McapLogError> {
         source,
     };
     let mut out = Vec::new();
-    for msg in McapMessages::new(&bytes) {
+    for msg in mcap_messages(&bytes) {
         let msg = msg.map_err(mcap_err)?;
         if &*msg.topic == topic::TIMING {
             out.push(
@@ -1711,7 +1744,7 @@ mod tests {
             w.write_to_known_channel(&header, b"{}").unwrap();
             w.finish().unwrap();
         }
-        let intact: Vec<_> = McapMessages::new(&plain).collect::<Result<_, _>>().unwrap();
+        let intact: Vec<_> = mcap_messages(&plain).collect::<Result<_, _>>().unwrap();
         assert_eq!(
             (intact.len(), &*intact[0].topic, intact[0].sequence),
             (1, "/t", 7)
@@ -1745,10 +1778,32 @@ mod tests {
         bytes.extend(&chunk);
         bytes.extend(&plain[body.end..]);
 
-        let err = McapMessages::new(&bytes)
+        let err = mcap_messages(&bytes)
             .collect::<Result<Vec<_>, _>>()
             .expect_err("a damaged length is an error");
         assert!(err.to_string().contains("exceeds limit"), "{err}");
+    }
+
+    /// A record the readers do not use is skipped unparsed: mcap 0.26's parser panicked
+    /// on an attachment shorter than its fixed fields (found by the `mcap` fuzz target).
+    #[test]
+    fn a_short_attachment_record_is_skipped() {
+        let path = temp("attachment.mcap");
+        let log = Log {
+            header_json: r#"{"run_id":"deadbeef01234567"}"#.into(),
+            records: (0..3).map(record).collect(),
+            damaged_records: Vec::new(),
+            trailing_bytes: 0,
+        };
+        export_mcap(&log, &path).unwrap();
+        let good = std::fs::read(&path).unwrap();
+        let (_, _, first) = records_in(&good, 8)[0].clone();
+        let mut bytes = good[..first.end].to_vec();
+        bytes.extend([0x09, 4, 0, 0, 0, 0, 0, 0, 0, 1, 2, 3, 4]);
+        bytes.extend(&good[first.end..]);
+        let log = parse_mcap(&path, &bytes).expect("the attachment is skipped");
+        assert_eq!(log.records.len(), 3);
+        let _ = std::fs::remove_file(path);
     }
 
     #[test]
