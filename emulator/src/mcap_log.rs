@@ -1799,7 +1799,11 @@ mod tests {
         let good = std::fs::read(&path).unwrap();
         let (_, _, first) = records_in(&good, 8)[0].clone();
         let mut bytes = good[..first.end].to_vec();
-        bytes.extend([0x09, 4, 0, 0, 0, 0, 0, 0, 0, 1, 2, 3, 4]);
+        // Log time, create time, empty name and media type, data length 0, and no room
+        // for the CRC after them.
+        bytes.push(0x09);
+        bytes.extend(32u64.to_le_bytes());
+        bytes.extend([0u8; 32]);
         bytes.extend(&good[first.end..]);
         let log = parse_mcap(&path, &bytes).expect("the attachment is skipped");
         assert_eq!(log.records.len(), 3);
