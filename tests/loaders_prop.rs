@@ -167,14 +167,7 @@ proptest! {
         cut in any::<usize>(),
         garbage in prop::collection::vec(any::<u8>(), 0..64),
     ) {
-        let good = good_log();
-        let mut bytes = good.clone();
-        for (at, b) in flips {
-            let i = at % bytes.len();
-            bytes[i] ^= b;
-        }
-        bytes.truncate(cut % (bytes.len() + 1));
-        bytes.extend_from_slice(&garbage);
+        let bytes = damaged(good_log(), &flips, cut, &garbage);
         if let Ok(log) = parse_log(Path::new("fuzz.oilslog"), &bytes) {
             prop_assert!(log.records.len() + log.damaged_records.len() <= 5);
         }
@@ -189,14 +182,7 @@ proptest! {
         cut in any::<usize>(),
         garbage in prop::collection::vec(any::<u8>(), 0..64),
     ) {
-        let good = good_mcap();
-        let mut bytes = good.clone();
-        for (at, b) in flips {
-            let i = at % bytes.len();
-            bytes[i] ^= b;
-        }
-        bytes.truncate(cut % (bytes.len() + 1));
-        bytes.extend_from_slice(&garbage);
+        let bytes = damaged(good_mcap(), &flips, cut, &garbage);
         if let Ok(log) = parse_mcap(Path::new("fuzz.mcap"), &bytes) {
             prop_assert!(log.records.len() <= 5);
         }
@@ -217,6 +203,17 @@ fn good_mcap() -> Vec<u8> {
         bytes
     })
     .clone()
+}
+
+/// `good` with bytes flipped, cut short, and garbage appended.
+fn damaged(mut bytes: Vec<u8>, flips: &[(usize, u8)], cut: usize, garbage: &[u8]) -> Vec<u8> {
+    for &(at, b) in flips {
+        let i = at % bytes.len();
+        bytes[i] ^= b;
+    }
+    bytes.truncate(cut % (bytes.len() + 1));
+    bytes.extend_from_slice(garbage);
+    bytes
 }
 
 /// A valid OILSLOG3 log of five records, as bytes.
