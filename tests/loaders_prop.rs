@@ -205,7 +205,7 @@ fn good_mcap() -> Vec<u8> {
     .clone()
 }
 
-/// `good` with bytes flipped, cut short, and garbage appended.
+/// `bytes` with some flipped, cut short, and garbage appended.
 fn damaged(mut bytes: Vec<u8>, flips: &[(usize, u8)], cut: usize, garbage: &[u8]) -> Vec<u8> {
     for &(at, b) in flips {
         let i = at % bytes.len();
