@@ -21,8 +21,13 @@ fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     p
 }
 
-/// A short in-process run with `extra` flags.
+/// A short in-process run of the terminal descent with `extra` flags.
 fn inproc(extra: &[&str]) -> Output {
+    inproc_scenario("terminal-descent", extra)
+}
+
+/// A short in-process run of `scenario` (a name or a file) with `extra` flags.
+fn inproc_scenario(scenario: &str, extra: &[&str]) -> Output {
     let mut args = vec![
         "run",
         "--link",
@@ -31,7 +36,7 @@ fn inproc(extra: &[&str]) -> Output {
         "--duration",
         "2",
         "--scenario",
-        "terminal-descent",
+        scenario,
     ];
     args.extend_from_slice(extra);
     run_oils(&args)
@@ -57,16 +62,7 @@ fn non_finite_scenario_numbers_are_refused_by_name() {
             &format!("{table}-{field}.toml"),
             &format!("[{table}]\n{field} = {value}\n"),
         );
-        let out = run_oils(&[
-            "run",
-            "--link",
-            "inproc",
-            "--no-log",
-            "--duration",
-            "2",
-            "--scenario",
-            file.to_str().unwrap(),
-        ]);
+        let out = inproc_scenario(file.to_str().unwrap(), &[]);
         let e = stderr(&out);
         assert!(
             !out.status.success(),
