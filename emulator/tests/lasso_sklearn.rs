@@ -1,9 +1,10 @@
-//! Validation against an external reference: our Gram-based coordinate-descent Lasso
-//! against scikit-learn's `Lasso(precompute=True, fit_intercept=True)` on a committed
-//! fixture (`tools/gen_lasso_fixture.py` made it; this test needs no Python).
+//! Validation against an external reference: our Gram-based Lasso (an active-set method,
+//! not scikit-learn's coordinate descent, but the same minimiser) against scikit-learn's
+//! `Lasso(precompute=True, fit_intercept=True)` on a committed fixture
+//! (`tools/gen_lasso_fixture.py` made it; this test needs no Python).
 
 use oils_emulator::surrogate::training::lasso::{
-    lasso_gram, GramProblem, GramStats, LassoSettings,
+    lasso_gram, GramProblem, GramStats, LassoSettings, LassoWorkspace,
 };
 use std::path::PathBuf;
 
@@ -43,7 +44,7 @@ fn lasso_matches_sklearn() {
     let fits = expected["fits"].as_array().unwrap();
     assert_eq!(fits.len(), 4);
     let mut w = vec![0.0; p];
-    let mut h = vec![0.0; p];
+    let mut ws = LassoWorkspace::new(p);
     for fit in fits {
         let alpha = fit["alpha"].as_f64().unwrap();
         let reference: Vec<f64> = fit["coef"]
@@ -53,7 +54,7 @@ fn lasso_matches_sklearn() {
             .map(|v| v.as_f64().unwrap())
             .collect();
         // Warm start from the previous (larger) penalty, as the training path does.
-        let report = lasso_gram(&prob, alpha, &settings, &mut w, &mut h);
+        let report = lasso_gram(&prob, alpha, &settings, &mut w, &mut ws);
         assert!(report.converged, "alpha {alpha}: {report:?}");
         let intercept = c.mean_y[0] - w.iter().zip(&c.mean_x).map(|(a, b)| a * b).sum::<f64>();
         let scale = reference.iter().fold(0.0f64, |m, v| m.max(v.abs()));

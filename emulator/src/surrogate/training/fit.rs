@@ -4,7 +4,7 @@
 
 use super::dataset::Dataset;
 use super::derive::ValveSpec;
-use super::lasso::{lasso_gram, GramStats, LassoSettings, Standardised};
+use super::lasso::{lasso_gram, GramStats, LassoSettings, LassoWorkspace, Standardised};
 use super::library::Library;
 use crate::surrogate::runtime::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
 use crate::surrogate::runtime::model::{active_terms_of, Model, OutputRow, Submodel, Target};
@@ -414,12 +414,12 @@ pub fn fit_path(
     let zero_shift = vec![0.0; p];
     let mut coefs = vec![Vec::with_capacity(std.outputs()); mus.len()];
     let mut unconverged = vec![0; mus.len()];
-    let mut h = vec![0.0; p];
+    let mut ws = LassoWorkspace::new(p);
     for c in 0..std.outputs() {
         let prob = std.problem(c);
         let mut w = vec![0.0; p];
         for (i, &mu) in mus.iter().enumerate() {
-            let r = lasso_gram(&prob, prep.spec.penalty.at(mu), settings, &mut w, &mut h);
+            let r = lasso_gram(&prob, prep.spec.penalty.at(mu), settings, &mut w, &mut ws);
             unconverged[i] += usize::from(!r.converged);
             coefs[i].push(std.unscale(c, &w, &zero_shift, prep.y_shift[c]));
         }

@@ -9,6 +9,7 @@
 // Index loops read like the equations in this numerical code.
 #![allow(clippy::needless_range_loop)]
 
+pub mod cholesky;
 pub mod cv;
 pub mod dataset;
 pub mod derive;
