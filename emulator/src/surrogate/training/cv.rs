@@ -180,20 +180,112 @@ pub fn history_range(
     cv.history_min..=hi
 }
 
-/// Runs the grid for one variant. `tick` is called once per (n, fold) done.
-pub fn cross_validate(
+/// The Gram sums cross-validation and the final fit take every history length's from:
+/// each submodel at the longest history searched, summed over each fold block. A shorter
+/// history's library is a subset of the longest's ([`Prepared::nested`]), so its sums are
+/// a selection of these: the costly products over the data are taken once per variant,
+/// not once per history length.
+#[derive(Debug, Clone)]
+pub struct NestedSums {
     variant: Variant,
+    /// The submodels at the longest history.
+    preps: Vec<Prepared>,
+    /// Per submodel, the sums of each fold block.
+    blocks: Vec<Vec<GramStats>>,
+    /// Per submodel, the sums over all the data (the blocks added in order).
+    totals: Vec<GramStats>,
+}
+
+/// A submodel at one history length, with where its terms are in [`NestedSums`].
+struct Nested {
+    prep: Prepared,
+    index: Vec<usize>,
+}
+
+impl NestedSums {
+    /// Sums of `variant`'s submodels at history `n_max` over the fold blocks of `cv`.
+    /// The blocks are summed in parallel, each in two halves, added in a fixed order (same
+    /// bits on any number of threads). `tick` is called once per block done.
+    pub fn new(
+        variant: Variant,
+        n_max: usize,
+        data: &Dataset,
+        cv: &CvConfig,
+        vcfg: &VariantConfig,
+        tick: &(dyn Fn() + Sync),
+    ) -> Self {
+        let bounds = fold_bounds(data.len(), cv.folds);
+        let preps: Vec<Prepared> = sub_specs(variant, n_max, vcfg)
+            .into_iter()
+            .map(|s| Prepared::new(s, data))
+            .collect();
+        let per_block: Vec<Vec<GramStats>> = bounds
+            .par_iter()
+            .map(|&(a, b)| {
+                let sums = preps
+                    .iter()
+                    .map(|prep| {
+                        let mid = a + (b - a) / 2;
+                        let (mut first, second) =
+                            rayon::join(|| prep.stats(data, a, mid), || prep.stats(data, mid, b));
+                        first.accumulate(&second, 1.0);
+                        first
+                    })
+                    .collect();
+                tick();
+                sums
+            })
+            .collect();
+        let blocks: Vec<Vec<GramStats>> = (0..preps.len())
+            .map(|s| per_block.iter().map(|b| b[s].clone()).collect())
+            .collect();
+        let totals = blocks
+            .iter()
+            .zip(&preps)
+            .map(|(bl, prep)| {
+                let mut t = GramStats::zeros(prep.library.len(), prep.spec.target_columns());
+                for b in bl {
+                    t.accumulate(b, 1.0);
+                }
+                t
+            })
+            .collect();
+        Self {
+            variant,
+            preps,
+            blocks,
+            totals,
+        }
+    }
+
+    /// The variant's submodels at history `n`.
+    fn at(&self, n: usize, vcfg: &VariantConfig) -> Vec<Nested> {
+        sub_specs(self.variant, n, vcfg)
+            .into_iter()
+            .zip(&self.preps)
+            .map(|(spec, longest)| {
+                let (prep, index) = longest.nested(spec);
+                Nested { prep, index }
+            })
+            .collect()
+    }
+}
+
+/// Runs the grid for one variant on its sums. `tick` is called once per (n, fold) done.
+pub fn cross_validate(
+    sums: &NestedSums,
     data: &Dataset,
     cv: &CvConfig,
     vcfg: &VariantConfig,
     tick: &(dyn Fn() + Sync),
 ) -> CvResult {
+    let variant = sums.variant;
     let mus = cv.mus();
     let bounds = fold_bounds(data.len(), cv.folds);
     let ostd = output_std(data);
     let per_n: Vec<Vec<GridPoint>> = history_range(variant, cv, vcfg)
         .into_par_iter()
-        .map(|n| grid_for_n(variant, n, data, cv, vcfg, &mus, &bounds, &ostd, tick))
+        .map(|n| grid_for_n(sums, n, data, cv, vcfg, &mus, &bounds, &ostd, tick))
         .collect();
     let points: Vec<GridPoint> = per_n.into_iter().flatten().collect();
     // The paper's model is chosen by the paper's rule, the lowest score.
@@ -232,7 +324,7 @@ pub fn select(points: &[GridPoint], tolerance: f64) -> usize {
 
 #[allow(clippy::too_many_arguments)]
 fn grid_for_n(
-    variant: Variant,
+    sums: &NestedSums,
     n: usize,
     data: &Dataset,
     cv: &CvConfig,
@@ -242,30 +334,18 @@ fn grid_for_n(
     ostd: &[f64; STATE_DIM],
     tick: &(dyn Fn() + Sync),
 ) -> Vec<GridPoint> {
-    let preps: Vec<Prepared> = sub_specs(variant, n, vcfg)
-        .into_iter()
-        .map(|s| Prepared::new(s, data))
-        .collect();
-    // Block sums once; a training set is the total minus its test block.
-    let blocks: Vec<Vec<GramStats>> = preps
+    let nested = sums.at(n, vcfg);
+    let preps: Vec<&Prepared> = nested.iter().map(|s| &s.prep).collect();
+    // A training set is the total minus its test block.
+    let blocks: Vec<Vec<GramStats>> = nested
         .iter()
-        .map(|prep| {
-            bounds
-                .iter()
-                .map(|&(a, b)| prep.stats(data, a, b))
-                .collect()
-        })
+        .zip(&sums.blocks)
+        .map(|(s, bl)| bl.iter().map(|b| b.select(&s.index)).collect())
         .collect();
-    let totals: Vec<GramStats> = blocks
+    let totals: Vec<GramStats> = nested
         .iter()
-        .zip(&preps)
-        .map(|(bl, prep)| {
-            let mut t = GramStats::zeros(prep.library.len(), prep.spec.target_columns());
-            for b in bl {
-                t.accumulate(b, 1.0);
-            }
-            t
-        })
+        .zip(&sums.totals)
+        .map(|(s, t)| t.select(&s.index))
         .collect();
     let m = mus.len();
     let folds = bounds.len() as f64;
@@ -370,7 +450,7 @@ pub fn free_run_rmse(
 
 /// Fits the chosen (n, mu) on all the data.
 pub fn fit_final(
-    variant: Variant,
+    sums: &NestedSums,
     n: usize,
     mu: f64,
     data: &Dataset,
@@ -380,13 +460,14 @@ pub fn fit_final(
     // Walk the grid's path down to mu for the warm start, then mu itself.
     let mut mus: Vec<f64> = cv.mus().into_iter().filter(|m| *m > mu).collect();
     mus.push(mu);
-    let subs = sub_specs(variant, n, vcfg)
+    let subs = sums
+        .at(n, vcfg)
         .into_iter()
-        .map(|s| {
-            let prep = Prepared::new(s, data);
-            let stats = prep.stats(data, 0, data.len());
-            let path = fit_path(&prep, &stats, &mus, &cv.lasso());
-            prep.submodel(path.coefs.last().map_or(&[][..], |c| &c[..]))
+        .zip(&sums.totals)
+        .map(|(s, total)| {
+            let path = fit_path(&s.prep, &total.select(&s.index), &mus, &cv.lasso());
+            s.prep
+                .submodel(path.coefs.last().map_or(&[][..], |c| &c[..]))
         })
         .collect();
     assemble(data, subs)
@@ -434,6 +515,84 @@ mod tests {
             active_terms,
             score,
             unconverged: 0,
+        }
+    }
+
+    /// A short recording of the `ideal` model with the valve filter tracked.
+    fn short_dataset() -> (Dataset, VariantConfig) {
+        use crate::config::PropulsionConfig;
+        use crate::propulsion::ideal::IdealPropulsion;
+        use crate::surrogate::runtime::predictor::tests::TEST_VALVE;
+        use crate::surrogate::training::excitation::ExcitationConfig;
+        let ex = ExcitationConfig {
+            levels: 1,
+            sphere_duration_s: 1.0,
+            steps: 1,
+            ramps: 1,
+            switches: 2,
+            ..Default::default()
+        }
+        .generate(10_000_000);
+        let mut m = IdealPropulsion::new(&PropulsionConfig::default());
+        let data = Dataset::record(&mut m, &ex, || {}).with_valves(Some(TEST_VALVE));
+        let vcfg = VariantConfig {
+            paper_degree: 2,
+            engine_stop_steps: 3,
+            engine_phase_degree: 3,
+            engine_command_sum: true,
+            engine_valve: Some(TEST_VALVE),
+            engine_valve_sum: true,
+            ..VariantConfig::default()
+        };
+        (data, vcfg)
+    }
+
+    #[test]
+    fn a_shorter_history_is_a_selection_of_the_longest() {
+        let (data, vcfg) = short_dataset();
+        for variant in [Variant::Paper, Variant::SharedEngine] {
+            for (s, spec) in sub_specs(variant, 4, &vcfg).into_iter().enumerate() {
+                let longest = Prepared::new(spec, &data);
+                let sums = longest.stats(&data, 0, data.len());
+                for n in 1..=4 {
+                    let spec = sub_specs(variant, n, &vcfg).swap_remove(s);
+                    let direct = Prepared::new(spec.clone(), &data);
+                    let (nested, index) = longest.nested(spec);
+                    assert_eq!(nested.library, direct.library);
+                    assert_eq!(
+                        (
+                            &nested.mean,
+                            &nested.std,
+                            &nested.lo,
+                            &nested.hi,
+                            &nested.y_shift
+                        ),
+                        (
+                            &direct.mean,
+                            &direct.std,
+                            &direct.lo,
+                            &direct.hi,
+                            &direct.y_shift
+                        ),
+                        "{variant:?} submodel {s} n = {n}: scaling"
+                    );
+                    let want = direct.stats(&data, 0, data.len());
+                    let got = sums.select(&index);
+                    let scale = want.xtx.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+                    for (a, b) in got
+                        .xtx
+                        .iter()
+                        .zip(&want.xtx)
+                        .chain(got.xty.iter().zip(&want.xty))
+                    {
+                        assert!(
+                            (a - b).abs() <= 1e-12 * scale,
+                            "{variant:?} n = {n}: {a} vs {b}"
+                        );
+                    }
+                    assert_eq!(got.n, want.n);
+                }
+            }
         }
     }
 

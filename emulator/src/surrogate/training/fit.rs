@@ -7,7 +7,7 @@ use super::derive::ValveSpec;
 use super::lasso::{lasso_gram, GramStats, LassoSettings, LassoWorkspace, Standardised};
 use super::library::Library;
 use crate::surrogate::runtime::features::{FeatureSpec, Layout, STATE_DIM, STATE_NAMES};
-use crate::surrogate::runtime::model::{active_terms_of, Model, OutputRow, Submodel, Target};
+use crate::surrogate::runtime::model::{active_terms_of, Model, OutputRow, Submodel, Target, Term};
 use crate::surrogate::runtime::valve::ValveFilter;
 use oils_shared::ENGINE_COUNT;
 use serde::{Deserialize, Serialize};
@@ -299,6 +299,18 @@ impl Prepared {
 
     /// Design rows (library terms, row-major) and shifted targets for steps `a..b`.
     pub fn block(&self, data: &Dataset, a: usize, b: usize) -> (Vec<f64>, Vec<f64>) {
+        let order: Vec<usize> = (0..self.library.len()).collect();
+        self.block_in(data, a, b, &order)
+    }
+
+    /// [`Prepared::block`] with the terms in the order `order` (a permutation).
+    fn block_in(
+        &self,
+        data: &Dataset,
+        a: usize,
+        b: usize,
+        order: &[usize],
+    ) -> (Vec<f64>, Vec<f64>) {
         let fs = self.spec.features;
         let dim = fs.dim();
         let p = self.library.len();
@@ -307,6 +319,7 @@ impl Prepared {
         let mut xs = vec![0.0; rows * p];
         let mut ys = vec![0.0; rows * cols];
         let mut x = vec![1.0; dim + 1];
+        let mut terms = vec![0.0; p];
         let mut r = 0;
         for t in a..b {
             for e in 0..self.spec.evaluations() {
@@ -314,7 +327,10 @@ impl Prepared {
                 for j in 0..dim {
                     x[j] = (x[j] - self.mean[j]) / self.std[j];
                 }
-                self.library.eval(&x, &mut xs[r * p..(r + 1) * p]);
+                self.library.eval(&x, &mut terms);
+                for (v, &k) in xs[r * p..(r + 1) * p].iter_mut().zip(order) {
+                    *v = terms[k];
+                }
                 let y = &mut ys[r * cols..(r + 1) * cols];
                 targets(&self.spec, data, t, e, y);
                 for (v, s) in y.iter_mut().zip(&self.y_shift) {
@@ -326,21 +342,108 @@ impl Prepared {
         (xs, ys)
     }
 
+    /// The terms with no phase or ignition factor (in library order), then those with one,
+    /// which are zero outside a start or a stop; and how many come first.
+    fn sparse_last(&self) -> (Vec<usize>, usize) {
+        let roles = self.spec.features.roles();
+        let sparse = |k: usize| {
+            self.library.terms[k]
+                .iter()
+                .any(|&f| roles.get(f as usize).is_some_and(|r| r.phase))
+        };
+        let p = self.library.len();
+        let mut order: Vec<usize> = (0..p).filter(|&k| !sparse(k)).collect();
+        let dense = order.len();
+        order.extend((0..p).filter(|&k| sparse(k)));
+        (order, dense)
+    }
+
     /// Gram sums of steps `a..b`, built in chunks so the design never has to fit in
     /// memory whole.
     pub fn stats(&self, data: &Dataset, a: usize, b: usize) -> GramStats {
-        const CHUNK_STEPS: usize = 2048;
+        const CHUNK_STEPS: usize = 1024;
         let p = self.library.len();
         let cols = self.spec.target_columns();
+        let (order, dense) = self.sparse_last();
         let mut total = GramStats::zeros(p, cols);
         let mut start = a;
         while start < b {
             let end = (start + CHUNK_STEPS).min(b);
-            let (xs, ys) = self.block(data, start, end);
-            total.accumulate(&GramStats::from_block(&xs, &ys, p, cols), 1.0);
+            let (xs, ys) = self.block_in(data, start, end, &order);
+            total.add_rows(&xs, &ys, dense);
             start = end;
         }
-        total
+        total.mirror();
+        // Back to library order.
+        let mut position = vec![0; p];
+        for (i, &k) in order.iter().enumerate() {
+            position[k] = i;
+        }
+        total.select(&position)
+    }
+
+    /// The same submodel at a shorter history, `spec`, taken from this one: its features
+    /// are a subset of these (the first lags of the same signals; found by name), scaled
+    /// alike, so its library is a subset of this library. Returns it and, for each of its
+    /// terms, the index of the same term here (for [`GramStats::select`]).
+    pub fn nested(&self, spec: SubSpec) -> (Self, Vec<usize>) {
+        let here = &self.spec;
+        assert!(
+            spec.degree == here.degree
+                && spec.phi == here.phi
+                && spec.target == here.target
+                && spec.outputs == here.outputs
+                && spec.penalty == here.penalty
+                && spec.features.history <= here.features.history,
+            "not a shorter history of the same submodel"
+        );
+        let fs = spec.features;
+        let names = self.spec.features.names();
+        let feature: Vec<usize> = fs
+            .names()
+            .iter()
+            .map(|n| {
+                names
+                    .iter()
+                    .position(|m| m == n)
+                    .unwrap_or_else(|| panic!("feature {n} not in the longer history"))
+            })
+            .collect();
+        let library = match spec.phi {
+            Phi::Products => Library::new(fs.dim(), spec.degree, &fs.roles(), fs.phase_degree),
+            Phi::Powers => Library::powers(fs.dim(), spec.degree, &fs.roles()),
+        };
+        let here_term: std::collections::BTreeMap<Term, usize> = self
+            .library
+            .terms
+            .iter()
+            .enumerate()
+            .map(|(k, t)| (*t, k))
+            .collect();
+        let (one, here_one) = (fs.dim(), self.spec.features.dim());
+        let index = library
+            .terms
+            .iter()
+            .map(|t| {
+                let mut u = t.map(|f| {
+                    let f = f as usize;
+                    (if f == one { here_one } else { feature[f] }) as u16
+                });
+                u.sort_unstable();
+                here_term[&u]
+            })
+            .collect();
+        let pick = |v: &[f64]| feature.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        let nested = Self {
+            library,
+            mean: pick(&self.mean),
+            std: pick(&self.std),
+            lo: pick(&self.lo),
+            hi: pick(&self.hi),
+            y_shift: self.y_shift.clone(),
+            spec,
+        };
+        (nested, index)
     }
 
     /// A submodel from raw-term coefficients (one vector and intercept per column).

@@ -26,7 +26,23 @@
 //! `mu_paper = N * mu` (N training rows).
 
 use super::cholesky::ActiveCholesky;
-use matrixmultiply::dgemm;
+use nalgebra::{Dyn, MatrixView, MatrixViewMut};
+
+/// A view of a slice with any strides.
+type Strided<'a> = MatrixView<'a, f64, Dyn, Dyn, Dyn, Dyn>;
+/// A mutable view of a slice with any strides.
+type StridedMut<'a> = MatrixViewMut<'a, f64, Dyn, Dyn, Dyn, Dyn>;
+
+/// Columns `j0..j0 + w` of the first `r` rows of a row-major matrix with row stride
+/// `stride`, as an r x w view.
+fn cols(x: &[f64], j0: usize, w: usize, r: usize, stride: usize) -> Strided<'_> {
+    Strided::from_slice_with_strides(&x[j0..], r, w, stride, 1)
+}
+
+/// The transpose of [`cols`], a w x r view.
+fn cols_t(x: &[f64], j0: usize, w: usize, r: usize, stride: usize) -> Strided<'_> {
+    Strided::from_slice_with_strides(&x[j0..], w, r, 1, stride)
+}
 
 /// Stopping and iteration limits.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -433,58 +449,138 @@ impl GramStats {
     /// Sums of a block of rows: `x` is rows x p and `y` rows x outputs, both row-major and
     /// already shifted.
     pub fn from_block(x: &[f64], y: &[f64], p: usize, outputs: usize) -> Self {
-        let rows = x.len() / p.max(1);
+        Self::from_block_split(x, y, p, outputs, p)
+    }
+
+    /// [`GramStats::from_block`] for a design whose columns from `dense` on are zero in
+    /// most rows (see [`GramStats::add_rows`]).
+    pub fn from_block_split(x: &[f64], y: &[f64], p: usize, outputs: usize, dense: usize) -> Self {
         let mut s = Self::zeros(p, outputs);
-        s.n = rows as f64;
-        let p_i = p as isize;
-        let o_i = outputs as isize;
-        // SAFETY: dimensions and strides describe exactly the slices passed.
-        unsafe {
-            // X' X: A = X' (p x rows), B = X (rows x p).
-            dgemm(
-                p,
-                rows,
-                p,
+        s.add_rows(x, y, dense);
+        s.mirror();
+        s
+    }
+
+    /// Adds a block of rows (`x` rows x p, `y` rows x outputs, row-major, shifted) to the
+    /// sums, but only to one triangle of `xtx`: call [`GramStats::mirror`] once all rows
+    /// are in. The columns from `dense` on are zero in most rows (the terms of the phase
+    /// and ignition features, zero outside a start or a stop): their products are taken
+    /// over the rows where one of them is not, the rest over every row, in panels.
+    pub fn add_rows(&mut self, x: &[f64], y: &[f64], dense: usize) {
+        /// Panel width of the dense product.
+        const PANEL: usize = 256;
+        let (p, outputs) = (self.p, self.outputs);
+        let rows = x.len() / p.max(1);
+        assert!(dense <= p && x.len() == rows * p && y.len() == rows * outputs);
+        self.n += rows as f64;
+        if rows == 0 || p == 0 {
+            return;
+        }
+        // Column-major views of the row-major buffers: `xtx` as such is its transpose,
+        // which does not matter once mirrored.
+        let mut xtx = StridedMut::from_slice_with_strides_mut(&mut self.xtx, p, p, 1, p);
+        let mut xty =
+            StridedMut::from_slice_with_strides_mut(&mut self.xty, p, outputs, outputs, 1);
+        for i0 in (0..dense).step_by(PANEL) {
+            let bi = PANEL.min(dense - i0);
+            let a = cols_t(x, i0, bi, rows, p);
+            for j0 in (i0..dense).step_by(PANEL) {
+                let bj = PANEL.min(dense - j0);
+                xtx.view_mut((i0, j0), (bi, bj))
+                    .gemm(1.0, &a, &cols(x, j0, bj, rows, p), 1.0);
+            }
+            xty.view_mut((i0, 0), (bi, outputs)).gemm(
                 1.0,
-                x.as_ptr(),
-                1,
-                p_i,
-                x.as_ptr(),
-                p_i,
-                1,
-                0.0,
-                s.xtx.as_mut_ptr(),
-                p_i,
-                1,
-            );
-            dgemm(
-                p,
-                rows,
-                outputs,
+                &a,
+                &cols(y, 0, outputs, rows, outputs),
                 1.0,
-                x.as_ptr(),
-                1,
-                p_i,
-                y.as_ptr(),
-                o_i,
-                1,
-                0.0,
-                s.xty.as_mut_ptr(),
-                o_i,
-                1,
             );
         }
         for r in 0..rows {
-            for (a, v) in s.sum_x.iter_mut().zip(&x[r * p..(r + 1) * p]) {
+            for (a, v) in self.sum_x[..dense].iter_mut().zip(&x[r * p..r * p + dense]) {
                 *a += v;
             }
             for o in 0..outputs {
                 let v = y[r * outputs + o];
-                s.sum_y[o] += v;
-                s.yty[o] += v * v;
+                self.sum_y[o] += v;
+                self.yty[o] += v * v;
             }
         }
-        s
+        if dense == p {
+            return;
+        }
+        // The rows where a sparse column is not zero, gathered.
+        let mut xs = Vec::new();
+        let mut ys = Vec::new();
+        for r in 0..rows {
+            let row = &x[r * p..(r + 1) * p];
+            if row[dense..].iter().any(|v| *v != 0.0) {
+                xs.extend_from_slice(row);
+                ys.extend_from_slice(&y[r * outputs..(r + 1) * outputs]);
+            }
+        }
+        let k = xs.len() / p;
+        if k == 0 {
+            return;
+        }
+        let w = p - dense;
+        xtx.view_mut((0, dense), (p, w)).gemm(
+            1.0,
+            &cols_t(&xs, 0, p, k, p),
+            &cols(&xs, dense, w, k, p),
+            1.0,
+        );
+        xty.view_mut((dense, 0), (w, outputs)).gemm(
+            1.0,
+            &cols_t(&xs, dense, w, k, p),
+            &cols(&ys, 0, outputs, k, outputs),
+            1.0,
+        );
+        for r in 0..k {
+            for (a, v) in self.sum_x[dense..]
+                .iter_mut()
+                .zip(&xs[r * p + dense..(r + 1) * p])
+            {
+                *a += v;
+            }
+        }
+    }
+
+    /// Completes `xtx` from the triangle [`GramStats::add_rows`] fills.
+    pub fn mirror(&mut self) {
+        let p = self.p;
+        // Row-major, the filled triangle is the lower one (j <= i).
+        for i in 0..p {
+            for j in i + 1..p {
+                self.xtx[i * p + j] = self.xtx[j * p + i];
+            }
+        }
+    }
+
+    /// The sums of the terms at `index` (in that order): the sums of a library that is a
+    /// subset of this one.
+    pub fn select(&self, index: &[usize]) -> Self {
+        let (p, o) = (self.p, self.outputs);
+        let q = index.len();
+        let mut xtx = vec![0.0; q * q];
+        for (a, &i) in index.iter().enumerate() {
+            for (b, &j) in index.iter().enumerate() {
+                xtx[a * q + b] = self.xtx[i * p + j];
+            }
+        }
+        Self {
+            p: q,
+            outputs: o,
+            n: self.n,
+            sum_x: index.iter().map(|&i| self.sum_x[i]).collect(),
+            sum_y: self.sum_y.clone(),
+            xtx,
+            xty: index
+                .iter()
+                .flat_map(|&i| self.xty[i * o..(i + 1) * o].iter().copied())
+                .collect(),
+            yty: self.yty.clone(),
+        }
     }
 
     /// Adds (`sign` = 1) or removes (`sign` = -1) another block's sums.
@@ -846,6 +942,74 @@ mod tests {
         );
         // ... and the active-set answer is the better one.
         assert!(objective(&prob, l1, &w) < objective(&prob, l1, &w_cd));
+    }
+
+    /// Sums by their definition, one row at a time.
+    fn naive(x: &[f64], y: &[f64], p: usize, o: usize) -> GramStats {
+        let mut s = GramStats::zeros(p, o);
+        for (r, row) in x.chunks(p).enumerate() {
+            s.n += 1.0;
+            for i in 0..p {
+                s.sum_x[i] += row[i];
+                for j in 0..p {
+                    s.xtx[i * p + j] += row[i] * row[j];
+                }
+                for c in 0..o {
+                    s.xty[i * o + c] += row[i] * y[r * o + c];
+                }
+            }
+            for c in 0..o {
+                s.sum_y[c] += y[r * o + c];
+                s.yty[c] += y[r * o + c] * y[r * o + c];
+            }
+        }
+        s
+    }
+
+    fn assert_close(a: &GramStats, b: &GramStats) {
+        assert_eq!((a.p, a.outputs, a.n), (b.p, b.outputs, b.n));
+        let pairs = [
+            (&a.sum_x, &b.sum_x),
+            (&a.sum_y, &b.sum_y),
+            (&a.xtx, &b.xtx),
+            (&a.xty, &b.xty),
+            (&a.yty, &b.yty),
+        ];
+        for (u, v) in pairs {
+            assert_eq!(u.len(), v.len());
+            for (x, y) in u.iter().zip(v.iter()) {
+                assert!((x - y).abs() <= 1e-12 * (1.0 + x.abs()), "{x} vs {y}");
+            }
+        }
+    }
+
+    #[test]
+    fn split_panelled_sums_are_the_sums() {
+        // 600 dense columns (three panels, the last partial) and 20 sparse ones that are
+        // zero but in every 37th row; two outputs.
+        let (p, dense, o, rows) = (620, 600, 2, 300);
+        let mut x = vec![0.0; rows * p];
+        let mut y = vec![0.0; rows * o];
+        for r in 0..rows {
+            for j in 0..p {
+                if j < dense || r % 37 == 0 {
+                    x[r * p + j] = ((r * 31 + j * 17) % 101) as f64 / 50.0 - 1.0;
+                }
+            }
+            for c in 0..o {
+                y[r * o + c] = ((r * 7 + c) % 13) as f64 - 6.0;
+            }
+        }
+        let want = naive(&x, &y, p, o);
+        assert_close(&GramStats::from_block_split(&x, &y, p, o, dense), &want);
+        assert_close(&GramStats::from_block(&x, &y, p, o), &want);
+        // A selection is the sums of the selected columns.
+        let index = [617, 3, 256, 599, 600, 42];
+        let sub: Vec<f64> = (0..rows)
+            .flat_map(|r| index.iter().map(move |&j| (r, j)))
+            .map(|(r, j)| x[r * p + j])
+            .collect();
+        assert_close(&want.select(&index), &naive(&sub, &y, index.len(), o));
     }
 
     #[test]

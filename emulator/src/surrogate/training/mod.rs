@@ -25,7 +25,7 @@ use crate::config::PropulsionConfig;
 use crate::propulsion::hifi::HifiParams;
 use crate::propulsion::{Propulsion, PropulsionKind};
 use crate::surrogate::runtime::model_file::{self, ModelFile, Provenance, Selection};
-use cv::{cross_validate, fit_final, CvConfig, CvResult};
+use cv::{cross_validate, fit_final, CvConfig, CvResult, NestedSums};
 use dataset::Dataset;
 use excitation::{Excitation, ExcitationConfig};
 use fit::{Variant, VariantConfig};
@@ -268,10 +268,18 @@ pub fn train_configured(
             .unwrap_or_else(|e| unreachable!("built once already: {e}"))
     };
     let info = ReferenceInfo::new(cfg.reference, &cfg.propulsion, &hifi);
-    progress.begin("derive", 1);
-    let (resolved, clock_fit) = cfg.resolve(Some(&hifi))?;
+    cfg.validate()?;
+    // What is derived from hifi (the valve's stroke table and the ignition clock) and the
+    // training data do not depend on each other: both at once.
+    let excitation = cfg.excitation.generate(cfg.sample_time_ns);
+    progress.begin("data, derive", excitation.inputs.len() as u64);
+    let (resolved, recorded) = rayon::join(
+        || cfg.resolve(Some(&hifi)),
+        || Dataset::record(factory().as_mut(), &excitation, || progress.tick()),
+    );
     progress.finish();
-    let mut outcome = train(&resolved, &factory, &info, progress)?;
+    let (resolved, clock_fit) = resolved?;
+    let mut outcome = train_recorded(&resolved, excitation, recorded, &factory, &info, progress)?;
     outcome.clock_fit = clock_fit;
     Ok(outcome)
 }
@@ -334,28 +342,43 @@ pub fn train(
     let excitation = cfg.excitation.generate(cfg.sample_time_ns);
     let mut model = reference();
     progress.begin("data", excitation.inputs.len() as u64);
-    let dataset = Dataset::record(model.as_mut(), &excitation, || progress.tick())
-        .with_valves(cfg.variants.engine_valve);
+    let recorded = Dataset::record(model.as_mut(), &excitation, || progress.tick());
     progress.finish();
+    train_recorded(cfg, excitation, recorded, reference, info, progress)
+}
+
+/// [`train`] from the data recorded from `reference` with `excitation` (its valve
+/// filter not yet tracked), with a resolved configuration.
+fn train_recorded(
+    cfg: &TrainConfig,
+    excitation: Excitation,
+    recorded: Dataset,
+    reference: &dyn Fn() -> Box<dyn Propulsion>,
+    info: &ReferenceInfo,
+    progress: &dyn Progress,
+) -> Result<TrainOutcome, TrainConfigError> {
+    let dataset = recorded.with_valves(cfg.variants.engine_valve);
     let initial_output = model_file::ReferenceOutput::of(&reference().output());
     let mut results = Vec::new();
     let mut models = Vec::new();
     for &variant in &cfg.train_variants {
-        let span = cv::history_range(variant, &cfg.cv, &cfg.variants).count() * cfg.cv.folds;
-        progress.begin(&format!("cv {}", variant.as_str()), span as u64);
-        let res = cross_validate(variant, &dataset, &cfg.cv, &cfg.variants, &|| {
-            progress.tick()
-        });
-        progress.finish();
-        let chosen = res.chosen().clone();
-        let fitted = fit_final(
+        let range = cv::history_range(variant, &cfg.cv, &cfg.variants);
+        progress.begin(&format!("sums {}", variant.as_str()), cfg.cv.folds as u64);
+        let sums = NestedSums::new(
             variant,
-            chosen.n,
-            chosen.mu,
+            *range.end(),
             &dataset,
             &cfg.cv,
             &cfg.variants,
+            &|| progress.tick(),
         );
+        progress.finish();
+        let span = range.count() * cfg.cv.folds;
+        progress.begin(&format!("cv {}", variant.as_str()), span as u64);
+        let res = cross_validate(&sums, &dataset, &cfg.cv, &cfg.variants, &|| progress.tick());
+        progress.finish();
+        let chosen = res.chosen().clone();
+        let fitted = fit_final(&sums, chosen.n, chosen.mu, &dataset, &cfg.cv, &cfg.variants);
         models.push(ModelFile::new(
             variant,
             fitted,
