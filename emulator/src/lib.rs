@@ -10,6 +10,7 @@
 //! loop), [`timing`], [`digest`], [`recorder`], [`report`], and [`session`] (one run,
 //! from a `RunConfig` to a report).
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod campaign;
 pub mod clock;
