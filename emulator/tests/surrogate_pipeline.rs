@@ -27,6 +27,25 @@ fn committed_config() -> TrainConfig {
 fn retrain_reproduces_committed_model() {
     let cfg = committed_config();
     let outcome = train_configured(&cfg, &Quiet).unwrap();
+    // Cross-validation over the whole [cv] grid for every variant, and its choice of
+    // penalty inside the grid: at an end, the grid would have cut the search short.
+    for res in &outcome.cv {
+        let searched: std::collections::BTreeSet<usize> = res.points.iter().map(|p| p.n).collect();
+        assert_eq!(
+            searched,
+            cfg.cv.histories().collect(),
+            "{:?}: history lengths searched",
+            res.variant
+        );
+        assert!(
+            !res.mu_at_grid_end(),
+            "{:?}: the chosen mu {} is at an end of the grid {}..{}",
+            res.variant,
+            res.chosen().mu,
+            cfg.cv.mu_min,
+            cfg.cv.mu_max
+        );
+    }
     let fresh = outcome.deployed_model().to_json();
     let committed = std::fs::read_to_string(root().join("models/surrogate-default.json")).unwrap();
     assert!(

@@ -33,7 +33,7 @@ pub struct CvConfig {
     pub mu_count: usize,
     /// Lasso duality-gap tolerance (scikit-learn's `tol`).
     pub tol: f64,
-    /// Lasso sweep limit.
+    /// Lasso active-set iterations at most per fit.
     pub max_iter: usize,
     /// Parsimony, beyond-paper variants only: choose the grid point with the fewest
     /// active coefficients among those whose score is within this fraction of the best
@@ -52,7 +52,7 @@ impl Default for CvConfig {
             mu_max: 1.0,
             mu_count: 11,
             tol: 1e-4,
-            max_iter: 2000,
+            max_iter: 10_000,
             score_tolerance: 0.0,
         }
     }
@@ -81,6 +81,12 @@ impl CvConfig {
             return Err("cv: need 0 <= score_tolerance <= 1".into());
         }
         Ok(())
+    }
+
+    /// The history lengths searched, for every variant (the paper's n = 1..10 by
+    /// default).
+    pub fn histories(&self) -> std::ops::RangeInclusive<usize> {
+        self.history_min..=self.history_max
     }
 
     /// The penalties, largest first.
@@ -116,7 +122,7 @@ pub struct GridPoint {
     pub active_terms: f64,
     /// Selection score: mean over outputs of free-run RMSE / output standard deviation.
     pub score: f64,
-    /// Lasso fits that hit the sweep limit.
+    /// Lasso fits whose duality gap ended above the tolerance.
     pub unconverged: usize,
 }
 
@@ -144,6 +150,19 @@ impl CvResult {
     pub fn chosen(&self) -> &GridPoint {
         &self.points[self.best]
     }
+
+    /// The chosen penalty is the grid's largest or smallest: the score may fall further
+    /// beyond it, and the grid should be widened.
+    pub fn mu_at_grid_end(&self) -> bool {
+        let mu = self.chosen().mu;
+        let (lo, hi) = self
+            .points
+            .iter()
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), p| {
+                (lo.min(p.mu), hi.max(p.mu))
+            });
+        mu <= lo || mu >= hi
+    }
 }
 
 /// Contiguous fold boundaries over `len` steps.
@@ -161,23 +180,6 @@ pub fn output_std(data: &Dataset) -> [f64; STATE_DIM] {
         let v = data.states.iter().map(|s| (s[o] - m).powi(2)).sum::<f64>() / n;
         v.sqrt().max(1e-12)
     })
-}
-
-/// History lengths searched for a variant: the `[cv]` range, capped for the shared-engine
-/// variant by `engine_history_max` (its step cost grows with `n`; the paper variant
-/// always searches the whole range, as the paper does).
-pub fn history_range(
-    variant: Variant,
-    cv: &CvConfig,
-    vcfg: &VariantConfig,
-) -> std::ops::RangeInclusive<usize> {
-    let hi = match variant {
-        Variant::SharedEngine if vcfg.engine_history_max > 0 => {
-            cv.history_max.min(vcfg.engine_history_max)
-        }
-        _ => cv.history_max,
-    };
-    cv.history_min..=hi
 }
 
 /// The Gram sums cross-validation and the final fit take every history length's from:
@@ -283,7 +285,8 @@ pub fn cross_validate(
     let mus = cv.mus();
     let bounds = fold_bounds(data.len(), cv.folds);
     let ostd = output_std(data);
-    let per_n: Vec<Vec<GridPoint>> = history_range(variant, cv, vcfg)
+    let per_n: Vec<Vec<GridPoint>> = cv
+        .histories()
         .into_par_iter()
         .map(|n| grid_for_n(sums, n, data, cv, vcfg, &mus, &bounds, &ostd, tick))
         .collect();
@@ -594,6 +597,22 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_penalty_at_either_end_of_the_grid_is_told() {
+        let at = |mu: f64| GridPoint {
+            mu,
+            ..point(1.0, 1.0)
+        };
+        let result = |best: usize| CvResult {
+            variant: Variant::Paper,
+            points: vec![at(1.0), at(1e-3), at(1e-6), at(1.0), at(1e-3), at(1e-6)],
+            best,
+        };
+        assert!(result(0).mu_at_grid_end() && result(3).mu_at_grid_end());
+        assert!(result(2).mu_at_grid_end() && result(5).mu_at_grid_end());
+        assert!(!result(1).mu_at_grid_end() && !result(4).mu_at_grid_end());
     }
 
     #[test]

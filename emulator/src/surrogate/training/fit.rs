@@ -76,10 +76,6 @@ pub struct VariantConfig {
     /// changed over the last steps, `dT_vsum[t..t-n]` (see [`FeatureSpec::valve_sum`]).
     /// Needs `engine_valve`.
     pub engine_valve_sum: bool,
-    /// Largest history length the shared-engine variant's cross-validation tries (0: the
-    /// `[cv]` range). Its degree-2 library grows with the square of `n`, and with it the
-    /// training's time.
-    pub engine_history_max: usize,
 }
 
 impl Default for VariantConfig {
@@ -99,7 +95,6 @@ impl Default for VariantConfig {
             engine_valve_spec: None,
             engine_valve: None,
             engine_valve_sum: false,
-            engine_history_max: 0,
         }
     }
 }
@@ -499,7 +494,7 @@ pub struct PathFit {
     /// `coefs[mu_index][column]` = (raw-term coefficients, intercept in shifted units
     /// plus shift, i.e. the real intercept).
     pub coefs: Vec<Vec<(Vec<f64>, f64)>>,
-    /// Per penalty: fits that hit the sweep limit before the gap rule was met.
+    /// Per penalty: fits whose duality gap ended above the tolerance.
     pub unconverged: Vec<usize>,
 }
 

@@ -58,7 +58,7 @@ impl Default for LassoSettings {
     fn default() -> Self {
         Self {
             tol: 1e-4,
-            max_iter: 1000,
+            max_iter: 10_000,
         }
     }
 }

@@ -125,12 +125,6 @@ impl TrainConfig {
                 )));
             }
         }
-        if v.engine_history_max != 0 && v.engine_history_max < self.cv.history_min {
-            return Err(e(format!(
-                "variants.engine_history_max = {}: must be 0 (the [cv] range) or at least cv.history_min",
-                v.engine_history_max
-            )));
-        }
         if let Some(f) = &v.engine_valve_spec {
             f.validate()
                 .map_err(|m| e(format!("variants.engine_valve: {m}")))?;
@@ -362,7 +356,7 @@ fn train_recorded(
     let mut results = Vec::new();
     let mut models = Vec::new();
     for &variant in &cfg.train_variants {
-        let range = cv::history_range(variant, &cfg.cv, &cfg.variants);
+        let range = cfg.cv.histories();
         progress.begin(&format!("sums {}", variant.as_str()), cfg.cv.folds as u64);
         let sums = NestedSums::new(
             variant,

@@ -159,6 +159,13 @@ pub fn summary(out: &TrainOutcome, top: usize) -> String {
             file.model.active_terms(),
             file.model.total_terms()
         );
+        if res.mu_at_grid_end() {
+            let _ = writeln!(
+                s,
+                "The chosen mu is at the end of the grid: the score may fall beyond it; \
+                 widen [cv] mu_min / mu_max.\n"
+            );
+        }
         let _ = writeln!(s, "free-run RMSE per output (CV):");
         for o in 0..STATE_DIM {
             let _ = writeln!(
