@@ -141,7 +141,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
                 &cfg.variants,
             );
             println!(
-                "lasso timing (paper model, n={}, mu={:e}, tol={:e}): Gram {:.4} s, coordinate descent (7 outputs, single penalty) {:.4} s",
+                "lasso timing (paper model, n={}, mu={:e}, tol={:e}): Gram {:.4} s, active-set Lasso (7 outputs, single penalty, from zero) {:.4} s",
                 paper.selection.history, paper.selection.mu, cfg.cv.tol, gram_s, fit_s
             );
         }

@@ -477,8 +477,8 @@ pub fn fit_final(
 }
 
 /// Wall-clock time of the final fit's two parts for one variant at (n, mu): building the
-/// Gram sums from the data, and coordinate descent from zero at `mu` alone (what
-/// scikit-learn's `Lasso(alpha=mu, precompute=True).fit` does). For the timing report
+/// Gram sums from the data, and the Lasso from zero at `mu` alone (the problem
+/// scikit-learn's `Lasso(alpha=mu, precompute=True).fit` solves). For the timing report
 /// only; nothing in a model reads the clock.
 pub fn time_final_fit(
     variant: Variant,
@@ -587,6 +587,9 @@ mod tests {
                         .iter()
                         .zip(&want.xtx)
                         .chain(got.xty.iter().zip(&want.xty))
+                        .chain(got.sum_x.iter().zip(&want.sum_x))
+                        .chain(got.sum_y.iter().zip(&want.sum_y))
+                        .chain(got.yty.iter().zip(&want.yty))
                     {
                         assert!(
                             (a - b).abs() <= 1e-12 * scale,
