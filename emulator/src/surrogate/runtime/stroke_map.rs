@@ -119,6 +119,12 @@ impl TryFrom<StrokeMapSpec> for StrokeMap {
             (points[r].0 - centre_n).powi(c as i32)
         });
         let b = nalgebra::DVector::from_fn(points.len(), |r, _| points[r].1);
+        // nalgebra's SVD panics on a non-finite entry rather than failing.
+        if !(a.iter().chain(b.iter()).all(|v| v.is_finite())) {
+            return Err(
+                "stroke map: its thrust range or full stroke is too large to fit its slope".into(),
+            );
+        }
         let q = a
             .svd(true, true)
             .solve(&b, 1e-12)
@@ -243,6 +249,13 @@ mod tests {
                 "positive",
             ),
             (spec(vec![0.1; 40]), "knots"),
+            (
+                StrokeMapSpec {
+                    step_n: 1e300,
+                    ..spec(vec![0.2, 0.3, 0.4])
+                },
+                "too large",
+            ),
         ] {
             let e = StrokeMap::try_from(s).unwrap_err();
             assert!(e.contains(want), "{e}");
