@@ -196,6 +196,30 @@ pub fn write_png(path: &Path, title: &str, panels: &[Panel]) -> Result<(), PlotE
     Ok(())
 }
 
+/// A tick's value in at most four significant digits: a log axis's ticks are powers of
+/// ten computed in floating point, which print as `9.999999999999999e-6` unrounded.
+fn tick_label(v: f64) -> String {
+    let a = v.abs();
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let trim = |s: String| {
+        if s.contains('.') {
+            s.trim_end_matches('0').trim_end_matches('.').to_string()
+        } else {
+            s
+        }
+    };
+    if (1e-3..1e5).contains(&a) {
+        let decimals = (3 - a.log10().floor() as i32).max(0) as usize;
+        trim(format!("{v:.decimals$}"))
+    } else {
+        let s = format!("{v:.3e}");
+        let (mantissa, exponent) = s.split_once('e').unwrap_or((&s, "0"));
+        format!("{}e{exponent}", trim(mantissa.to_string()))
+    }
+}
+
 fn draw_panel<DB, X, Y>(
     area: &DrawingArea<DB, plotters::coord::Shift>,
     panel: &Panel,
@@ -219,6 +243,8 @@ where
         .configure_mesh()
         .x_desc(panel.x_label)
         .y_desc(panel.y_label)
+        .x_label_formatter(&|v| tick_label(*v))
+        .y_label_formatter(&|v| tick_label(*v))
         .label_style((FONT_FAMILY, 15).into_font())
         .axis_desc_style((FONT_FAMILY, 16).into_font())
         .light_line_style(RGBColor(235, 235, 235))
@@ -251,6 +277,22 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tick_labels_are_rounded_to_four_significant_digits() {
+        for (v, want) in [
+            (9.999999999999999e-6, "1e-5"),
+            (3.1622776601683795e-7, "3.162e-7"),
+            (0.1 + 0.2, "0.3"),
+            (1500.0, "1500"),
+            (12.5, "12.5"),
+            (-0.25, "-0.25"),
+            (2.0e6, "2e6"),
+            (0.0, "0"),
+        ] {
+            assert_eq!(tick_label(v), want, "{v:e}");
+        }
+    }
 
     #[test]
     fn writes_a_png_with_linear_and_log_panels() {
