@@ -12,10 +12,9 @@
 //! The table is hifi's (commanded thrust to stroke at evenly spaced commands); the step
 //! path uses a quadratic in thrust fitted to its slopes (within 0.4 % of every
 //! segment's slope for hifi's table). Why not the table itself: the filter in stroke,
-//! with the command mapped to stroke and the valve mapped back every step, was measured
-//! at some 66 ns a step more (criterion: 256 against 189 ns; the lookups sit on the
-//! step's chain of dependent operations), against a 200 ns budget; a quadratic is two
-//! multiply-adds per engine.
+//! with the command mapped to stroke and the valve mapped back every step, puts two
+//! table lookups on the step's chain of dependent operations; a quadratic is two
+//! multiply-adds per engine, and the fitted model was trained with it.
 //!
 //! "Position newtons" are stroke fraction times `full_stroke_n`, the thrust a full stroke
 //! stands for: the filter's `rate_n_per_s` and `backlash_n` are in them. The slope is

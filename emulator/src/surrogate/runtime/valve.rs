@@ -504,8 +504,8 @@ impl ValveTrack {
         let clock_before_n = match &self.stroke {
             None => {
                 // The plain filter, written out rather than through `step_valve` with
-                // factors of 1 (the same operations and bits): through `step_valve` the
-                // bench step read 196-207 ns, written out 193 ns (interleaved runs).
+                // factors of 1: the same operations and bits, without multiplying by
+                // factors that are 1 on every step.
                 let before = s.valve_n;
                 let band = d.rate_per_s * d.tau_s;
                 let mut actuator = [0.0; ENGINE_COUNT];
@@ -547,7 +547,7 @@ impl ValveTrack {
                 // that is depends on the slope itself; the slope at the middle of the
                 // range sets it, which is close enough to place the middle and keeps
                 // one slope evaluation, not two, in the step's chain of dependent
-                // operations (measured: 8-11 ns a step less in the probe).
+                // operations.
                 let slope: [f64; ENGINE_COUNT] = std::array::from_fn(|e| {
                     let at = s.actuator_n[e];
                     let moved = (target_n[e] - at).max(-self.reach_n).min(self.reach_n);
