@@ -6,7 +6,6 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use oils_emulator::propulsion::PropulsionKind;
 use oils_emulator::run_config::{LinkKind, RunConfig};
-use oils_emulator::session;
 use std::sync::atomic::AtomicBool;
 
 fn descent(c: &mut Criterion) {
@@ -22,7 +21,8 @@ fn descent(c: &mut Criterion) {
         let stop = AtomicBool::new(false);
         group.bench_function(model.as_str(), |b| {
             b.iter(|| {
-                let r = session::run(&cfg, None, &stop, &mut |_| unreachable!()).unwrap();
+                let r =
+                    oils_lab::onboard::fly_in_process(&cfg, 1, &stop, Default::default()).unwrap();
                 assert_eq!(r.summary.outcome, oils_emulator::scheduler::Outcome::Landed);
                 r.summary.steps
             })

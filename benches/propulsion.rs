@@ -8,8 +8,8 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use oils_emulator::config::PropulsionConfig;
 use oils_emulator::propulsion::hifi::{HifiParams, HifiPropulsion};
 use oils_emulator::propulsion::ideal::IdealPropulsion;
+use oils_emulator::propulsion::surrogate::SurrogatePropulsion;
 use oils_emulator::propulsion::{EngineCommand, Propulsion};
-use oils_emulator::surrogate::runtime::SurrogatePropulsion;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 

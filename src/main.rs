@@ -6,7 +6,7 @@ mod cmd;
 
 use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
-use oils_onboard_stub::cli::{run_stub, StubArgs};
+use oils_onboard_stub::join::run_stub;
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -41,9 +41,9 @@ enum Cmd {
     /// all local cores or a Slurm cluster.
     #[command(subcommand)]
     Mc(cmd::mc::McCmd),
-    /// Run the onboard stub (what `oils run` spawns; also usable by hand).
-    #[command(hide = true)]
-    Stub(StubArgs),
+    /// Run the onboard stub: what `oils run` spawns; by hand, it joins a run started
+    /// with `oils run --no-stub`.
+    Stub(Box<cmd::stub::StubArgs>),
 }
 
 #[derive(clap::Args)]
@@ -102,14 +102,15 @@ fn real_main() -> anyhow::Result<()> {
         Cmd::Stub(a) => {
             let stop =
                 oils_shared::signals::termination_flag().context("installing signal handlers")?;
-            run_stub(&a, &stop).with_context(|| format!("onboard stub on run {}", a.run_id))?;
+            run_stub(&(&*a).into(), &stop)
+                .with_context(|| format!("onboard stub on run {}", a.run_id))?;
             Ok(())
         }
     }
 }
 
 fn export(a: &ExportArgs) -> anyhow::Result<()> {
-    let log = oils_emulator::mcap_log::read_any(&a.log)?;
+    let log = oils_lab::mcap_log::read_any(&a.log)?;
     if !log.damaged_records.is_empty() {
         // One record per step from step 0, so a record's position is its step.
         let shown: Vec<String> = log
@@ -152,7 +153,7 @@ fn export(a: &ExportArgs) -> anyhow::Result<()> {
     }
     if let Some(path) = &a.mcap {
         let started = std::time::Instant::now();
-        let stats = oils_emulator::mcap_log::export_mcap(&log, path)?;
+        let stats = oils_lab::mcap_log::export_mcap(&log, path)?;
         eprintln!(
             "oils export: {} records to {} ({:.1} MB) in {:.2} s{torn}",
             stats.records,

@@ -36,10 +36,9 @@ fn inproc_config(model: PropulsionKind) -> RunConfig {
 
 fn digest_in_process(cfg: &RunConfig) -> String {
     let stop = AtomicBool::new(false);
-    let report = session::run(cfg, None, &stop, &mut |_| {
-        unreachable!("no launch in process")
-    })
-    .expect("in-process run");
+    let report =
+        oils_lab::onboard::fly_in_process(cfg, session::fresh_run_id(), &stop, Default::default())
+            .expect("in-process run");
     report.summary.digest
 }
 

@@ -4,12 +4,12 @@
 //! obeys their rules.
 
 use oils_emulator::config::ScenarioConfig;
-use oils_emulator::mcap_log::{export_mcap, parse_mcap};
 use oils_emulator::propulsion::hifi::HifiParams;
+use oils_emulator::propulsion::surrogate::model_file::ModelFile;
+use oils_emulator::propulsion::surrogate::DEFAULT_MODEL_JSON;
 use oils_emulator::recorder::{parse_log, Record, Recorder};
 use oils_emulator::run_config::RunConfig;
-use oils_emulator::surrogate::runtime::model_file::ModelFile;
-use oils_emulator::surrogate::runtime::DEFAULT_MODEL_JSON;
+use oils_lab::mcap_log::{export_mcap, parse_mcap};
 use oils_shared::profile::{ThrustProfile, MAX_PROFILE_END_S, RATED_THRUST_N};
 use proptest::prelude::*;
 use std::path::Path;

@@ -6,8 +6,8 @@
 mod common;
 
 use common::{oils, report, run_oils, scratch, text};
-use oils_emulator::mcap_log::topic;
 use oils_emulator::recorder::{read_log, Log};
+use oils_lab::mcap_log::topic;
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -205,7 +205,7 @@ fn exported_mcap_holds_every_step_of_the_binary_log() {
         );
     }
     // Bit for bit through the oils reader: every record equal to the binary log's.
-    let back = oils_emulator::mcap_log::read_mcap(&out).unwrap();
+    let back = oils_lab::mcap_log::read_mcap(&out).unwrap();
     assert_eq!(back.header_json, log.header_json);
     assert_eq!(back.records.len(), n);
     for (k, (a, b)) in log.records.iter().zip(&back.records).enumerate() {

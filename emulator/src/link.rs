@@ -11,8 +11,7 @@
 //! Calls on the step path do not allocate.
 
 use crate::recorder::{Log, REC_COMMAND_RECEIVED, REC_END_OF_RUN};
-use oils_onboard_stub::fsw::FlightSoftware;
-use oils_onboard_stub::runner::answer;
+use oils_shared::fsw::{answer, FlightSoftware, FswFailure};
 use oils_shared::link::{EmulatorLink, LinkError, PeerPort};
 use oils_shared::{AsBytes, Command, Telemetry};
 use std::sync::atomic::AtomicBool;
@@ -25,7 +24,7 @@ pub enum ExchangeError {
     Link(#[from] LinkError),
     /// The in-process flight software reported a failed step.
     #[error("flight software: {0}")]
-    FlightSoftware(#[from] oils_onboard_stub::fsw::FswFailure),
+    FlightSoftware(#[from] FswFailure),
     /// A command came from another flight-software process than the one bound to the run.
     #[error(
         "flight software changed: the command for step {step} came from another process ({from}) than the one that joined the run ({bound}); the flight software restarted, or a second one joined. The run is bound to the process that joined it (--allow-reattach lets a new one take over)"

@@ -25,6 +25,7 @@ use crate::plant::{ActuatorCommand, TruthState};
 use crate::propulsion::{PropulsionInternals, PropulsionOutput};
 use crossbeam::channel::{bounded, Receiver, Sender, TrySendError};
 use oils_shared::{AsBytes, Command, Telemetry, ENGINE_COUNT};
+use serde::{Deserialize, Serialize};
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
 use std::path::{Path, PathBuf};
@@ -346,6 +347,69 @@ pub enum RecorderError {
     },
 }
 
+/// The format of a run's log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LogFormat {
+    /// OILSLOG3: fixed-size binary records with a CRC each (this module).
+    #[default]
+    Oilslog,
+    /// MCAP with JSON messages: opens in Foxglove. Written by a sink from the lab
+    /// (`oils_lab::mcap_log`), handed to the session as a [`SinkOpener`].
+    Mcap,
+}
+
+impl LogFormat {
+    /// The default; lets the configuration leave it out.
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// The format a log file name asks for: `.mcap` is MCAP, anything else OILSLOG3.
+    pub fn from_path(path: &std::path::Path) -> Self {
+        match path.extension().and_then(|e| e.to_str()) {
+            Some("mcap") => LogFormat::Mcap,
+            _ => LogFormat::Oilslog,
+        }
+    }
+
+    /// File extension of a log in this format.
+    pub fn extension(&self) -> &'static str {
+        match self {
+            LogFormat::Oilslog => "oilslog",
+            LogFormat::Mcap => "mcap",
+        }
+    }
+}
+
+impl std::str::FromStr for LogFormat {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "oilslog" => Ok(LogFormat::Oilslog),
+            "mcap" => Ok(LogFormat::Mcap),
+            other => Err(format!(
+                "unknown log format `{other}` (expected oilslog or mcap)"
+            )),
+        }
+    }
+}
+
+/// Opens a writer for a log format the core does not write itself (MCAP: the lab's
+/// `oils_lab::mcap_log::McapOpener`). The session calls it before tick 0 with the log's
+/// path and header; the sink then runs on the writer thread.
+pub trait SinkOpener {
+    /// The formats this opener writes.
+    fn writes(&self, format: LogFormat) -> bool;
+    /// Creates the file at `path` with `header_json` and returns its sink.
+    fn open(
+        &self,
+        format: LogFormat,
+        path: &Path,
+        header_json: &str,
+    ) -> Result<Box<dyn RecordSink>, RecorderError>;
+}
+
 /// Another format for the writer thread to write (the MCAP log): it gets every record,
 /// in order, on the writer thread, never on the stepping thread.
 pub trait RecordSink: Send {
@@ -392,7 +456,7 @@ impl Recorder {
     }
 
     /// Starts a writer thread that hands every record to `sink` (a format other than
-    /// OILSLOG3, e.g. [`crate::mcap_log::McapSink`]); same channel, same guarantees.
+    /// OILSLOG3, e.g. the lab's MCAP sink); same channel, same guarantees.
     pub fn with_sink(path: &Path, mut sink: Box<dyn RecordSink>) -> Result<Self, RecorderError> {
         let (tx, rx) = bounded::<Record>(CHANNEL_CAPACITY);
         let writer = std::thread::Builder::new()

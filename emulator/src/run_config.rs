@@ -11,7 +11,7 @@ use crate::propulsion::hifi::HifiParams;
 use crate::propulsion::PropulsionKind;
 use crate::scheduler::{MissPolicy, Mode};
 use crate::timing::TimingThresholds;
-use oils_onboard_stub::fsw::FswSpec;
+use oils_shared::fsw::FswSpec;
 use oils_shared::link::WaitStrategy;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -133,8 +133,8 @@ pub struct LogConfig {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub path: Option<PathBuf>,
     /// The log's format: `oilslog` (OILSLOG3, the default) or `mcap`.
-    #[serde(skip_serializing_if = "crate::mcap_log::LogFormat::is_default")]
-    pub format: crate::mcap_log::LogFormat,
+    #[serde(skip_serializing_if = "crate::recorder::LogFormat::is_default")]
+    pub format: crate::recorder::LogFormat,
 }
 
 impl Default for LogConfig {

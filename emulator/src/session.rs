@@ -1,21 +1,25 @@
 //! One bench run from a [`RunConfig`] to a [`RunReport`]: builds everything before
-//! tick 0 (plant, propulsion, log, link, flight software), runs the scheduler over the
-//! configured link and clock, and closes the log. Also replays a recorded log through
-//! the same loop. No command-line types here: binaries build the `RunConfig`.
+//! tick 0 (plant, propulsion, log, link), runs the scheduler over the configured link
+//! and clock, and closes the log. Also replays a recorded log through the same loop.
+//!
+//! The flight software comes in as a value ([`Onboard`]): one built by the caller and
+//! called in this thread, or a peer process the caller starts once the run's services
+//! exist. No command-line types here, and nothing of the lab: binaries build the
+//! `RunConfig` and the flight software, and hand in a [`SinkOpener`] for log formats
+//! the core does not write itself.
 
 use crate::clock::{LockstepClock, RealtimeClock, ReplayClock, StepClock};
 use crate::faults::{FaultPlan, PlantFault};
 use crate::link::{BoundLink, InProcLink, Link, ReplayLink};
-use crate::mcap_log::{LogFormat, McapSink};
 use crate::plant::Plant;
 use crate::propulsion::build_configured;
 use crate::propulsion::hifi::HifiParams;
-use crate::recorder::{Recorder, RecorderError};
+use crate::recorder::{Log, LogFormat, Recorder, RecorderError, SinkOpener};
 use crate::report::RunReport;
 use crate::run_config::{LinkKind, RunConfig, RunConfigError};
 use crate::scheduler::{self, Mode, SchedulerConfig, SchedulerError};
-use oils_onboard_stub::cli::{build_fsw, StubCliError};
 use oils_shared::domain::Domain;
+use oils_shared::fsw::FlightSoftware;
 use oils_shared::link::{create_node_in, EmulatorLink, LinkError, WaitStrategy};
 use oils_shared::profile::ProfileRules;
 use oils_shared::PROTOCOL_VERSION;
@@ -52,9 +56,9 @@ pub enum SessionError {
     /// Propulsion model could not be built.
     #[error("propulsion")]
     Propulsion(#[from] crate::propulsion::BuildError),
-    /// The in-process flight software could not be built.
-    #[error("flight software")]
-    Fsw(#[from] StubCliError),
+    /// The flight software handed in does not fit the configured link.
+    #[error("{0}")]
+    Onboard(String),
     /// Starting the onboard process failed.
     #[error("starting the onboard process: {0}")]
     Launch(String),
@@ -75,6 +79,35 @@ pub struct StubLaunch {
     pub run_id: u64,
     /// The emulator's wait strategy (announced on the services too).
     pub wait: WaitStrategy,
+}
+
+/// Who flies the run, handed to the core as a value.
+pub enum Onboard<'a> {
+    /// Flight software called in the emulator's thread (`link = "inproc"`): the
+    /// reference GNC, a profile playback, a C library, or the user's own Rust type.
+    InProcess(Box<dyn FlightSoftware + 'a>),
+    /// A separate onboard process over iceoryx2 (`link = "iceoryx2"`). Called once the
+    /// run's services exist: it starts the process (the `oils` binary spawns
+    /// `oils stub`), or prints how to start one.
+    Peer(&'a mut dyn FnMut(&StubLaunch) -> Result<(), SessionError>),
+}
+
+impl Onboard<'_> {
+    fn link(&self) -> LinkKind {
+        match self {
+            Onboard::InProcess(_) => LinkKind::Inproc,
+            Onboard::Peer(_) => LinkKind::Iceoryx2,
+        }
+    }
+}
+
+/// What a run may take beyond its configuration and flight software.
+#[derive(Default)]
+pub struct Extras<'a> {
+    /// Called after every integrated step (a campaign case samples its trajectory there).
+    pub observer: Option<scheduler::StepObserver<'a>>,
+    /// Writers for log formats other than OILSLOG3 (the lab's MCAP sink).
+    pub sinks: Option<&'a dyn SinkOpener>,
 }
 
 /// A fresh run id: process id and monotonic time mixed (naming only; never enters the
@@ -163,7 +196,11 @@ fn log_header(cfg: &RunConfig, run_id: u64) -> String {
     .to_string()
 }
 
-fn open_recorder(cfg: &RunConfig, run_id: u64) -> Result<Option<Recorder>, SessionError> {
+fn open_recorder(
+    cfg: &RunConfig,
+    run_id: u64,
+    sinks: Option<&dyn SinkOpener>,
+) -> Result<Option<Recorder>, SessionError> {
     if !cfg.log.enabled {
         return Ok(None);
     }
@@ -179,35 +216,42 @@ fn open_recorder(cfg: &RunConfig, run_id: u64) -> Result<Option<Recorder>, Sessi
             source,
         })?;
     }
+    let header = log_header(cfg, run_id);
     Ok(Some(match cfg.log.format {
-        LogFormat::Oilslog => Recorder::create(&path, &log_header(cfg, run_id))?,
-        LogFormat::Mcap => McapSink::recorder(&path, &log_header(cfg, run_id))?,
+        LogFormat::Oilslog => Recorder::create(&path, &header)?,
+        other => {
+            match sinks.filter(|s| s.writes(other)) {
+                Some(opener) => Recorder::with_sink(&path, opener.open(other, &path, &header)?)?,
+                None => return Err(RunConfigError::Invalid {
+                    field: "log.format",
+                    value: other.extension().into(),
+                    why:
+                        "this program has no writer for that format (the `oils` binary writes MCAP)"
+                            .into(),
+                }
+                .into()),
+            }
+        }
     }))
 }
 
-/// Runs one bench run. `run_id`: `None` for a fresh one. `launch` is called once the
-/// iceoryx2 services exist (the `oils` binary starts the onboard process there, or
-/// prints how to start one); it is not called for in-process runs.
+/// Runs one bench run with run id `run_id` ([`fresh_run_id`] for a new one), flown by
+/// `onboard`, which must match the configured link.
 pub fn run(
     cfg: &RunConfig,
-    run_id: Option<u64>,
+    run_id: u64,
     stop: &AtomicBool,
-    launch: &mut dyn FnMut(&StubLaunch) -> Result<(), SessionError>,
-) -> Result<RunReport, SessionError> {
-    run_observed(cfg, run_id, stop, launch, None)
-}
-
-/// [`run`], calling `observer` after every integrated step (a campaign case samples
-/// its trajectory there).
-pub fn run_observed(
-    cfg: &RunConfig,
-    run_id: Option<u64>,
-    stop: &AtomicBool,
-    launch: &mut dyn FnMut(&StubLaunch) -> Result<(), SessionError>,
-    mut observer: Option<scheduler::StepObserver<'_>>,
+    onboard: Onboard<'_>,
+    mut extras: Extras<'_>,
 ) -> Result<RunReport, SessionError> {
     cfg.validate()?;
-    let run_id = run_id.unwrap_or_else(fresh_run_id);
+    if onboard.link() != cfg.link {
+        return Err(SessionError::Onboard(format!(
+            "the run's link is {} but the flight software was handed in for {}",
+            cfg.link.as_str(),
+            onboard.link().as_str()
+        )));
+    }
     let mut plant = build_plant(cfg)?;
     let mut faults = fault_plan(cfg, &plant)?;
     let sched = scheduler_config(cfg, run_id);
@@ -219,17 +263,11 @@ pub fn run_observed(
     }
     let mut warnings = Vec::new();
     let mut reattachments = None;
-    let (summary, log_path, wait) = match cfg.link {
-        LinkKind::Inproc => {
-            let rules = ProfileRules::rated(cfg.scenario.propulsion.max_thrust_n);
-            let fsw = build_fsw(
-                &cfg.fsw,
-                cfg.profile.as_deref().map(|p| (p, &rules)),
-                cfg.fsw_params.as_deref(),
-                run_id,
-            )?;
+    let observer = extras.observer.take();
+    let (summary, log_path, wait) = match onboard {
+        Onboard::InProcess(fsw) => {
             let mut link = InProcLink::new(fsw);
-            let recorder = open_recorder(cfg, run_id)?;
+            let recorder = open_recorder(cfg, run_id, extras.sinks)?;
             let summary = run_and_close(
                 &sched,
                 &mut plant,
@@ -238,11 +276,11 @@ pub fn run_observed(
                 &mut faults,
                 recorder,
                 stop,
-                observer.take(),
+                observer,
             )?;
             (summary.0, summary.1, None)
         }
-        LinkKind::Iceoryx2 => {
+        Onboard::Peer(launch) => {
             if let Some(profile) = &cfg.profile {
                 // Fail here, before any process or service exists, not in the spawned stub.
                 let rules = ProfileRules::rated(cfg.scenario.propulsion.max_thrust_n);
@@ -258,7 +296,7 @@ pub fn run_observed(
             warnings.extend(domain.notes().iter().cloned());
             let node = create_node_in("oils-emulator", &domain)?;
             let link = EmulatorLink::create(&node, run_id, wait)?;
-            let recorder = open_recorder(cfg, run_id)?;
+            let recorder = open_recorder(cfg, run_id, extras.sinks)?;
             launch(&StubLaunch { run_id, wait })?;
             let joined = link.wait_for_peer(cfg.startup_timeout_ms, stop)?;
             let mut link = BoundLink::new(link, joined, cfg.allow_reattach);
@@ -270,7 +308,7 @@ pub fn run_observed(
                 &mut faults,
                 recorder,
                 stop,
-                observer.take(),
+                observer,
             )?;
             if wait.notifies() && link.link().wake_counts().peer_never_notified() {
                 warnings.push(format!(
@@ -371,13 +409,13 @@ pub struct Replay {
 /// Replays a recorded log through the same plant and loop: each recorded command is
 /// fed back in, and each telemetry the emulator publishes must equal the recorded one
 /// (else the replay stops with the first step that differs). The digest comes out the
-/// recorded run's: record == replay.
-pub fn replay(log_path: &Path, stop: &AtomicBool) -> Result<Replay, SessionError> {
+/// recorded run's: record == replay. `log` is the file at `log_path`, read by whichever
+/// reader its format needs ([`crate::recorder::read_log`] for OILSLOG3).
+pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, SessionError> {
     let bad = |why: String| SessionError::Replay {
         path: log_path.to_path_buf(),
         why,
     };
-    let log = crate::mcap_log::read_any(log_path)?;
     if !log.damaged_records.is_empty() {
         return Err(bad(format!(
             "{} damaged records (first at position {})",

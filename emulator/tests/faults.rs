@@ -24,8 +24,20 @@ fn config(model: PropulsionKind, faults: &[&str], duration_s: f64) -> RunConfig 
     cfg
 }
 
+fn try_fly(cfg: &RunConfig) -> Result<RunReport, session::SessionError> {
+    let run_id = session::fresh_run_id();
+    let fsw = oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id).unwrap();
+    session::run(
+        cfg,
+        run_id,
+        &AtomicBool::new(false),
+        session::Onboard::InProcess(fsw),
+        session::Extras::default(),
+    )
+}
+
 fn fly(cfg: &RunConfig) -> RunReport {
-    session::run(cfg, None, &AtomicBool::new(false), &mut |_| unreachable!()).unwrap()
+    try_fly(cfg).unwrap()
 }
 
 fn fly_logged(name: &str, mut cfg: RunConfig) -> (RunReport, Log) {
@@ -256,9 +268,7 @@ fn same_faults_same_seed_same_digest_random_or_scheduled() {
 fn faults_a_model_cannot_represent_are_refused_naming_it() {
     for model in [PropulsionKind::Ideal, PropulsionKind::Surrogate] {
         let cfg = config(model, &["regulator-open@t=1"], 10.0);
-        let e = session::run(&cfg, None, &AtomicBool::new(false), &mut |_| unreachable!())
-            .unwrap_err()
-            .to_string();
+        let e = try_fly(&cfg).unwrap_err().to_string();
         assert!(
             e.contains(model.as_str()) && e.contains("regulator-open"),
             "{e}"

@@ -6,7 +6,7 @@
 //! the descent-length runs take seconds.
 
 use oils_emulator::config::PropulsionConfig;
-use oils_emulator::propulsion::hifi::figures::{profile_of, simulate, Sample, DESCENT_PROFILE_CSV};
+use oils_emulator::propulsion::hifi::runner::{profile_of, simulate, Sample, DESCENT_PROFILE_CSV};
 use oils_emulator::propulsion::hifi::{HifiParams, HifiPropulsion};
 use oils_emulator::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
 use oils_shared::profile::ThrustProfile;

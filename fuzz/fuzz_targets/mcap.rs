@@ -2,7 +2,7 @@
 //! panic, and what it accepts holds at most one record per message.
 #![no_main]
 use libfuzzer_sys::fuzz_target;
-use oils_emulator::mcap_log::parse_mcap;
+use oils_lab::mcap_log::parse_mcap;
 
 fuzz_target!(|data: &[u8]| {
     if let Ok(log) = parse_mcap(std::path::Path::new("fuzz.mcap"), data) {

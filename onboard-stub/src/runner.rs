@@ -7,7 +7,7 @@
 use crate::fsw::FlightSoftware;
 use oils_shared::clock::monotonic_ns;
 use oils_shared::link::{LinkError, StubLink};
-use oils_shared::{Command, PacketHeader, Telemetry, TLM_FLAG_END_OF_RUN};
+use oils_shared::TLM_FLAG_END_OF_RUN;
 use std::sync::atomic::AtomicBool;
 
 /// How the stub's loop ended well.
@@ -51,19 +51,7 @@ pub enum StubError {
     FlightSoftware(#[from] crate::fsw::FswFailure),
 }
 
-/// Runs the flight software on Telemetry(k) and returns Command(k) stamped as the wire
-/// wants it: the header echoes the telemetry's run, step and time, and
-/// `stub_compute_ns` holds the flight software's own step time (monotonic clock; the
-/// digest ignores it). Every link uses this, so a command is the same whichever link
-/// carries it.
-pub fn answer<F: FlightSoftware + ?Sized>(fsw: &mut F, tlm: &Telemetry) -> Command {
-    let started_ns = monotonic_ns();
-    let mut cmd = fsw.step(tlm);
-    let compute_ns = monotonic_ns().saturating_sub(started_ns);
-    cmd.header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
-    cmd.stub_compute_ns = compute_ns;
-    cmd
-}
+pub use oils_shared::fsw::answer;
 
 /// While it waits for telemetry, the stub checks this often (wall time) whether the
 /// emulator's process still runs: a dead emulator is noticed within this bound, whatever

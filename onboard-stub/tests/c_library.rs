@@ -3,7 +3,7 @@
 
 mod common;
 use common::c_build::{shared_library, terminal_descent_c};
-use oils_onboard_stub::cli::build_fsw;
+use oils_onboard_stub::build::build_fsw;
 use oils_onboard_stub::fsw::{FswFailure, FswSpec};
 use oils_shared::c_abi::{FSW_ABI_VERSION, FSW_LAYOUT_HASH};
 use oils_shared::{PacketHeader, Telemetry};

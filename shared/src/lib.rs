@@ -20,6 +20,7 @@ use iceoryx2::prelude::ZeroCopySend;
 pub mod c_abi;
 pub mod clock;
 pub mod domain;
+pub mod fsw;
 pub mod link;
 pub mod profile;
 pub mod service;

@@ -3,7 +3,8 @@
 
 use anyhow::{bail, Context, Result};
 use oils_emulator::config::PropulsionConfig;
-use oils_emulator::propulsion::hifi::{figures, runner, HifiParams, HifiPropulsion};
+use oils_emulator::propulsion::hifi::{runner, HifiParams, HifiPropulsion};
+use oils_lab::hifi_figures as figures;
 use oils_shared::profile::{ProfileRules, ThrustProfile, MAX_PROFILE_END_S};
 use std::io::BufWriter;
 use std::path::PathBuf;

@@ -4,11 +4,11 @@
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use oils_emulator::campaign::{
+use oils_emulator::propulsion::PropulsionKind;
+use oils_emulator::recorder::LogFormat;
+use oils_lab::campaign::{
     self, case, compare, local, run_cases, CampaignSpec, Merged, RunOptions, Shard, Store,
 };
-use oils_emulator::mcap_log::LogFormat;
-use oils_emulator::propulsion::PropulsionKind;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -437,7 +437,11 @@ fn mc_case(a: &McCaseArgs, stop: &AtomicBool) -> Result<()> {
     for f in &setup.faults {
         eprintln!("  fault                        {f}");
     }
-    let report = oils_emulator::session::run(&cfg, Some(a.index), stop, &mut |_| Ok(()))
+    let extras = oils_emulator::session::Extras {
+        sinks: Some(&oils_lab::mcap_log::McapOpener),
+        ..Default::default()
+    };
+    let report = oils_lab::onboard::fly_in_process(&cfg, a.index, stop, extras)
         .with_context(|| format!("case {}", a.index))?;
     print!("{}", report.table());
     if let Some(path) = &a.report {

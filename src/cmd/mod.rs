@@ -4,5 +4,6 @@ pub mod hifi;
 pub mod mc;
 pub mod plot;
 pub mod run;
+pub mod stub;
 pub mod train;
 pub mod validate;

@@ -1,8 +1,8 @@
 //! `oils plot LOG --out DIR` and `oils run --plots DIR`: a run's figures from its log.
 
 use anyhow::{Context, Result};
-use oils_emulator::mcap_log::{is_mcap, read_any, read_mcap_timing};
 use oils_emulator::report::RunReport;
+use oils_lab::mcap_log::{is_mcap, read_any, read_mcap_timing};
 use std::path::Path;
 
 /// The figures' common title: run id, propulsion model, flight software, from the
@@ -39,13 +39,9 @@ pub fn run(log: &Path, dir: &Path) -> Result<()> {
     } else {
         None
     };
-    let written = oils_emulator::run_plots::write_all(
-        &data,
-        timing.as_deref(),
-        dir,
-        &title_of(&data.header_json),
-    )
-    .with_context(|| format!("plotting {}", log.display()))?;
+    let written =
+        oils_lab::run_plots::write_all(&data, timing.as_deref(), dir, &title_of(&data.header_json))
+            .with_context(|| format!("plotting {}", log.display()))?;
     eprintln!(
         "oils plot: {} figures of {} records in {}",
         written.len(),

@@ -7,7 +7,8 @@ use oils_emulator::propulsion::hifi::HifiParams;
 use oils_emulator::propulsion::PropulsionKind;
 use oils_emulator::run_config::{load_scenario, LinkKind, RunConfig, WaitKind};
 use oils_emulator::scheduler::{MissPolicy, Mode};
-use oils_emulator::session::{self, SessionError, StubLaunch};
+use oils_emulator::session::{self, Extras, Onboard, SessionError, StubLaunch};
+use oils_lab::mcap_log::McapOpener;
 use oils_onboard_stub::fsw::FswSpec;
 use oils_shared::service::RunServices;
 use std::path::PathBuf;
@@ -88,7 +89,7 @@ pub struct RunArgs {
     pub no_log: bool,
     /// Log format: oilslog (binary records) or mcap (opens in Foxglove). [default: oilslog]
     #[arg(long, value_name = "FORMAT")]
-    pub log_format: Option<oils_emulator::mcap_log::LogFormat>,
+    pub log_format: Option<oils_emulator::recorder::LogFormat>,
     /// At the end of the run, draw its figures (PNG) from its log into DIR.
     #[arg(long, value_name = "DIR", conflicts_with = "no_log")]
     pub plots: Option<PathBuf>,
@@ -249,17 +250,36 @@ pub fn run(args: &RunArgs) -> Result<()> {
     }
     let run_id = args.run_id()?;
     let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
+    let run_id = run_id.unwrap_or_else(session::fresh_run_id);
+    let extras = || Extras {
+        sinks: Some(&McapOpener),
+        ..Default::default()
+    };
     let mut child: Option<Child> = None;
-    let result = session::run(&cfg, run_id, &stop, &mut |launch| {
-        if cfg.fsw == FswSpec::External {
-            print_services(launch);
-            return Ok(());
+    let mut stub_status = None;
+    let report = match cfg.link {
+        LinkKind::Inproc => {
+            let fsw = oils_lab::onboard::flight_software(&cfg, run_id)
+                .context("building the flight software")?;
+            session::run(&cfg, run_id, &stop, Onboard::InProcess(fsw), extras())
         }
-        child = Some(spawn_stub(&cfg, launch).map_err(|e| SessionError::Launch(format!("{e:#}")))?);
-        Ok(())
-    });
-    let stub_status = child.map(reap_stub);
-    let report = result.context("bench run")?;
+        LinkKind::Iceoryx2 => {
+            let mut launch = |launch: &StubLaunch| {
+                if cfg.fsw == FswSpec::External {
+                    print_services(launch);
+                    return Ok(());
+                }
+                child = Some(
+                    spawn_stub(&cfg, launch).map_err(|e| SessionError::Launch(format!("{e:#}")))?,
+                );
+                Ok(())
+            };
+            let result = session::run(&cfg, run_id, &stop, Onboard::Peer(&mut launch), extras());
+            stub_status = child.take().map(reap_stub);
+            result
+        }
+    }
+    .context("bench run")?;
     if let Some(dir) = &args.plots {
         super::plot::after_run(&report, dir)?;
     }
@@ -348,7 +368,8 @@ pub struct ReplayArgs {
 /// Runs `oils replay`: the log's commands through the same plant and loop.
 pub fn replay(args: &ReplayArgs) -> Result<()> {
     let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
-    let r = session::replay(&args.log, &stop)?;
+    let log = oils_lab::mcap_log::read_any(&args.log)?;
+    let r = session::replay(&args.log, log, &stop)?;
     println!(
         "oils replay: {} records of {} replayed, every telemetry identical",
         r.records,

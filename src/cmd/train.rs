@@ -2,8 +2,8 @@
 
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use oils_emulator::surrogate::training::fit::Variant;
-use oils_emulator::surrogate::training::{report, train_configured, Progress, TrainConfig};
+use oils_lab::training::fit::Variant;
+use oils_lab::training::{report, train_configured, Progress, TrainConfig};
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
@@ -132,7 +132,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     if args.time_lasso {
         let paper = outcome.models.iter().find(|m| m.variant == Variant::Paper);
         if let Some(paper) = paper {
-            let (gram_s, fit_s) = oils_emulator::surrogate::training::cv::time_final_fit(
+            let (gram_s, fit_s) = oils_lab::training::cv::time_final_fit(
                 Variant::Paper,
                 paper.selection.history,
                 paper.selection.mu,
@@ -146,7 +146,7 @@ pub fn run(args: &TrainArgs) -> Result<()> {
             );
         }
     }
-    let figures = oils_emulator::surrogate::training::figures::write_figures(&outcome, &args.out)
+    let figures = oils_lab::training::figures::write_figures(&outcome, &args.out)
         .context("drawing the figures")?;
     let mut summary = report::summary(&outcome, cfg.top_terms);
     let mut holdout_pngs = Vec::new();
@@ -172,10 +172,10 @@ pub fn run(args: &TrainArgs) -> Result<()> {
 /// stair, descent profile); returns the summary section and the figures written.
 fn holdout(
     cfg: &TrainConfig,
-    outcome: &oils_emulator::surrogate::training::TrainOutcome,
+    outcome: &oils_lab::training::TrainOutcome,
     args: &TrainArgs,
 ) -> Result<(String, Vec<PathBuf>)> {
-    use oils_emulator::surrogate::training::holdout::{run_cases, table, Case};
+    use oils_lab::training::holdout::{run_cases, table, Case};
     let dt = cfg.sample_time_ns;
     let mut cases = vec![Case::sine(dt), Case::stair(dt)];
     let mut note = String::new();
@@ -183,7 +183,7 @@ fn holdout(
         Ok(p) => cases.push(Case::from_profile("descent", &p, dt)),
         Err(e) => note = format!("(descent case skipped: {e})\n"),
     }
-    let hifi = oils_emulator::surrogate::training::hifi_params_of(cfg)?;
+    let hifi = oils_lab::training::hifi_params_of(cfg)?;
     let reference = || {
         oils_emulator::propulsion::build_with_hifi_params(cfg.reference, &cfg.propulsion, &hifi)
             .unwrap_or_else(|e| unreachable!("the reference was built for training: {e}"))
@@ -201,7 +201,7 @@ fn holdout(
     let mut pngs = Vec::new();
     for r in &results {
         let p = args.out.join(format!("holdout_{}.png", r.case.name));
-        oils_emulator::surrogate::training::figures::holdout(r, &names, &p)
+        oils_lab::training::figures::holdout(r, &names, &p)
             .with_context(|| format!("drawing {}", p.display()))?;
         pngs.push(p);
     }

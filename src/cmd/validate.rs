@@ -4,16 +4,16 @@
 
 use anyhow::{bail, Context, Result};
 use oils_emulator::config::ScenarioConfig;
-use oils_emulator::propulsion::hifi::figures::DESCENT_PROFILE_CSV;
+use oils_emulator::propulsion::hifi::runner::DESCENT_PROFILE_CSV;
+use oils_emulator::propulsion::surrogate::model_file::ModelFile;
+use oils_emulator::propulsion::surrogate::DEFAULT_MODEL_JSON;
 use oils_emulator::propulsion::{
     hifi_for_bench, surrogate_for_bench, BuildError, ModelFiles, Propulsion,
 };
-use oils_emulator::surrogate::runtime::model_file::ModelFile;
-use oils_emulator::surrogate::runtime::DEFAULT_MODEL_JSON;
-use oils_emulator::validation::cases::{self, CaseKind};
-use oils_emulator::validation::report::{Bounds, ValidationReport};
-use oils_emulator::validation::uncertainty::ModelUncertainty;
-use oils_emulator::validation::{plots, run_cases};
+use oils_lab::validation::cases::{self, CaseKind};
+use oils_lab::validation::report::{Bounds, ValidationReport};
+use oils_lab::validation::uncertainty::ModelUncertainty;
+use oils_lab::validation::{plots, run_cases};
 use oils_shared::profile::ThrustProfile;
 use std::path::{Path, PathBuf};
 

@@ -10,6 +10,7 @@ pub mod diagnostics;
 pub mod hifi;
 pub mod ideal;
 pub mod shadow;
+pub mod surrogate;
 
 pub use diagnostics::PropulsionDiagnostics;
 
@@ -226,7 +227,7 @@ pub struct ModelFiles {
 pub enum BuildError {
     /// The surrogate model file was refused.
     #[error(transparent)]
-    Surrogate(#[from] crate::surrogate::model_file::ModelFileError),
+    Surrogate(#[from] crate::propulsion::surrogate::model_file::ModelFileError),
     /// The hifi parameters were refused.
     #[error(transparent)]
     Hifi(#[from] hifi::HifiError),
@@ -295,8 +296,8 @@ pub fn surrogate_for_bench(
     cfg: &PropulsionConfig,
     files: &ModelFiles,
     bench_step_ns: u64,
-) -> Result<crate::surrogate::runtime::SurrogatePropulsion, BuildError> {
-    use crate::surrogate::runtime::SurrogatePropulsion;
+) -> Result<crate::propulsion::surrogate::SurrogatePropulsion, BuildError> {
+    use crate::propulsion::surrogate::SurrogatePropulsion;
     Ok(match &files.surrogate_model {
         Some(path) => SurrogatePropulsion::from_path(path, cfg, bench_step_ns)?,
         None => SurrogatePropulsion::default_model(cfg, Some(bench_step_ns))?,

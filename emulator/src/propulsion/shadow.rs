@@ -6,7 +6,7 @@
 use super::diagnostics::{DivergenceAccumulator, PropulsionDiagnostics};
 use super::hifi::HifiPropulsion;
 use super::{EngineCommand, Propulsion, PropulsionOutput};
-use crate::surrogate::runtime::SurrogatePropulsion;
+use crate::propulsion::surrogate::SurrogatePropulsion;
 
 /// A driving model and a shadowing model stepped on the same commands.
 ///

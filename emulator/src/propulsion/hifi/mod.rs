@@ -14,8 +14,8 @@
 //! Modules: `params` (TOML parameters), `gas` (helium, bottle, check valves),
 //! `regulator`, `fluid` (tanks, lines, manifold), `engine` (valves, dome, chamber),
 //! `calibration` (thrust command to TFCV position), `plant` (state layout and
-//! right-hand side), `integrator` (ROS2, and why), `runner` (open-loop CSV runner),
-//! `figures` (the documentation plots).
+//! right-hand side), `integrator` (ROS2, and why), `runner` (open-loop CSV runner)
+//! (its documentation figures are drawn by the lab, `oils_lab::hifi_figures`).
 //!
 //! Integration: each bench step is split into equal sub-steps of at most
 //! `integration.substep_s` (0.1 ms) integrated by the linearly implicit ROS2 method
@@ -23,7 +23,6 @@
 
 pub mod calibration;
 pub mod engine;
-pub mod figures;
 pub mod fluid;
 pub mod gas;
 pub mod integrator;

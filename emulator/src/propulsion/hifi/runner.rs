@@ -2,9 +2,10 @@
 //! output at the bench step as CSV, so anyone can generate data or check behaviour
 //! without the bench.
 
-use super::{HifiDetail, HifiError, HifiPropulsion};
+use super::{HifiDetail, HifiError, HifiParams, HifiPropulsion};
+use crate::config::PropulsionConfig;
 use crate::propulsion::{EngineCommand, Propulsion};
-use oils_shared::profile::ThrustProfile;
+use oils_shared::profile::{ProfileRow, ThrustProfile};
 use oils_shared::ENGINE_COUNT;
 use std::io::Write;
 
@@ -205,4 +206,61 @@ mod tests {
         }
         assert!(lines[6].starts_with("0.05,600,"));
     }
+}
+
+/// The committed Chandrayaan-3-like open-loop descent profile
+/// (`emulator/data/descent-profile.csv`).
+pub const DESCENT_PROFILE_CSV: &str = include_str!("../../../data/descent-profile.csv");
+
+/// One sample of a simulated run.
+#[derive(Debug, Clone, Copy)]
+pub struct Sample {
+    /// Time, s.
+    pub t_s: f64,
+    /// Command held over the step that ended here.
+    pub cmd: EngineCommand,
+    /// Outputs.
+    pub d: HifiDetail,
+}
+
+/// Runs a fresh model over a profile and keeps every bench-step sample.
+pub fn simulate(
+    params: &HifiParams,
+    cfg: &PropulsionConfig,
+    profile: &ThrustProfile,
+    dt_ns: u64,
+    duration_ns: i64,
+) -> Result<Vec<Sample>, HifiError> {
+    let mut model = HifiPropulsion::new(params, cfg)?;
+    let mut samples = Vec::with_capacity((duration_ns.max(0) as u64 / dt_ns.max(1)) as usize + 2);
+    run_profile_with(
+        &mut model,
+        profile,
+        dt_ns,
+        duration_ns,
+        &mut std::io::sink(),
+        |t_ns, cmd, d| {
+            samples.push(Sample {
+                t_s: t_ns as f64 * 1e-9,
+                cmd: *cmd,
+                d: *d,
+            })
+        },
+    )?;
+    Ok(samples)
+}
+
+/// A profile of `(t_s, [thrust per engine], [on per engine])` rows.
+pub fn profile_of(rows: &[(f64, [f64; ENGINE_COUNT], [bool; ENGINE_COUNT])]) -> ThrustProfile {
+    let rows = rows
+        .iter()
+        .map(|&(t, c, on)| ProfileRow {
+            t_ns: (t * 1e9).round() as i64,
+            thrust_cmd_n: c,
+            on,
+        })
+        .collect();
+    // Profiles built this way are literals in figures and tests; a bad one is a
+    // programming error.
+    ThrustProfile::from_rows(rows).expect("literal profiles are valid")
 }

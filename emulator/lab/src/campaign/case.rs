@@ -1,0 +1,535 @@
+//! One case of a campaign: its run configuration (the base with the case's draws
+//! applied), its run, and its result.
+
+use super::spec::{Apply, CampaignSpec, Distribution};
+use super::{streams, CampaignError};
+use crate::validation::uncertainty::ModelUncertainty;
+use oils_emulator::plant::Plant;
+use oils_emulator::run_config::{LinkKind, RunConfig};
+use oils_emulator::scheduler::Mode;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use std::collections::BTreeMap;
+
+/// The committed default model's validated error statistics.
+pub const DEFAULT_UNCERTAINTY_JSON: &str =
+    include_str!("../../../models/surrogate-default.uncertainty.json");
+
+/// Name of the stream of a case's run seed (navigation noise, random fault triggers).
+pub const RUN_SEED_STREAM: &str = "seed";
+
+/// A case, ready to run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CaseSetup {
+    /// Index in the campaign.
+    pub index: u64,
+    /// The whole run configuration.
+    pub config: RunConfig,
+    /// Applied values: column name (`altitude`, `engine_scale[2]`) to the value in the
+    /// configuration the case ran with.
+    pub applied: BTreeMap<String, f64>,
+    /// Faults the case got, in `--fault` syntax with their drawn trigger.
+    pub faults: Vec<String>,
+    /// A configuration the draws made invalid (the case is recorded `invalid`).
+    pub invalid: Option<String>,
+}
+
+/// The nominal run of a campaign: the base, in process, no dispersions, seeded with the
+/// master seed's nominal stream.
+pub fn nominal_config(spec: &CampaignSpec) -> RunConfig {
+    let mut cfg = base(spec);
+    cfg.seed = streams::seed(spec.seed, u64::MAX, RUN_SEED_STREAM);
+    cfg
+}
+
+fn base(spec: &CampaignSpec) -> RunConfig {
+    let mut cfg = spec.base.clone();
+    cfg.link = LinkKind::Inproc;
+    cfg.mode = Mode::Lockstep;
+    cfg.log.enabled = false;
+    cfg.log.path = None;
+    cfg.rt_priority = None;
+    cfg
+}
+
+/// Draws `dist` from `rng`.
+pub fn draw(dist: &Distribution, rng: &mut ChaCha8Rng) -> f64 {
+    match dist {
+        Distribution::Normal { mean, std } => {
+            let n: f64 = rng.sample(StandardNormal);
+            mean + std * n
+        }
+        Distribution::TruncatedNormal {
+            mean,
+            std,
+            min,
+            max,
+        } => {
+            for _ in 0..1000 {
+                let n: f64 = rng.sample(StandardNormal);
+                let x = mean + std * n;
+                if (*min..=*max).contains(&x) {
+                    return x;
+                }
+            }
+            mean.clamp(*min, *max)
+        }
+        Distribution::Uniform { min, max } => {
+            if min == max {
+                *min
+            } else {
+                rng.gen_range(*min..*max)
+            }
+        }
+        Distribution::Choice { values, weights } => {
+            if weights.is_empty() {
+                values[rng.gen_range(0..values.len())]
+            } else {
+                let total: f64 = weights.iter().sum();
+                let mut u = rng.gen::<f64>() * total;
+                for (v, w) in values.iter().zip(weights) {
+                    if u < *w {
+                        return *v;
+                    }
+                    u -= w;
+                }
+                values[values.len() - 1]
+            }
+        }
+    }
+}
+
+/// One step of a configuration path: a field or an array element.
+enum Step<'a> {
+    Field(&'a str),
+    Element(usize),
+}
+
+fn parse_path(path: &str) -> Result<Vec<Step<'_>>, String> {
+    let mut steps = Vec::new();
+    for part in path.split('.') {
+        let (field, mut rest) = match part.find('[') {
+            Some(i) => (&part[..i], &part[i..]),
+            None => (part, ""),
+        };
+        if field.is_empty() {
+            return Err(format!("`{path}`: empty field name"));
+        }
+        steps.push(Step::Field(field));
+        while !rest.is_empty() {
+            let close = rest
+                .find(']')
+                .ok_or_else(|| format!("`{path}`: `[` without `]`"))?;
+            let i: usize = rest[1..close]
+                .parse()
+                .map_err(|_| format!("`{path}`: `{}` is not an index", &rest[1..close]))?;
+            steps.push(Step::Element(i));
+            rest = &rest[close + 1..];
+            if !rest.is_empty() && !rest.starts_with('[') {
+                return Err(format!("`{path}`: unexpected `{rest}`"));
+            }
+        }
+    }
+    Ok(steps)
+}
+
+/// The number at `path` in `root`, for changing.
+fn number_at<'v>(root: &'v mut Value, path: &str) -> Result<&'v mut Value, String> {
+    let steps = parse_path(path)?;
+    let mut at = root;
+    for step in steps {
+        at = match step {
+            Step::Field(f) => {
+                if at.is_null() {
+                    // An optional section left to its defaults (`hifi`): materialise them.
+                    return Err(format!(
+                        "`{path}`: `{f}` is inside a section that is not set"
+                    ));
+                }
+                at.get_mut(f).ok_or_else(|| {
+                    format!("`{path}`: no field `{f}` (see `oils run --print-config`)")
+                })?
+            }
+            Step::Element(i) => at
+                .get_mut(i)
+                .ok_or_else(|| format!("`{path}`: no element {i}"))?,
+        };
+    }
+    if at.is_number() {
+        Ok(at)
+    } else {
+        Err(format!("`{path}` is not a number"))
+    }
+}
+
+fn config_value(cfg: &RunConfig) -> Value {
+    let mut v = serde_json::to_value(cfg).expect("a run configuration serialises");
+    if v.get("hifi").is_none_or(Value::is_null) {
+        // Dispersions of hifi parameters start from the defaults the run would use.
+        v["hifi"] = serde_json::to_value(oils_emulator::propulsion::hifi::HifiParams::default())
+            .expect("hifi parameters serialise");
+    }
+    v
+}
+
+/// Checks that every target path of the spec names a number in the base configuration.
+pub fn check_targets(spec: &CampaignSpec) -> Result<(), CampaignError> {
+    let mut v = config_value(&base(spec));
+    for d in &spec.dispersions {
+        for t in &d.targets {
+            number_at(&mut v, t)
+                .map_err(|e| CampaignError::Spec(format!("dispersion `{}`: {e}", d.name)))?;
+        }
+    }
+    Ok(())
+}
+
+/// The model-error statistics the spec asks for.
+pub fn load_uncertainty(spec: &CampaignSpec) -> Result<Option<ModelUncertainty>, CampaignError> {
+    let Some(m) = &spec.model_error else {
+        return Ok(None);
+    };
+    if !spec.applies(&m.models) {
+        return Ok(None);
+    }
+    let spec_err = |e: String| CampaignError::Spec(format!("model_error: {e}"));
+    let u = match (&m.uncertainty, &spec.base.model) {
+        (Some(path), _) => ModelUncertainty::load(path).map_err(|e| spec_err(e.to_string()))?,
+        (None, Some(model)) => {
+            let path = ModelUncertainty::path_beside(model);
+            let u = ModelUncertainty::load(&path).map_err(|e| {
+                spec_err(format!(
+                    "{e} (run `oils validate` on the model to write it)"
+                ))
+            })?;
+            let bytes = std::fs::read(model).map_err(|source| CampaignError::Io {
+                path: model.clone(),
+                source,
+            })?;
+            if !u.matches_model(&bytes) {
+                return Err(spec_err(format!(
+                    "{} was computed for another model file than {}; run `oils validate` again",
+                    path.display(),
+                    model.display()
+                )));
+            }
+            u
+        }
+        (None, None) => ModelUncertainty::parse(DEFAULT_UNCERTAINTY_JSON).map_err(spec_err)?,
+    };
+    Ok(Some(u))
+}
+
+/// Case `index` of `spec` (`uncertainty`: from [`load_uncertainty`]).
+pub fn case_setup(
+    spec: &CampaignSpec,
+    uncertainty: Option<&ModelUncertainty>,
+    index: u64,
+) -> Result<CaseSetup, CampaignError> {
+    let mut cfg = base(spec);
+    cfg.seed = streams::seed(spec.seed, index, RUN_SEED_STREAM);
+    let mut applied = BTreeMap::new();
+    let mut faults = Vec::new();
+
+    // Dispersions of configuration values, through the configuration's serde form
+    // (to_value / from_value keep every f64 exact).
+    let mut v = config_value(&cfg);
+    for d in spec.dispersions.iter().filter(|d| spec.applies(&d.models)) {
+        let mut rng = streams::stream(spec.seed, index, &d.name);
+        let shared = d.shared.then(|| draw(&d.dist, &mut rng));
+        for (k, target) in d.targets.iter().enumerate() {
+            let x = shared.unwrap_or_else(|| draw(&d.dist, &mut rng));
+            let at = number_at(&mut v, target)
+                .map_err(|e| CampaignError::Spec(format!("dispersion `{}`: {e}", d.name)))?;
+            let nominal = at.as_f64().unwrap_or(0.0);
+            let value = match d.apply {
+                Apply::Offset => nominal + x,
+                Apply::Scale => nominal * x,
+                Apply::Set => x,
+            };
+            // An integer field gets the nearest integer; what it got is what is recorded.
+            *at = if at.is_f64() {
+                serde_json::json!(value)
+            } else {
+                serde_json::json!(value.round() as i64)
+            };
+            let column = if d.targets.len() == 1 {
+                d.name.clone()
+            } else {
+                format!("{}[{k}]", d.name)
+            };
+            if let Some(x) = at.as_f64().filter(|x| x.is_finite()) {
+                applied.insert(column, x);
+            }
+        }
+    }
+    let mut invalid = None;
+    match serde_json::from_value::<RunConfig>(v) {
+        Ok(mut c) => {
+            if spec.base.hifi.is_none()
+                && c.propulsion != oils_emulator::propulsion::PropulsionKind::Hifi
+            {
+                c.hifi = None;
+            }
+            cfg = c;
+        }
+        Err(e) => invalid = Some(format!("the draws do not make a configuration: {e}")),
+    }
+
+    // The surrogate's validated error as a per-engine disturbance.
+    if let (Some(m), Some(u)) = (&spec.model_error, uncertainty) {
+        let mut rng = streams::stream(spec.seed, index, "model_error");
+        let steady = u.thrust_n.steady;
+        let transient = u.thrust_n.transient;
+        let me = &mut cfg.scenario.model_error;
+        me.enabled = true;
+        for (e, b) in me.bias_n.iter_mut().enumerate() {
+            let n: f64 = rng.sample(StandardNormal);
+            *b = (steady.mean + n * steady.std * m.scale).clamp(-steady.max_abs, steady.max_abs);
+            applied.insert(format!("model_error_bias_n[{e}]"), *b);
+        }
+        me.transient_mean_n = transient.mean;
+        me.transient_std_n = transient.std * m.scale;
+        me.transient_max_abs_n = transient.max_abs;
+        me.transient_tau_s = m.transient_tau_s;
+        me.step_threshold_n = m.step_threshold_n;
+        me.seed = rng.gen();
+    }
+
+    // Faults: each strikes with its probability at a uniform time in its window.
+    for f in spec.faults.iter().filter(|f| spec.applies(&f.models)) {
+        let mut rng = streams::stream(spec.seed, index, &f.name);
+        let strikes = rng.gen::<f64>() < f.probability;
+        let [from, to] = f.window_s;
+        let t_s = if from < to {
+            rng.gen_range(from..to)
+        } else {
+            from
+        };
+        // Trigger times on the millisecond: readable in the results, exact in text.
+        let t_s = (t_s * 1000.0).round() / 1000.0;
+        if strikes {
+            // The column holds the trigger time of a case the fault struck (empty else).
+            applied.insert(f.name.clone(), t_s);
+            let spec = f
+                .at(t_s)
+                .map_err(|e| CampaignError::Spec(format!("fault `{}`: {e}", f.name)))?;
+            faults.push(spec.to_string());
+            cfg.faults.push(spec);
+        }
+    }
+    if invalid.is_none() {
+        if let Err(e) = cfg.validate() {
+            invalid = Some(e.to_string());
+        }
+    }
+    Ok(CaseSetup {
+        index,
+        config: cfg,
+        applied,
+        faults,
+        invalid,
+    })
+}
+
+/// Where a run's trajectory is sampled for the campaign's traces, simulated seconds.
+pub const TRACE_PERIOD_S: f64 = 2.0;
+
+/// A case's trajectory, sampled every [`TRACE_PERIOD_S`] (and at the end).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Trace {
+    /// Time, seconds.
+    pub t_s: Vec<f32>,
+    /// Altitude of the footpads, metres.
+    pub altitude_m: Vec<f32>,
+    /// Horizontal speed, m/s.
+    pub horizontal_speed_m_s: Vec<f32>,
+    /// Vertical speed (positive up), m/s.
+    pub vertical_speed_m_s: Vec<f32>,
+}
+
+/// Position over the surface in the start frame: arc along the nominal ground track
+/// and across it, metres.
+pub fn surface_position_m(pos_mci_m: &nalgebra::Vector3<f64>, radius_m: f64) -> (f64, f64) {
+    let p = pos_mci_m;
+    let r = p.norm();
+    (
+        radius_m * p.y.atan2(p.x),
+        radius_m * (p.z / r).clamp(-1.0, 1.0).asin(),
+    )
+}
+
+/// What one case gave: the row of `cases.csv` and more.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CaseResult {
+    /// Index in the campaign (`None` for the nominal run).
+    pub index: Option<u64>,
+    /// The run's seed.
+    pub seed: u64,
+    /// `landed`, `crashed`, `aborted`, `completed`, `timeout`, `invalid` or `error`.
+    pub outcome: String,
+    /// Why a case aborted, timed out or failed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+    /// Digest over every packet (empty when the case did not run).
+    pub digest: String,
+    /// Steps integrated.
+    pub steps: u64,
+    /// Simulated time at the end, seconds.
+    pub sim_time_s: f64,
+    /// Touchdown figures (absent without a touchdown).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub touchdown: Option<Touchdown>,
+    /// Propellant used by the end, kilograms.
+    pub propellant_used_kg: f64,
+    /// Final position along the nominal ground track, metres of arc (absent when the
+    /// case did not run).
+    pub downrange_m: Option<f64>,
+    /// Final position across the ground track, metres of arc.
+    pub crossrange_m: Option<f64>,
+    /// Fault firings.
+    pub fault_events: u64,
+    /// Faults the case was given.
+    pub faults: Vec<String>,
+    /// Surrogate envelope exits (surrogate runs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub out_of_envelope: Option<u64>,
+    /// Applied dispersion values by column.
+    pub applied: BTreeMap<String, f64>,
+    /// Trajectory samples.
+    pub trace: Trace,
+    /// Wall time of the case, seconds (not in the merged results: it differs between
+    /// machines, and the merged files are byte-identical for the same spec).
+    pub wall_s: f64,
+}
+
+/// Touchdown figures of a case.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Touchdown {
+    /// Time of contact, seconds.
+    pub t_s: f64,
+    /// Vertical speed at contact, m/s.
+    pub vertical_speed_mps: f64,
+    /// Horizontal speed at contact, m/s.
+    pub horizontal_speed_mps: f64,
+    /// Tilt at contact, degrees.
+    pub tilt_deg: f64,
+}
+
+/// Runs `setup` in process with `stop` (set when the case is over its budget or the
+/// campaign is interrupted; `timed_out` tells which).
+pub fn run_case(
+    setup: &CaseSetup,
+    stop: &std::sync::atomic::AtomicBool,
+    timed_out: &dyn Fn() -> bool,
+) -> CaseResult {
+    let started = std::time::Instant::now();
+    let mut result = CaseResult {
+        index: Some(setup.index),
+        seed: setup.config.seed,
+        outcome: String::new(),
+        error: None,
+        digest: String::new(),
+        steps: 0,
+        sim_time_s: 0.0,
+        touchdown: None,
+        propellant_used_kg: 0.0,
+        downrange_m: None,
+        crossrange_m: None,
+        fault_events: 0,
+        faults: setup.faults.clone(),
+        out_of_envelope: None,
+        applied: setup.applied.clone(),
+        trace: Trace::default(),
+        wall_s: 0.0,
+    };
+    if let Some(why) = &setup.invalid {
+        result.outcome = "invalid".into();
+        result.error = Some(why.clone());
+        return result;
+    }
+    let dt_s = setup.config.dt_ms as f64 * 1e-3;
+    let every = ((TRACE_PERIOD_S / dt_s).round() as u64).max(1);
+    let mut trace = Trace::default();
+    let mut last_pos_mci_m = None;
+    let mut touched = false;
+    let mut observe = |k: u64, plant: &Plant| {
+        let down = plant.touchdown().is_some();
+        if (k + 1).is_multiple_of(every) || (down && !touched) {
+            sample(&mut trace, plant);
+        }
+        touched |= down;
+        last_pos_mci_m = Some(plant.state().pos_mci_m);
+    };
+    let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        crate::onboard::fly_in_process(
+            &setup.config,
+            setup.index,
+            stop,
+            oils_emulator::session::Extras {
+                observer: Some(&mut observe),
+                ..Default::default()
+            },
+        )
+    }));
+    result.trace = trace;
+    if let Some(p) = last_pos_mci_m {
+        let (down, across) = surface_position_m(&p, setup.config.scenario.moon.radius_m);
+        result.downrange_m = Some(down).filter(|x| x.is_finite());
+        result.crossrange_m = Some(across).filter(|x| x.is_finite());
+    }
+    match run {
+        Ok(Ok(report)) => {
+            let s = &report.summary;
+            result.digest = s.digest.clone();
+            result.steps = s.steps;
+            result.sim_time_s = s.sim_time_s;
+            result.propellant_used_kg = s.propellant_used_kg;
+            result.fault_events = s.faults.len() as u64;
+            result.out_of_envelope = s
+                .propulsion_diagnostics
+                .as_ref()
+                .and_then(|d| d.out_of_envelope_steps);
+            result.touchdown = s.touchdown.map(|t| Touchdown {
+                t_s: t.t_s,
+                vertical_speed_mps: t.vertical_speed_mps,
+                horizontal_speed_mps: t.horizontal_speed_mps,
+                tilt_deg: t.tilt_deg,
+            });
+            result.outcome = format!("{:?}", s.outcome).to_lowercase();
+            result.error = s.error.clone();
+            if s.outcome == oils_emulator::scheduler::Outcome::Aborted && timed_out() {
+                result.outcome = "timeout".into();
+            }
+        }
+        Ok(Err(e)) => {
+            result.outcome = "error".into();
+            result.error = Some(e.to_string());
+        }
+        Err(panic) => {
+            let what = panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "unknown panic".into());
+            result.outcome = "error".into();
+            result.error = Some(format!("the case panicked: {what}"));
+        }
+    }
+    result.wall_s = started.elapsed().as_secs_f64();
+    result
+}
+
+fn sample(trace: &mut Trace, plant: &Plant) {
+    let s = plant.state();
+    let up = s.pos_mci_m.normalize();
+    let vertical = s.vel_mci_m_s.dot(&up);
+    let horizontal = (s.vel_mci_m_s - up * vertical).norm();
+    trace.t_s.push(plant.time_ns() as f32 * 1e-9);
+    trace.altitude_m.push(plant.altitude_m() as f32);
+    trace.horizontal_speed_m_s.push(horizontal as f32);
+    trace.vertical_speed_m_s.push(vertical as f32);
+}

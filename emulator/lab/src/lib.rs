@@ -1,0 +1,22 @@
+//! The lab of the oils bench: offline work built on the run core (`oils-emulator`).
+//! Nothing here runs in the loop, so it may use anything: rayon, plotters, mcap.
+//!
+//! - [`training`]: the surrogate's training pipeline (seed paper): excitation, data,
+//!   library, Lasso, cross-validation, the model file the core's runtime reads.
+//! - [`validation`]: the surrogate against the hifi model on the paper's cases.
+//! - [`campaign`]: Monte Carlo campaigns (local on all cores, or a Slurm job array).
+//! - [`mcap_log`]: MCAP logs (Foxglove), written in the loop through the core's
+//!   `RecordSink` and read back for export, plots and replay.
+//! - [`onboard`]: the flight software a configuration names, flown in process.
+//! - [`plot`], [`run_plots`], [`hifi_figures`]: figures.
+#![warn(missing_docs)]
+#![forbid(unsafe_code)]
+
+pub mod campaign;
+pub mod hifi_figures;
+pub mod mcap_log;
+pub mod onboard;
+pub mod plot;
+pub mod run_plots;
+pub mod training;
+pub mod validation;

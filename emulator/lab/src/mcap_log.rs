@@ -1,0 +1,1799 @@
+//! A run as an MCAP file that opens in Foxglove: the same records as the OILSLOG3 log
+//! ([`oils_emulator::recorder`]), one message per record on each per-step channel, stamped with
+//! simulated time (`log_time` = `publish_time` = `t_ns`).
+//!
+//! Channels (JSON messages, JSON-schema schemas):
+//!
+//! | topic | schema | per record |
+//! |---|---|---|
+//! | `/oils/telemetry` | `oils.Telemetry` | Telemetry(k) as published (navigation is noisy) |
+//! | `/oils/command` | `oils.Command` | Command(k) as received, and what the plant applied |
+//! | `/oils/truth` | `oils.TrueState` | the true state at t_k, with derived speeds and tilt |
+//! | `/oils/propulsion` | `oils.Propulsion` | the propulsion model's outputs and internals |
+//! | `/oils/timing` | `oils.StepTiming` | per-step timing (see [`step_timing`]) |
+//! | `/tf` | `foxglove.FrameTransforms` | `moon` -> `site` (fixed) and `moon` -> `lander` |
+//! | `/oils/pose` | `foxglove.PoseInFrame` | the lander in the `site` frame (3D trail, ground track) |
+//! | `/oils/events` | `foxglove.Log` | only when something happens: start, deadline miss, rejected values, touchdown, end of run (fault events: [`Event`]) |
+//! | `/oils/scene` | `foxglove.SceneUpdate` | once, at the first record: the Moon and a lander model |
+//!
+//! Frames: `moon` is the plant's `mci` (the Moon does not rotate in the plant, so it is
+//! Moon-fixed); `site` is a local east-north-up frame on the surface below the first
+//! record's position; `lander` is the body frame (+Z the thrust axis).
+//!
+//! Why JSON and not protobuf: Foxglove reads both; JSON needs no code generation and no
+//! protobuf crate, every message is readable as text in Foxglove's raw-message panel and
+//! in any tool, the schemas are plain JSON in this file, and `serde_json` writes every
+//! f64 as its shortest round-trip form, so nothing is rounded. Protobuf would be smaller
+//! before compression and faster to encode; the measured cost of JSON is in the README
+//! ("Log formats"), and it is paid on the writer thread, not the stepping thread.
+//! Non-finite values (the `NaN` of a propulsion state a model does not have) are written
+//! as `null` and read back as `NaN`.
+//!
+//! The file is chunked (1 MiB uncompressed), zstd-compressed, CRC-checked per chunk and
+//! indexed, with the run's header (its whole configuration) as the metadata record
+//! `oils`. Chunk boundaries depend on the content only, so the same run gives the same
+//! bytes. [`read_mcap`] turns such a file back into a [`Log`].
+
+use mcap::records::{MessageHeader, Metadata};
+use mcap::{Compression, WriteOptions, Writer};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use oils_emulator::plant::{ActuatorCommand, TruthState};
+use oils_emulator::propulsion::{EngineCommand, PropulsionInternals, PropulsionOutput};
+use oils_emulator::recorder::{
+    Log, LogFormat, Record, RecordSink, Recorder, RecorderError, SinkOpener, REC_COMMAND_RECEIVED,
+    REC_DEADLINE_MISS, REC_END_OF_RUN, REC_REJECTED_VALUES,
+};
+use oils_shared::{
+    Command, EngineReading, NavState, PacketHeader, PropulsionReadings, Telemetry, ENGINE_COUNT,
+};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::{BufWriter, Seek, Write};
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// First bytes of every MCAP file.
+pub const MCAP_MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
+/// Name of the metadata record holding the run's header.
+pub const METADATA_NAME: &str = "oils";
+/// Uncompressed chunk size, bytes (the crate's default; 4 MiB saved only 0.5 %).
+const CHUNK_SIZE: u64 = 1 << 20;
+/// zstd level of the chunks.
+const ZSTD_LEVEL: u32 = 1;
+
+/// Topics, as written.
+pub mod topic {
+    /// Telemetry(k) as published.
+    pub const TELEMETRY: &str = "/oils/telemetry";
+    /// Command(k) as received and as applied.
+    pub const COMMAND: &str = "/oils/command";
+    /// The true state.
+    pub const TRUTH: &str = "/oils/truth";
+    /// Propulsion outputs and internals.
+    pub const PROPULSION: &str = "/oils/propulsion";
+    /// Per-step timing.
+    pub const TIMING: &str = "/oils/timing";
+    /// Frame transforms.
+    pub const TF: &str = "/tf";
+    /// The lander's pose in the site frame.
+    pub const POSE: &str = "/oils/pose";
+    /// Events (foxglove.Log).
+    pub const EVENTS: &str = "/oils/events";
+    /// The 3D scene (once).
+    pub const SCENE: &str = "/oils/scene";
+    /// The channels with exactly one message per record.
+    pub const PER_STEP: [&str; 7] = [TELEMETRY, COMMAND, TRUTH, PROPULSION, TIMING, TF, POSE];
+}
+
+/// MCAP log errors.
+#[derive(Debug, Error)]
+pub enum McapLogError {
+    /// The file could not be created, written or read.
+    #[error("{path}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The MCAP library refused (a damaged file: bad CRC, truncated chunk, ...).
+    #[error("{path}: {source}")]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// What the library said.
+        source: mcap::McapError,
+    },
+    /// The file is MCAP but not an oils run (a channel or the header is missing or bad).
+    #[error("{path} is not an oils MCAP log ({why})")]
+    NotOils {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        why: String,
+    },
+}
+
+impl From<McapLogError> for RecorderError {
+    fn from(e: McapLogError) -> Self {
+        match e {
+            McapLogError::Io { path, source } => RecorderError::Io { path, source },
+            // A write that failed (a full disk) is an I/O error, not a damaged file.
+            McapLogError::Mcap {
+                path,
+                source: mcap::McapError::Io(source),
+            } => RecorderError::Io { path, source },
+            McapLogError::Mcap { path, source } => RecorderError::NotALog {
+                path,
+                why: format!("damaged MCAP: {source}"),
+            },
+            McapLogError::NotOils { path, why } => RecorderError::NotALog { path, why },
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Messages. A float that may be non-finite is an `F`: written as a number or `null`.
+
+/// An f64 that serialises as a JSON number, or `null` when not finite (read back as NaN).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct F(f64);
+
+impl Serialize for F {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        // serde_json writes non-finite floats as null.
+        s.serialize_f64(self.0)
+    }
+}
+
+impl<'de> Deserialize<'de> for F {
+    /// Parses the number's own text with Rust's exact parser (serde_json's default float
+    /// parser may be one ulp off); `null` is NaN.
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let raw: &'de serde_json::value::RawValue = Deserialize::deserialize(d)?;
+        match raw.get() {
+            "null" => Ok(F(f64::NAN)),
+            text => text
+                .parse::<f64>()
+                .map(F)
+                .map_err(|e| serde::de::Error::custom(format!("number `{text}`: {e}"))),
+        }
+    }
+}
+
+fn fs<const N: usize>(v: [f64; N]) -> [F; N] {
+    v.map(F)
+}
+
+fn un<const N: usize>(v: [F; N]) -> [f64; N] {
+    v.map(|x| x.0)
+}
+
+/// A u64 that JavaScript cannot hold exactly (run id, schema hash): hex text.
+fn hex(v: u64) -> String {
+    format!("{v:016x}")
+}
+
+fn unhex(s: &str) -> u64 {
+    u64::from_str_radix(s, 16).unwrap_or(0)
+}
+
+#[derive(Serialize, Deserialize)]
+struct HeaderMsg {
+    protocol_version: u32,
+    flags: u32,
+    schema_hash: String,
+    run_id: String,
+    step: u64,
+    t_ns: i64,
+}
+
+impl HeaderMsg {
+    fn of(h: &PacketHeader) -> Self {
+        Self {
+            protocol_version: h.protocol_version,
+            flags: h.flags,
+            schema_hash: hex(h.schema_hash),
+            run_id: hex(h.run_id),
+            step: h.step,
+            t_ns: h.t_ns,
+        }
+    }
+    fn header(&self) -> PacketHeader {
+        PacketHeader {
+            protocol_version: self.protocol_version,
+            flags: self.flags,
+            schema_hash: unhex(&self.schema_hash),
+            run_id: unhex(&self.run_id),
+            step: self.step,
+            t_ns: self.t_ns,
+        }
+    }
+}
+
+#[derive(Serialize, Deserialize)]
+struct NavMsg {
+    pos_mci_m: [F; 3],
+    vel_mci_m_s: [F; 3],
+    q_mci_from_body: [F; 4],
+    rate_body_rad_s: [F; 3],
+}
+
+#[derive(Serialize, Deserialize)]
+struct EngineMsg {
+    thrust_n: F,
+    chamber_pressure_pa: F,
+    valve_open: u32,
+    flags: u32,
+}
+
+#[derive(Serialize, Deserialize)]
+struct ReadingsMsg {
+    gas_pressure_pa: F,
+    fuel_tank_pressure_pa: F,
+    ox_tank_pressure_pa: F,
+    engines: [EngineMsg; ENGINE_COUNT],
+}
+
+#[derive(Serialize, Deserialize)]
+struct TelemetryMsg {
+    header: HeaderMsg,
+    t_s: f64,
+    nav: NavMsg,
+    accel_body_m_s2: [F; 3],
+    altitude_m: F,
+    mass_estimate_kg: F,
+    propulsion: ReadingsMsg,
+}
+
+impl TelemetryMsg {
+    fn of(t: &Telemetry) -> Self {
+        let n = &t.nav;
+        let p = &t.propulsion;
+        Self {
+            header: HeaderMsg::of(&t.header),
+            t_s: t.header.t_ns as f64 * 1e-9,
+            nav: NavMsg {
+                pos_mci_m: fs(n.pos_mci_m),
+                vel_mci_m_s: fs(n.vel_mci_m_s),
+                q_mci_from_body: fs(n.q_mci_from_body),
+                rate_body_rad_s: fs(n.rate_body_rad_s),
+            },
+            accel_body_m_s2: fs(t.accel_body_m_s2),
+            altitude_m: F(t.altitude_m),
+            mass_estimate_kg: F(t.mass_estimate_kg),
+            propulsion: ReadingsMsg {
+                gas_pressure_pa: F(p.gas_pressure_pa),
+                fuel_tank_pressure_pa: F(p.fuel_tank_pressure_pa),
+                ox_tank_pressure_pa: F(p.ox_tank_pressure_pa),
+                engines: p.engines.map(|e| EngineMsg {
+                    thrust_n: F(e.thrust_n),
+                    chamber_pressure_pa: F(e.chamber_pressure_pa),
+                    valve_open: e.valve_open,
+                    flags: e.flags,
+                }),
+            },
+        }
+    }
+    fn telemetry(self) -> Telemetry {
+        let p = self.propulsion;
+        Telemetry {
+            header: self.header.header(),
+            nav: NavState {
+                pos_mci_m: un(self.nav.pos_mci_m),
+                vel_mci_m_s: un(self.nav.vel_mci_m_s),
+                q_mci_from_body: un(self.nav.q_mci_from_body),
+                rate_body_rad_s: un(self.nav.rate_body_rad_s),
+            },
+            accel_body_m_s2: un(self.accel_body_m_s2),
+            altitude_m: self.altitude_m.0,
+            mass_estimate_kg: self.mass_estimate_kg.0,
+            propulsion: PropulsionReadings {
+                gas_pressure_pa: p.gas_pressure_pa.0,
+                fuel_tank_pressure_pa: p.fuel_tank_pressure_pa.0,
+                ox_tank_pressure_pa: p.ox_tank_pressure_pa.0,
+                engines: p.engines.map(|e| EngineReading {
+                    thrust_n: e.thrust_n.0,
+                    chamber_pressure_pa: e.chamber_pressure_pa.0,
+                    valve_open: e.valve_open,
+                    flags: e.flags,
+                }),
+            },
+        }
+    }
+}
+
+#[derive(Serialize, Deserialize)]
+struct AppliedMsg {
+    thrust_cmd_n: [F; ENGINE_COUNT],
+    on: [bool; ENGINE_COUNT],
+    torque_cmd_body_nm: [F; 3],
+}
+
+#[derive(Serialize, Deserialize)]
+struct CommandMsg {
+    /// The record's `REC_*` flags.
+    record_flags: u32,
+    received: bool,
+    deadline_miss: bool,
+    rejected_values: bool,
+    header: HeaderMsg,
+    thrust_cmd_n: [F; ENGINE_COUNT],
+    engine_on: [u32; ENGINE_COUNT],
+    torque_cmd_body_nm: [F; 3],
+    stub_compute_ns: u64,
+    applied: AppliedMsg,
+}
+
+impl CommandMsg {
+    fn of(r: &Record) -> Self {
+        let c = &r.command;
+        let a = &r.applied;
+        Self {
+            record_flags: r.flags,
+            received: r.flags & REC_COMMAND_RECEIVED != 0,
+            deadline_miss: r.flags & REC_DEADLINE_MISS != 0,
+            rejected_values: r.flags & REC_REJECTED_VALUES != 0,
+            header: HeaderMsg::of(&c.header),
+            thrust_cmd_n: fs(c.thrust_cmd_n),
+            engine_on: c.engine_on,
+            torque_cmd_body_nm: fs(c.torque_cmd_body_nm),
+            stub_compute_ns: c.stub_compute_ns,
+            applied: AppliedMsg {
+                thrust_cmd_n: fs(a.engines.thrust_cmd_n),
+                on: a.engines.on,
+                torque_cmd_body_nm: fs(a.torque_cmd_body_nm),
+            },
+        }
+    }
+}
+
+#[derive(Serialize, Deserialize)]
+struct TruthMsg {
+    t_s: f64,
+    pos_mci_m: [F; 3],
+    vel_mci_m_s: [F; 3],
+    q_mci_from_body: [F; 4],
+    rate_body_rad_s: [F; 3],
+    mass_kg: F,
+    altitude_m: F,
+    contact: bool,
+    /// Derived (not read back): radial velocity, m/s (negative: descending).
+    vertical_speed_m_s: F,
+    /// Derived: velocity across the local vertical, m/s.
+    horizontal_speed_m_s: F,
+    /// Derived: angle between the thrust axis (body +Z) and the local vertical, degrees.
+    tilt_deg: F,
+    /// Derived: body rates, deg/s.
+    rate_body_deg_s: [F; 3],
+    /// Derived: position in the site frame (east, north, up), metres.
+    pos_site_m: [F; 3],
+}
+
+#[derive(Serialize, Deserialize)]
+struct PropulsionMsg {
+    t_s: f64,
+    thrust_cmd_n: [F; ENGINE_COUNT],
+    thrust_n: [F; ENGINE_COUNT],
+    mean_thrust_n: [F; ENGINE_COUNT],
+    chamber_pressure_pa: [F; ENGINE_COUNT],
+    gas_pressure_pa: F,
+    fuel_tank_pressure_pa: F,
+    ox_tank_pressure_pa: F,
+    ejected_fuel_kg: F,
+    ejected_ox_kg: F,
+    fuel_flow_kg_s: F,
+    ox_flow_kg_s: F,
+    regulator_outlet_pa: F,
+    manifold_pressure_pa: [F; 2],
+    fuel_valve_position: [F; ENGINE_COUNT],
+    ox_valve_position: [F; ENGINE_COUNT],
+}
+
+/// Per-step timing, nanoseconds; `None` where a step has no such figure (no command
+/// received; wake error outside realtime; transport in process).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct StepTiming {
+    /// Step index.
+    pub step: u64,
+    /// Simulated time, seconds.
+    pub t_s: f64,
+    /// The flight software's own step time, from the command.
+    pub stub_compute_ns: Option<u64>,
+    /// Telemetry(k) published until Command(k) received.
+    pub round_trip_ns: Option<u64>,
+    /// Step start minus scheduled start (realtime).
+    pub wake_error_ns: Option<i64>,
+    /// Round trip minus stub compute.
+    pub transport_ns: Option<u64>,
+}
+
+/// The timing of one record (wall-clock measurements the scheduler took at that step).
+pub fn step_timing(r: &Record) -> StepTiming {
+    let received = r.flags & REC_COMMAND_RECEIVED != 0;
+    StepTiming {
+        step: r.telemetry.header.step,
+        t_s: r.telemetry.header.t_ns as f64 * 1e-9,
+        stub_compute_ns: received.then_some(r.command.stub_compute_ns),
+        round_trip_ns: r.timing.round_trip_ns,
+        wake_error_ns: r.timing.wake_error_ns,
+        transport_ns: r.timing.transport_ns,
+    }
+}
+
+#[derive(Serialize)]
+struct Time {
+    sec: u64,
+    nsec: u32,
+}
+
+impl Time {
+    fn of(t_ns: u64) -> Self {
+        Self {
+            sec: t_ns / 1_000_000_000,
+            nsec: (t_ns % 1_000_000_000) as u32,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct Vec3 {
+    x: F,
+    y: F,
+    z: F,
+}
+
+#[derive(Serialize)]
+struct Quat {
+    x: F,
+    y: F,
+    z: F,
+    w: F,
+}
+
+fn vec3(v: &Vector3<f64>) -> Vec3 {
+    Vec3 {
+        x: F(v.x),
+        y: F(v.y),
+        z: F(v.z),
+    }
+}
+
+/// `[w, x, y, z]` to Foxglove's `{x, y, z, w}`.
+fn quat(q: &[f64; 4]) -> Quat {
+    Quat {
+        x: F(q[1]),
+        y: F(q[2]),
+        z: F(q[3]),
+        w: F(q[0]),
+    }
+}
+
+#[derive(Serialize)]
+struct FrameTransform<'a> {
+    timestamp: Time,
+    parent_frame_id: &'a str,
+    child_frame_id: &'a str,
+    translation: Vec3,
+    rotation: Quat,
+}
+
+#[derive(Serialize)]
+struct FrameTransforms<'a> {
+    transforms: [FrameTransform<'a>; 2],
+}
+
+#[derive(Serialize)]
+struct Pose {
+    position: Vec3,
+    orientation: Quat,
+}
+
+#[derive(Serialize)]
+struct PoseInFrame<'a> {
+    timestamp: Time,
+    frame_id: &'a str,
+    pose: Pose,
+}
+
+/// What happened, as a `foxglove.Log` message on `/oils/events`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Event {
+    /// Short kind: `start`, `deadline_miss`, `rejected_values`, `touchdown`,
+    /// `end_of_run`; fault injection adds `fault` (its detail names the fault).
+    pub kind: &'static str,
+    /// Foxglove level: 2 info, 3 warning, 4 error.
+    pub level: u8,
+    /// The sentence shown in Foxglove's log panel.
+    pub message: String,
+}
+
+#[derive(Serialize)]
+struct LogMsg<'a> {
+    timestamp: Time,
+    level: u8,
+    message: &'a str,
+    name: &'a str,
+    file: &'a str,
+    line: u32,
+}
+
+// ---------------------------------------------------------------------------------------
+// Schemas.
+
+/// JSON schema of a number that may be `null` (non-finite).
+const NUM: &str = r#"{"type":["number","null"]}"#;
+
+fn arr(n: usize) -> String {
+    format!(r#"{{"type":"array","items":{NUM},"minItems":{n},"maxItems":{n}}}"#)
+}
+
+fn obj(title: &str, fields: &[(&str, String)]) -> String {
+    let props: Vec<String> = fields
+        .iter()
+        .map(|(name, schema)| format!(r#""{name}":{schema}"#))
+        .collect();
+    format!(
+        r#"{{"title":"{title}","type":"object","properties":{{{}}}}}"#,
+        props.join(",")
+    )
+}
+
+fn num() -> String {
+    NUM.to_string()
+}
+
+fn int() -> String {
+    r#"{"type":"integer"}"#.to_string()
+}
+
+fn boolean() -> String {
+    r#"{"type":"boolean"}"#.to_string()
+}
+
+fn string() -> String {
+    r#"{"type":"string"}"#.to_string()
+}
+
+fn time_schema() -> String {
+    obj("time", &[("sec", int()), ("nsec", int())])
+}
+
+fn vec3_schema() -> String {
+    obj(
+        "foxglove.Vector3",
+        &[("x", num()), ("y", num()), ("z", num())],
+    )
+}
+
+fn quat_schema() -> String {
+    obj(
+        "foxglove.Quaternion",
+        &[("x", num()), ("y", num()), ("z", num()), ("w", num())],
+    )
+}
+
+fn header_schema() -> String {
+    obj(
+        "oils.PacketHeader",
+        &[
+            ("protocol_version", int()),
+            ("flags", int()),
+            ("schema_hash", string()),
+            ("run_id", string()),
+            ("step", int()),
+            ("t_ns", int()),
+        ],
+    )
+}
+
+fn list(item: String) -> String {
+    format!(r#"{{"type":"array","items":{item}}}"#)
+}
+
+/// `(topic, schema name, schema JSON)` of every channel, in channel-id order.
+fn channels() -> Vec<(&'static str, &'static str, String)> {
+    let e = ENGINE_COUNT;
+    let telemetry = obj(
+        "oils.Telemetry",
+        &[
+            ("header", header_schema()),
+            ("t_s", num()),
+            (
+                "nav",
+                obj(
+                    "oils.NavState",
+                    &[
+                        ("pos_mci_m", arr(3)),
+                        ("vel_mci_m_s", arr(3)),
+                        ("q_mci_from_body", arr(4)),
+                        ("rate_body_rad_s", arr(3)),
+                    ],
+                ),
+            ),
+            ("accel_body_m_s2", arr(3)),
+            ("altitude_m", num()),
+            ("mass_estimate_kg", num()),
+            (
+                "propulsion",
+                obj(
+                    "oils.PropulsionReadings",
+                    &[
+                        ("gas_pressure_pa", num()),
+                        ("fuel_tank_pressure_pa", num()),
+                        ("ox_tank_pressure_pa", num()),
+                        (
+                            "engines",
+                            list(obj(
+                                "oils.EngineReading",
+                                &[
+                                    ("thrust_n", num()),
+                                    ("chamber_pressure_pa", num()),
+                                    ("valve_open", int()),
+                                    ("flags", int()),
+                                ],
+                            )),
+                        ),
+                    ],
+                ),
+            ),
+        ],
+    );
+    let applied = obj(
+        "oils.AppliedCommand",
+        &[
+            ("thrust_cmd_n", arr(e)),
+            ("on", list(boolean())),
+            ("torque_cmd_body_nm", arr(3)),
+        ],
+    );
+    let command = obj(
+        "oils.Command",
+        &[
+            ("record_flags", int()),
+            ("received", boolean()),
+            ("deadline_miss", boolean()),
+            ("rejected_values", boolean()),
+            ("header", header_schema()),
+            ("thrust_cmd_n", arr(e)),
+            ("engine_on", list(int())),
+            ("torque_cmd_body_nm", arr(3)),
+            ("stub_compute_ns", int()),
+            ("applied", applied),
+        ],
+    );
+    let truth = obj(
+        "oils.TrueState",
+        &[
+            ("t_s", num()),
+            ("pos_mci_m", arr(3)),
+            ("vel_mci_m_s", arr(3)),
+            ("q_mci_from_body", arr(4)),
+            ("rate_body_rad_s", arr(3)),
+            ("mass_kg", num()),
+            ("altitude_m", num()),
+            ("contact", boolean()),
+            ("vertical_speed_m_s", num()),
+            ("horizontal_speed_m_s", num()),
+            ("tilt_deg", num()),
+            ("rate_body_deg_s", arr(3)),
+            ("pos_site_m", arr(3)),
+        ],
+    );
+    let propulsion = obj(
+        "oils.Propulsion",
+        &[
+            ("t_s", num()),
+            ("thrust_cmd_n", arr(e)),
+            ("thrust_n", arr(e)),
+            ("mean_thrust_n", arr(e)),
+            ("chamber_pressure_pa", arr(e)),
+            ("gas_pressure_pa", num()),
+            ("fuel_tank_pressure_pa", num()),
+            ("ox_tank_pressure_pa", num()),
+            ("ejected_fuel_kg", num()),
+            ("ejected_ox_kg", num()),
+            ("fuel_flow_kg_s", num()),
+            ("ox_flow_kg_s", num()),
+            ("regulator_outlet_pa", num()),
+            ("manifold_pressure_pa", arr(2)),
+            ("fuel_valve_position", arr(e)),
+            ("ox_valve_position", arr(e)),
+        ],
+    );
+    let opt_int = r#"{"type":["integer","null"]}"#.to_string();
+    let timing = obj(
+        "oils.StepTiming",
+        &[
+            ("step", int()),
+            ("t_s", num()),
+            ("stub_compute_ns", opt_int.clone()),
+            ("round_trip_ns", opt_int.clone()),
+            ("wake_error_ns", opt_int.clone()),
+            ("transport_ns", opt_int),
+        ],
+    );
+    let transform = obj(
+        "foxglove.FrameTransform",
+        &[
+            ("timestamp", time_schema()),
+            ("parent_frame_id", string()),
+            ("child_frame_id", string()),
+            ("translation", vec3_schema()),
+            ("rotation", quat_schema()),
+        ],
+    );
+    let transforms = obj(
+        "foxglove.FrameTransforms",
+        &[("transforms", list(transform))],
+    );
+    let pose = obj(
+        "foxglove.PoseInFrame",
+        &[
+            ("timestamp", time_schema()),
+            ("frame_id", string()),
+            (
+                "pose",
+                obj(
+                    "foxglove.Pose",
+                    &[("position", vec3_schema()), ("orientation", quat_schema())],
+                ),
+            ),
+        ],
+    );
+    let log = obj(
+        "foxglove.Log",
+        &[
+            ("timestamp", time_schema()),
+            ("level", int()),
+            ("message", string()),
+            ("name", string()),
+            ("file", string()),
+            ("line", int()),
+        ],
+    );
+    // The scene is written once; its schema names the fields used (Foxglove reads
+    // missing fields as defaults).
+    let color = obj(
+        "foxglove.Color",
+        &[("r", num()), ("g", num()), ("b", num()), ("a", num())],
+    );
+    let prim = |title: &str| {
+        obj(
+            title,
+            &[
+                (
+                    "pose",
+                    obj(
+                        "foxglove.Pose",
+                        &[("position", vec3_schema()), ("orientation", quat_schema())],
+                    ),
+                ),
+                ("size", vec3_schema()),
+                ("color", color.clone()),
+            ],
+        )
+    };
+    let entity = obj(
+        "foxglove.SceneEntity",
+        &[
+            ("timestamp", time_schema()),
+            ("frame_id", string()),
+            ("id", string()),
+            ("frame_locked", boolean()),
+            ("spheres", list(prim("foxglove.SpherePrimitive"))),
+            ("cubes", list(prim("foxglove.CubePrimitive"))),
+            ("cylinders", list(prim("foxglove.CylinderPrimitive"))),
+        ],
+    );
+    let scene = obj(
+        "foxglove.SceneUpdate",
+        &[
+            ("deletions", list(obj("foxglove.SceneEntityDeletion", &[]))),
+            ("entities", list(entity)),
+        ],
+    );
+    vec![
+        (topic::TELEMETRY, "oils.Telemetry", telemetry),
+        (topic::COMMAND, "oils.Command", command),
+        (topic::TRUTH, "oils.TrueState", truth),
+        (topic::PROPULSION, "oils.Propulsion", propulsion),
+        (topic::TIMING, "oils.StepTiming", timing),
+        (topic::TF, "foxglove.FrameTransforms", transforms),
+        (topic::POSE, "foxglove.PoseInFrame", pose),
+        (topic::EVENTS, "foxglove.Log", log),
+        (topic::SCENE, "foxglove.SceneUpdate", scene),
+    ]
+}
+
+// ---------------------------------------------------------------------------------------
+// Writing.
+
+/// The local frame fixed at the first record: origin on the surface below the vehicle,
+/// axes east, north, up.
+#[derive(Debug, Clone, Copy)]
+struct Site {
+    origin_mci_m: Vector3<f64>,
+    q_mci_from_site: UnitQuaternion<f64>,
+}
+
+impl Site {
+    fn below(truth: &TruthState) -> Self {
+        let r = Vector3::from(truth.pos_mci_m);
+        let up = r.try_normalize(1e-9).unwrap_or(Vector3::z());
+        let east = Vector3::z()
+            .cross(&up)
+            .try_normalize(1e-9)
+            .unwrap_or(Vector3::x());
+        let north = up.cross(&east);
+        let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[east, north, up]));
+        let surface = (r.norm() - truth.altitude_m).max(0.0);
+        Self {
+            origin_mci_m: up * surface,
+            q_mci_from_site: UnitQuaternion::from_rotation_matrix(&rot),
+        }
+    }
+
+    fn site_of(&self, p_mci: &Vector3<f64>) -> Vector3<f64> {
+        self.q_mci_from_site.inverse() * (p_mci - self.origin_mci_m)
+    }
+}
+
+/// Speeds and tilt relative to the local vertical.
+fn local(truth: &TruthState) -> (f64, f64, f64) {
+    let r = Vector3::from(truth.pos_mci_m);
+    let v = Vector3::from(truth.vel_mci_m_s);
+    let up = r.try_normalize(1e-9).unwrap_or(Vector3::z());
+    let vertical = v.dot(&up);
+    let horizontal = (v - up * vertical).norm();
+    let [w, x, y, z] = truth.q_mci_from_body;
+    let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+    let axis = q * Vector3::z();
+    let tilt = axis.dot(&up).clamp(-1.0, 1.0).acos().to_degrees();
+    (vertical, horizontal, tilt)
+}
+
+/// Turns records into MCAP messages on a writer; keeps what spans records (channel ids,
+/// the site frame, sequence numbers, the previous contact state).
+struct Encoder {
+    ids: Vec<u16>,
+    seq: Vec<u32>,
+    site: Option<Site>,
+    contact: bool,
+    buf: Vec<u8>,
+    written: u64,
+}
+
+const CH_TELEMETRY: usize = 0;
+const CH_COMMAND: usize = 1;
+const CH_TRUTH: usize = 2;
+const CH_PROPULSION: usize = 3;
+const CH_TIMING: usize = 4;
+const CH_TF: usize = 5;
+const CH_POSE: usize = 6;
+const CH_EVENTS: usize = 7;
+const CH_SCENE: usize = 8;
+
+impl Encoder {
+    fn new<W: Write + Seek>(w: &mut Writer<W>, header_json: &str) -> mcap::McapResult<Self> {
+        let mut metadata = BTreeMap::new();
+        metadata.insert("header_json".to_string(), header_json.to_string());
+        metadata.insert("format".to_string(), "oils-mcap-1".to_string());
+        w.write_metadata(&Metadata {
+            name: METADATA_NAME.to_string(),
+            metadata,
+        })?;
+        let mut ids = Vec::new();
+        for (topic, name, schema) in channels() {
+            let schema_id = w.add_schema(name, "jsonschema", schema.as_bytes())?;
+            ids.push(w.add_channel(schema_id, topic, "json", &BTreeMap::new())?);
+        }
+        let n = ids.len();
+        Ok(Self {
+            ids,
+            seq: vec![0; n],
+            site: None,
+            contact: false,
+            buf: Vec::with_capacity(4096),
+            written: 0,
+        })
+    }
+
+    fn put<W: Write + Seek, T: Serialize>(
+        &mut self,
+        w: &mut Writer<W>,
+        ch: usize,
+        t_ns: u64,
+        msg: &T,
+    ) -> mcap::McapResult<()> {
+        self.buf.clear();
+        // Serialising plain structs to a Vec cannot fail.
+        serde_json::to_writer(&mut self.buf, msg).expect("JSON of a plain struct");
+        let header = MessageHeader {
+            channel_id: self.ids[ch],
+            sequence: self.seq[ch],
+            log_time: t_ns,
+            publish_time: t_ns,
+        };
+        self.seq[ch] = self.seq[ch].wrapping_add(1);
+        w.write_to_known_channel(&header, &self.buf)
+    }
+
+    fn event<W: Write + Seek>(
+        &mut self,
+        w: &mut Writer<W>,
+        t_ns: u64,
+        e: &Event,
+    ) -> mcap::McapResult<()> {
+        let msg = LogMsg {
+            timestamp: Time::of(t_ns),
+            level: e.level,
+            message: &e.message,
+            name: e.kind,
+            file: "",
+            line: 0,
+        };
+        self.put(w, CH_EVENTS, t_ns, &msg)
+    }
+
+    fn write<W: Write + Seek>(&mut self, w: &mut Writer<W>, r: &Record) -> mcap::McapResult<()> {
+        let tlm = &r.telemetry;
+        let t_ns = tlm.header.t_ns.max(0) as u64;
+        let t_s = tlm.header.t_ns as f64 * 1e-9;
+        let step = tlm.header.step;
+        let truth = &r.truth;
+        let first = self.site.is_none();
+        let site = *self.site.get_or_insert_with(|| Site::below(truth));
+        if first {
+            self.scene(w, t_ns)?;
+            let e = Event {
+                kind: "start",
+                level: 2,
+                message: format!(
+                    "run {} starts at step {step}, altitude {:.1} m",
+                    hex(tlm.header.run_id),
+                    truth.altitude_m
+                ),
+            };
+            self.event(w, t_ns, &e)?;
+        }
+
+        self.put(w, CH_TELEMETRY, t_ns, &TelemetryMsg::of(tlm))?;
+        self.put(w, CH_COMMAND, t_ns, &CommandMsg::of(r))?;
+
+        let pos = Vector3::from(truth.pos_mci_m);
+        let (vertical, horizontal, tilt) = local(truth);
+        let pos_site = site.site_of(&pos);
+        let truth_msg = TruthMsg {
+            t_s,
+            pos_mci_m: fs(truth.pos_mci_m),
+            vel_mci_m_s: fs(truth.vel_mci_m_s),
+            q_mci_from_body: fs(truth.q_mci_from_body),
+            rate_body_rad_s: fs(truth.rate_body_rad_s),
+            mass_kg: F(truth.mass_kg),
+            altitude_m: F(truth.altitude_m),
+            contact: truth.contact,
+            vertical_speed_m_s: F(vertical),
+            horizontal_speed_m_s: F(horizontal),
+            tilt_deg: F(tilt),
+            rate_body_deg_s: fs(truth.rate_body_rad_s.map(f64::to_degrees)),
+            pos_site_m: fs([pos_site.x, pos_site.y, pos_site.z]),
+        };
+        self.put(w, CH_TRUTH, t_ns, &truth_msg)?;
+
+        let p = &truth.propulsion;
+        let i = &truth.internals;
+        let prop = PropulsionMsg {
+            t_s,
+            thrust_cmd_n: fs(r.applied.engines.thrust_cmd_n),
+            thrust_n: fs(p.thrust_n),
+            mean_thrust_n: fs(p.mean_thrust_n),
+            chamber_pressure_pa: fs(p.chamber_pressure_pa),
+            gas_pressure_pa: F(p.gas_pressure_pa),
+            fuel_tank_pressure_pa: F(p.fuel_tank_pressure_pa),
+            ox_tank_pressure_pa: F(p.ox_tank_pressure_pa),
+            ejected_fuel_kg: F(p.ejected_fuel_kg),
+            ejected_ox_kg: F(p.ejected_ox_kg),
+            fuel_flow_kg_s: F(p.fuel_flow_kg_s),
+            ox_flow_kg_s: F(p.ox_flow_kg_s),
+            regulator_outlet_pa: F(i.regulator_outlet_pa),
+            manifold_pressure_pa: fs(i.manifold_pressure_pa),
+            fuel_valve_position: fs(i.valve_position.map(|v| v[0])),
+            ox_valve_position: fs(i.valve_position.map(|v| v[1])),
+        };
+        self.put(w, CH_PROPULSION, t_ns, &prop)?;
+        self.put(w, CH_TIMING, t_ns, &step_timing(r))?;
+
+        let q_site_from_body = site.q_mci_from_site.inverse()
+            * UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                truth.q_mci_from_body[0],
+                truth.q_mci_from_body[1],
+                truth.q_mci_from_body[2],
+                truth.q_mci_from_body[3],
+            ));
+        let qs = site.q_mci_from_site.quaternion();
+        let tf = FrameTransforms {
+            transforms: [
+                FrameTransform {
+                    timestamp: Time::of(t_ns),
+                    parent_frame_id: "moon",
+                    child_frame_id: "site",
+                    translation: vec3(&site.origin_mci_m),
+                    rotation: quat(&[qs.w, qs.i, qs.j, qs.k]),
+                },
+                FrameTransform {
+                    timestamp: Time::of(t_ns),
+                    parent_frame_id: "moon",
+                    child_frame_id: "lander",
+                    translation: vec3(&pos),
+                    rotation: quat(&truth.q_mci_from_body),
+                },
+            ],
+        };
+        self.put(w, CH_TF, t_ns, &tf)?;
+        let qb = q_site_from_body.quaternion();
+        let pose = PoseInFrame {
+            timestamp: Time::of(t_ns),
+            frame_id: "site",
+            pose: Pose {
+                position: vec3(&pos_site),
+                orientation: quat(&[qb.w, qb.i, qb.j, qb.k]),
+            },
+        };
+        self.put(w, CH_POSE, t_ns, &pose)?;
+
+        for e in events(r, self.contact, vertical, horizontal, tilt) {
+            self.event(w, t_ns, &e)?;
+        }
+        self.contact = truth.contact;
+        self.written += 1;
+        Ok(())
+    }
+
+    /// The Moon and a lander model (a 2 m box on four engine bells), written once.
+    fn scene<W: Write + Seek>(&mut self, w: &mut Writer<W>, t_ns: u64) -> mcap::McapResult<()> {
+        let d = 2.0 * 1_737_400.0;
+        let bells: Vec<serde_json::Value> = [[0.6, 0.6], [-0.6, 0.6], [-0.6, -0.6], [0.6, -0.6]]
+            .iter()
+            .map(|[x, y]| {
+                serde_json::json!({
+                    "pose": {"position": {"x": x, "y": y, "z": 0.2},
+                             "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}},
+                    "size": {"x": 0.4, "y": 0.4, "z": 0.4},
+                    "color": {"r": 0.3, "g": 0.3, "b": 0.35, "a": 1.0}
+                })
+            })
+            .collect();
+        let scene = serde_json::json!({
+            "deletions": [],
+            "entities": [
+                {
+                    "timestamp": {"sec": t_ns / 1_000_000_000, "nsec": t_ns % 1_000_000_000},
+                    "frame_id": "moon", "id": "moon", "frame_locked": true,
+                    "spheres": [{
+                        "pose": {"position": {"x": 0, "y": 0, "z": 0},
+                                 "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}},
+                        "size": {"x": d, "y": d, "z": d},
+                        "color": {"r": 0.55, "g": 0.55, "b": 0.55, "a": 1.0}
+                    }]
+                },
+                {
+                    "timestamp": {"sec": t_ns / 1_000_000_000, "nsec": t_ns % 1_000_000_000},
+                    "frame_id": "lander", "id": "lander", "frame_locked": true,
+                    "cubes": [{
+                        "pose": {"position": {"x": 0, "y": 0, "z": 1.2},
+                                 "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}},
+                        "size": {"x": 2.0, "y": 2.0, "z": 1.6},
+                        "color": {"r": 0.85, "g": 0.65, "b": 0.2, "a": 1.0}
+                    }],
+                    "cylinders": bells
+                }
+            ]
+        });
+        self.put(w, CH_SCENE, t_ns, &scene)
+    }
+}
+
+/// The events one record gives. `was_in_contact`: the previous record's contact.
+fn events(
+    r: &Record,
+    was_in_contact: bool,
+    vertical_m_s: f64,
+    horizontal_m_s: f64,
+    tilt_deg: f64,
+) -> Vec<Event> {
+    let step = r.telemetry.header.step;
+    let t_s = r.telemetry.header.t_ns as f64 * 1e-9;
+    let mut out = Vec::new();
+    if r.flags & REC_DEADLINE_MISS != 0 {
+        out.push(Event {
+            kind: "deadline_miss",
+            level: 3,
+            message: format!(
+                "step {step} (t = {t_s:.2} s): deadline miss, miss policy applied (thrust {:?} N)",
+                r.applied.engines.thrust_cmd_n
+            ),
+        });
+    }
+    if r.flags & REC_REJECTED_VALUES != 0 {
+        out.push(Event {
+            kind: "rejected_values",
+            level: 3,
+            message: format!(
+                "step {step} (t = {t_s:.2} s): command values rejected: sent thrust {:?} N, on {:?}, torque {:?} N m; applied thrust {:?} N, on {:?}, torque {:?} N m",
+                r.command.thrust_cmd_n,
+                r.command.engine_on,
+                r.command.torque_cmd_body_nm,
+                r.applied.engines.thrust_cmd_n,
+                r.applied.engines.on,
+                r.applied.torque_cmd_body_nm
+            ),
+        });
+    }
+    if r.flags
+        & (oils_emulator::recorder::REC_FAULT_FIRED | oils_emulator::recorder::REC_FAULT_CLEARED)
+        != 0
+    {
+        // Which faults: bit i of faults_active is the i-th of the configuration's faults.
+        out.push(Event {
+            kind: "fault",
+            level: 3,
+            message: format!(
+                "step {step} (t = {t_s:.2} s): fault {}; active faults now {:#x} (bit i: the i-th of config.faults)",
+                if r.flags & oils_emulator::recorder::REC_FAULT_FIRED != 0 { "fired" } else { "cleared" },
+                r.faults_active
+            ),
+        });
+    }
+    if r.truth.contact && !was_in_contact {
+        out.push(Event {
+            kind: "touchdown",
+            level: 2,
+            message: format!(
+                "step {step} (t = {t_s:.2} s): touchdown, vertical {vertical_m_s:.2} m/s, horizontal {horizontal_m_s:.2} m/s, tilt {tilt_deg:.2} deg"
+            ),
+        });
+    }
+    if r.flags & REC_END_OF_RUN != 0 {
+        out.push(Event {
+            kind: "end_of_run",
+            level: 2,
+            message: format!(
+                "step {step} (t = {t_s:.2} s): end of run, altitude {:.2} m, mass {:.1} kg",
+                r.truth.altitude_m, r.truth.mass_kg
+            ),
+        });
+    }
+    out
+}
+
+fn write_options() -> WriteOptions {
+    WriteOptions::new()
+        .compression(Some(Compression::Zstd))
+        // Level 1: on a whole descent it gave a smaller file than the default level 3
+        // (79.9 against 89.3 MB: the JSON floats' digits are what is left to squeeze)
+        // for less time; 6 was 4x slower for 86 MB.
+        .compression_level(ZSTD_LEVEL)
+        .chunk_size(Some(CHUNK_SIZE))
+        // Compress on the writer thread itself: no extra threads on a shared machine,
+        // and one deterministic compressor.
+        .compression_threads(0)
+        .profile("")
+}
+
+/// What writing an MCAP log gave.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct McapStats {
+    /// Records written.
+    pub records: u64,
+    /// File size, bytes.
+    pub bytes: u64,
+}
+
+/// Writes a log (read from an OILSLOG3 file) as MCAP.
+pub fn export_mcap(log: &Log, path: &Path) -> Result<McapStats, McapLogError> {
+    let mut sink = McapSink::create(path, &log.header_json)?;
+    for r in &log.records {
+        sink.write_record(r)?;
+    }
+    sink.close()?;
+    let bytes = std::fs::metadata(path)
+        .map_err(|source| McapLogError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?
+        .len();
+    Ok(McapStats {
+        records: sink.enc.written,
+        bytes,
+    })
+}
+
+/// The MCAP log as the recorder's writer: `oils run --log-format mcap`.
+pub struct McapSink {
+    writer: Option<Writer<BufWriter<File>>>,
+    enc: Encoder,
+    path: PathBuf,
+}
+
+impl McapSink {
+    /// Creates the file and writes the header (metadata, schemas, channels).
+    pub fn create(path: &Path, header_json: &str) -> Result<Self, McapLogError> {
+        let file = File::create(path).map_err(|source| McapLogError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let mcap_err = |source| McapLogError::Mcap {
+            path: path.to_path_buf(),
+            source,
+        };
+        let mut writer = write_options()
+            .create(BufWriter::with_capacity(1 << 20, file))
+            .map_err(mcap_err)?;
+        let enc = Encoder::new(&mut writer, header_json).map_err(mcap_err)?;
+        Ok(Self {
+            writer: Some(writer),
+            enc,
+            path: path.to_path_buf(),
+        })
+    }
+
+    fn mcap_err(&self, source: mcap::McapError) -> McapLogError {
+        McapLogError::Mcap {
+            path: self.path.clone(),
+            source,
+        }
+    }
+
+    /// Writes one record's messages.
+    pub fn write_record(&mut self, r: &Record) -> Result<(), McapLogError> {
+        let Some(w) = self.writer.as_mut() else {
+            return Err(McapLogError::NotOils {
+                path: self.path.clone(),
+                why: "written after it was closed".into(),
+            });
+        };
+        self.enc.write(w, r).map_err(|e| self.mcap_err(e))
+    }
+
+    /// Writes the summary (index, statistics), flushes and syncs.
+    pub fn close(&mut self) -> Result<(), McapLogError> {
+        let Some(mut w) = self.writer.take() else {
+            return Ok(());
+        };
+        w.finish().map_err(|e| self.mcap_err(e))?;
+        let io = |source| McapLogError::Io {
+            path: self.path.clone(),
+            source,
+        };
+        let mut out = w.into_inner();
+        out.flush().map_err(io)?;
+        out.get_ref().sync_all().map_err(io)
+    }
+
+    /// A recorder (writer thread, bounded channel) writing MCAP to `path`.
+    pub fn recorder(path: &Path, header_json: &str) -> Result<Recorder, RecorderError> {
+        let sink = Self::create(path, header_json)?;
+        Recorder::with_sink(path, Box::new(sink))
+    }
+}
+
+/// Hands the run core an MCAP writer for `log.format = "mcap"` ([`Extras::sinks`]).
+///
+/// [`Extras::sinks`]: oils_emulator::session::Extras::sinks
+#[derive(Debug, Clone, Copy, Default)]
+pub struct McapOpener;
+
+impl SinkOpener for McapOpener {
+    fn writes(&self, format: LogFormat) -> bool {
+        format == LogFormat::Mcap
+    }
+
+    fn open(
+        &self,
+        _format: LogFormat,
+        path: &Path,
+        header_json: &str,
+    ) -> Result<Box<dyn RecordSink>, RecorderError> {
+        Ok(Box::new(McapSink::create(path, header_json)?))
+    }
+}
+
+impl RecordSink for McapSink {
+    fn write(&mut self, rec: &Record) -> Result<(), RecorderError> {
+        Ok(self.write_record(rec)?)
+    }
+
+    /// Nothing: a chunk is written when it is full, so chunk boundaries (and the file's
+    /// bytes) do not depend on how fast the writer kept up. A crash loses at most the
+    /// chunk being filled (1 MiB of JSON, about 3 s of simulated time at 10 ms).
+    fn caught_up(&mut self) -> Result<(), RecorderError> {
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<(), RecorderError> {
+        Ok(self.close()?)
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Reading.
+
+/// The longest record the readers accept, inside a chunk or not: the file's own length,
+/// or 16 MiB for a small file (an oils message is a few kilobytes).
+fn record_length_limit(file_len: usize) -> usize {
+    file_len.max(16 << 20)
+}
+
+/// One message of an MCAP file.
+#[derive(Debug)]
+struct McapMessage {
+    topic: std::sync::Arc<str>,
+    sequence: u32,
+    log_time: u64,
+    data: Vec<u8>,
+}
+
+/// What the oils readers take from an MCAP file.
+#[derive(Debug)]
+enum McapItem {
+    Message(McapMessage),
+    Metadata(mcap::records::Metadata),
+}
+
+/// The messages (with chunks read) or the metadata records (chunks skipped) of an MCAP
+/// file, in file order, chunk CRCs checked; other records are skipped unparsed.
+///
+/// Not `mcap::MessageStream` or `mcap::read::LinearReader`: in mcap 0.26 the first reads
+/// chunk contents with no bound on a record's declared length, so a damaged length makes
+/// it try to allocate exabytes and abort the process, and both parse every record, and a
+/// short attachment record panics. Both found by the `mcap` fuzz target
+/// (`docs/fuzzing.md`). This drives the same crate's sans-io reader with a bound on record
+/// lengths ([`record_length_limit`]) and parses only channels, messages and metadata.
+struct McapReader<'a> {
+    rest: &'a [u8],
+    reader: mcap::sans_io::LinearReader,
+    topics: BTreeMap<u16, std::sync::Arc<str>>,
+}
+
+impl<'a> McapReader<'a> {
+    /// Messages, from inside the chunks.
+    fn messages(bytes: &'a [u8]) -> Self {
+        Self::new(bytes, false)
+    }
+
+    /// Metadata records, without decompressing a chunk.
+    fn metadata(bytes: &'a [u8]) -> Self {
+        Self::new(bytes, true)
+    }
+
+    fn new(bytes: &'a [u8], skip_chunks: bool) -> Self {
+        let options = mcap::sans_io::LinearReaderOptions::default()
+            .with_record_length_limit(record_length_limit(bytes.len()))
+            .with_validate_chunk_crcs(true)
+            .with_emit_chunks(skip_chunks);
+        Self {
+            rest: bytes,
+            reader: mcap::sans_io::LinearReader::new_with_options(options),
+            topics: BTreeMap::new(),
+        }
+    }
+}
+
+impl Iterator for McapReader<'_> {
+    type Item = Result<McapItem, mcap::McapError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        use mcap::records::{op, Record as R};
+        use mcap::sans_io::LinearReadEvent as E;
+        while let Some(event) = self.reader.next_event() {
+            let (opcode, data) = match event {
+                Ok(E::ReadRequest(need)) => {
+                    let n = need.min(self.rest.len());
+                    self.reader.insert(n).copy_from_slice(&self.rest[..n]);
+                    self.reader.notify_read(n);
+                    self.rest = &self.rest[n..];
+                    continue;
+                }
+                Ok(E::Record { opcode, data }) => (opcode, data),
+                Err(e) => return Some(Err(e)),
+            };
+            if ![op::CHANNEL, op::MESSAGE, op::METADATA].contains(&opcode) {
+                continue;
+            }
+            match mcap::parse_record(opcode, data) {
+                Ok(R::Channel(c)) => {
+                    self.topics.insert(c.id, c.topic.as_str().into());
+                }
+                Ok(R::Message { header, data }) => {
+                    let Some(topic) = self.topics.get(&header.channel_id) else {
+                        return Some(Err(mcap::McapError::UnknownChannel(
+                            header.sequence,
+                            header.channel_id,
+                        )));
+                    };
+                    return Some(Ok(McapItem::Message(McapMessage {
+                        topic: topic.clone(),
+                        sequence: header.sequence,
+                        log_time: header.log_time,
+                        data: data.into_owned(),
+                    })));
+                }
+                Ok(R::Metadata(m)) => return Some(Ok(McapItem::Metadata(m))),
+                Ok(_) => {}
+                Err(e) => return Some(Err(e)),
+            }
+        }
+        None
+    }
+}
+
+/// The messages of an MCAP file (see [`McapReader`]).
+fn mcap_messages(bytes: &[u8]) -> impl Iterator<Item = Result<McapMessage, mcap::McapError>> + '_ {
+    McapReader::messages(bytes).filter_map(|item| match item {
+        Ok(McapItem::Message(m)) => Some(Ok(m)),
+        Ok(McapItem::Metadata(_)) => None,
+        Err(e) => Some(Err(e)),
+    })
+}
+
+/// Is this file an MCAP file (by its magic)?
+pub fn is_mcap(path: &Path) -> bool {
+    use std::io::Read;
+    let mut magic = [0u8; 8];
+    File::open(path)
+        .and_then(|mut f| f.read_exact(&mut magic))
+        .map(|_| &magic == MCAP_MAGIC)
+        .unwrap_or(false)
+}
+
+/// Reads an oils MCAP log back into a [`Log`]: telemetry, command, applied command and
+/// true state per record (derived fields are not read). Chunk CRCs are checked; a
+/// damaged file is an error naming the file.
+pub fn read_mcap(path: &Path) -> Result<Log, McapLogError> {
+    let bytes = std::fs::read(path).map_err(|source| McapLogError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_mcap(path, &bytes)
+}
+
+/// [`read_mcap`] of bytes already read (`path` names them in errors); the fuzz target
+/// `mcap` feeds it arbitrary bytes.
+pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
+    let mcap_err = |source| McapLogError::Mcap {
+        path: path.to_path_buf(),
+        source,
+    };
+    let not = |why: String| McapLogError::NotOils {
+        path: path.to_path_buf(),
+        why,
+    };
+    let mut header_json = None;
+    for item in McapReader::metadata(bytes) {
+        if let McapItem::Metadata(m) = item.map_err(mcap_err)? {
+            if m.name == METADATA_NAME {
+                header_json = m.metadata.get("header_json").cloned();
+            }
+        }
+    }
+    let header_json = header_json.ok_or_else(|| not("no `oils` metadata record".into()))?;
+    let mut records: Vec<Record> = Vec::new();
+    let mut index: BTreeMap<u64, usize> = BTreeMap::new();
+    // Every per-step channel has one message per record: its sequence number is the
+    // record's position.
+    let mut slot = |seq: u64, records: &mut Vec<Record>| -> usize {
+        *index.entry(seq).or_insert_with(|| {
+            records.push(Record::default());
+            records.len() - 1
+        })
+    };
+    for msg in mcap_messages(bytes) {
+        let msg = msg.map_err(mcap_err)?;
+        let topic = &*msg.topic;
+        let bad = |e: serde_json::Error| not(format!("{topic} at t = {} ns: {e}", msg.log_time));
+        match topic {
+            topic::TELEMETRY => {
+                let m: TelemetryMsg = serde_json::from_slice(&msg.data).map_err(bad)?;
+                let i = slot(u64::from(msg.sequence), &mut records);
+                records[i].telemetry = m.telemetry();
+            }
+            topic::COMMAND => {
+                let m: CommandMsg = serde_json::from_slice(&msg.data).map_err(bad)?;
+                let i = slot(u64::from(msg.sequence), &mut records);
+                let r = &mut records[i];
+                r.flags = m.record_flags;
+                r.command = Command {
+                    header: m.header.header(),
+                    thrust_cmd_n: un(m.thrust_cmd_n),
+                    engine_on: m.engine_on,
+                    torque_cmd_body_nm: un(m.torque_cmd_body_nm),
+                    stub_compute_ns: m.stub_compute_ns,
+                };
+                r.applied = ActuatorCommand {
+                    engines: EngineCommand {
+                        thrust_cmd_n: un(m.applied.thrust_cmd_n),
+                        on: m.applied.on,
+                    },
+                    torque_cmd_body_nm: un(m.applied.torque_cmd_body_nm),
+                };
+            }
+            topic::TRUTH => {
+                let m: TruthMsg = serde_json::from_slice(&msg.data).map_err(bad)?;
+                let i = slot(u64::from(msg.sequence), &mut records);
+                let t = &mut records[i].truth;
+                t.pos_mci_m = un(m.pos_mci_m);
+                t.vel_mci_m_s = un(m.vel_mci_m_s);
+                t.q_mci_from_body = un(m.q_mci_from_body);
+                t.rate_body_rad_s = un(m.rate_body_rad_s);
+                t.mass_kg = m.mass_kg.0;
+                t.altitude_m = m.altitude_m.0;
+                t.contact = m.contact;
+            }
+            topic::PROPULSION => {
+                let m: PropulsionMsg = serde_json::from_slice(&msg.data).map_err(bad)?;
+                let i = slot(u64::from(msg.sequence), &mut records);
+                let t = &mut records[i].truth;
+                t.propulsion = PropulsionOutput {
+                    thrust_n: un(m.thrust_n),
+                    mean_thrust_n: un(m.mean_thrust_n),
+                    chamber_pressure_pa: un(m.chamber_pressure_pa),
+                    gas_pressure_pa: m.gas_pressure_pa.0,
+                    fuel_tank_pressure_pa: m.fuel_tank_pressure_pa.0,
+                    ox_tank_pressure_pa: m.ox_tank_pressure_pa.0,
+                    ejected_fuel_kg: m.ejected_fuel_kg.0,
+                    ejected_ox_kg: m.ejected_ox_kg.0,
+                    fuel_flow_kg_s: m.fuel_flow_kg_s.0,
+                    ox_flow_kg_s: m.ox_flow_kg_s.0,
+                };
+                let fuel = un(m.fuel_valve_position);
+                let ox = un(m.ox_valve_position);
+                t.internals = PropulsionInternals {
+                    regulator_outlet_pa: m.regulator_outlet_pa.0,
+                    manifold_pressure_pa: un(m.manifold_pressure_pa),
+                    valve_position: std::array::from_fn(|e| [fuel[e], ox[e]]),
+                };
+            }
+            topic::TIMING => {
+                let m: StepTiming = serde_json::from_slice(&msg.data).map_err(bad)?;
+                let i = slot(u64::from(msg.sequence), &mut records);
+                records[i].timing = oils_emulator::recorder::StepTimes {
+                    round_trip_ns: m.round_trip_ns,
+                    wake_error_ns: m.wake_error_ns,
+                    transport_ns: m.transport_ns,
+                };
+            }
+            _ => {}
+        }
+    }
+    Ok(Log {
+        header_json,
+        records,
+        damaged_records: Vec::new(),
+        trailing_bytes: 0,
+    })
+}
+
+/// Per-step timing from an MCAP log's `/oils/timing` channel (in record order).
+pub fn read_mcap_timing(path: &Path) -> Result<Vec<StepTiming>, McapLogError> {
+    let bytes = std::fs::read(path).map_err(|source| McapLogError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let mcap_err = |source| McapLogError::Mcap {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut out = Vec::new();
+    for msg in mcap_messages(&bytes) {
+        let msg = msg.map_err(mcap_err)?;
+        if &*msg.topic == topic::TIMING {
+            out.push(
+                serde_json::from_slice(&msg.data).map_err(|e| McapLogError::NotOils {
+                    path: path.to_path_buf(),
+                    why: format!("{}: {e}", topic::TIMING),
+                })?,
+            );
+        }
+    }
+    Ok(out)
+}
+
+/// Reads a run log in either format: OILSLOG3 or MCAP (by the file's magic).
+pub fn read_any(path: &Path) -> Result<Log, RecorderError> {
+    if is_mcap(path) {
+        Ok(read_mcap(path)?)
+    } else {
+        oils_emulator::recorder::read_log(path)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp(name: &str) -> PathBuf {
+        std::env::temp_dir().join(format!("oils-mcap-{}-{name}", std::process::id()))
+    }
+
+    fn record(k: u64) -> Record {
+        let mut r = Record {
+            flags: REC_COMMAND_RECEIVED,
+            ..Default::default()
+        };
+        r.telemetry.header = PacketHeader::new(0xdead_beef_0123_4567, k, k as i64 * 10_000_000);
+        r.telemetry.altitude_m = 1000.0 - k as f64 * 0.1;
+        r.command.header = r.telemetry.header;
+        r.command.thrust_cmd_n = [400.0 + k as f64 / 3.0, 0.1, 800.0, 1e-300];
+        r.command.stub_compute_ns = 1234 + k;
+        r.applied.engines.thrust_cmd_n = r.command.thrust_cmd_n;
+        r.truth.pos_mci_m = [1_737_400.0 + 1000.0, k as f64, 0.0];
+        r.truth.q_mci_from_body = [1.0, 0.0, 0.0, 0.0];
+        r.truth.altitude_m = 1000.0;
+        r.truth.internals = PropulsionInternals::NONE;
+        r.truth.propulsion.thrust_n = [1.0 / 3.0, 2.0 / 3.0, 0.1 + 0.2, 123.456e-7];
+        r
+    }
+
+    #[test]
+    fn records_survive_mcap_and_nan_comes_back_as_nan() {
+        let path = temp("rt.mcap");
+        let mut records: Vec<Record> = (0..500).map(record).collect();
+        records[10].flags |= REC_REJECTED_VALUES;
+        records[499].flags = REC_END_OF_RUN;
+        let log = Log {
+            header_json: r#"{"run_id":"deadbeef01234567"}"#.into(),
+            records,
+            damaged_records: Vec::new(),
+            trailing_bytes: 0,
+        };
+        let stats = export_mcap(&log, &path).unwrap();
+        assert_eq!(stats.records, 500);
+        assert!(is_mcap(&path));
+        let back = read_mcap(&path).unwrap();
+        assert_eq!(back.header_json, log.header_json);
+        assert_eq!(back.records.len(), 500);
+        for (a, b) in log.records.iter().zip(&back.records) {
+            assert_eq!(a.telemetry, b.telemetry);
+            assert_eq!(a.command, b.command);
+            assert_eq!(a.flags, b.flags);
+            assert_eq!(a.applied, b.applied);
+            assert_eq!(a.truth.propulsion, b.truth.propulsion);
+            assert!(b.truth.internals.regulator_outlet_pa.is_nan());
+        }
+        let timing = read_mcap_timing(&path).unwrap();
+        assert_eq!(timing.len(), 500);
+        assert_eq!(timing[7].stub_compute_ns, Some(1241));
+        assert_eq!(timing[499].stub_compute_ns, None);
+        std::fs::remove_file(&path).ok();
+    }
+
+    #[test]
+    fn site_frame_is_east_north_up_below_the_vehicle() {
+        let mut t = TruthState {
+            pos_mci_m: [1_750_000.0, 0.0, 0.0],
+            altitude_m: 12_600.0,
+            ..Default::default()
+        };
+        let site = Site::below(&t);
+        assert!((site.origin_mci_m - Vector3::new(1_737_400.0, 0.0, 0.0)).norm() < 1e-6);
+        // 1 km north (mci +Z here) and 100 m up of the site.
+        t.pos_mci_m = [1_737_500.0, 0.0, 1000.0];
+        let p = site.site_of(&Vector3::from(t.pos_mci_m));
+        assert!((p - Vector3::new(0.0, 1000.0, 100.0)).norm() < 1e-6, "{p}");
+        // East is mci +Y at this point.
+        let e = site.site_of(&Vector3::new(1_737_400.0, 50.0, 0.0));
+        assert!((e - Vector3::new(50.0, 0.0, 0.0)).norm() < 1e-6, "{e}");
+    }
+
+    /// The records of an MCAP byte range: (position, opcode, body range).
+    fn records_in(bytes: &[u8], from: usize) -> Vec<(usize, u8, std::ops::Range<usize>)> {
+        let mut out = Vec::new();
+        let mut at = from;
+        while at + 9 <= bytes.len() {
+            let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().unwrap()) as usize;
+            out.push((at, bytes[at], at + 9..at + 9 + len));
+            at += 9 + len;
+        }
+        out
+    }
+
+    /// A message inside a zstd chunk whose declared length is absurd is an error, not an
+    /// attempt to allocate it: mcap 0.26's MessageStream reserved the declared length and
+    /// aborted the process (found by the `mcap` fuzz target).
+    #[test]
+    fn a_huge_record_length_inside_a_chunk_is_an_error() {
+        // A one-message file, chunked but not compressed, so its records can be edited.
+        let mut plain = Vec::new();
+        {
+            let mut w = WriteOptions::new()
+                .compression(None)
+                .create(std::io::Cursor::new(&mut plain))
+                .unwrap();
+            let channel = w.add_channel(0, "/t", "json", &BTreeMap::new()).unwrap();
+            let header = mcap::records::MessageHeader {
+                channel_id: channel,
+                sequence: 7,
+                log_time: 1,
+                publish_time: 1,
+            };
+            w.write_to_known_channel(&header, b"{}").unwrap();
+            w.finish().unwrap();
+        }
+        let intact: Vec<_> = mcap_messages(&plain).collect::<Result<_, _>>().unwrap();
+        assert_eq!(
+            (intact.len(), &*intact[0].topic, intact[0].sequence),
+            (1, "/t", 7)
+        );
+
+        // Rebuild its chunk as zstd (crc 0: unchecked) with the message's length set to
+        // 2^61 bytes. Chunk body: start, end, uncompressed size, crc, compression, records.
+        let (at, _, body) = records_in(&plain, 8)
+            .into_iter()
+            .find(|r| r.1 == 0x06)
+            .expect("a chunk");
+        let b = &plain[body.clone()];
+        let compression_len = u32::from_le_bytes(b[28..32].try_into().unwrap()) as usize;
+        let mut inner = b[32 + compression_len + 8..].to_vec();
+        let (msg, _, _) = records_in(&inner, 0)
+            .into_iter()
+            .find(|r| r.1 == 0x05)
+            .expect("the message in the chunk");
+        inner[msg + 1..msg + 9].copy_from_slice(&(1u64 << 61).to_le_bytes());
+        let packed = zstd::bulk::compress(&inner, 1).unwrap();
+        let mut chunk = b[..16].to_vec();
+        chunk.extend((inner.len() as u64).to_le_bytes());
+        chunk.extend(0u32.to_le_bytes());
+        chunk.extend(4u32.to_le_bytes());
+        chunk.extend(b"zstd");
+        chunk.extend((packed.len() as u64).to_le_bytes());
+        chunk.extend(&packed);
+        let mut bytes = plain[..at].to_vec();
+        bytes.push(0x06);
+        bytes.extend((chunk.len() as u64).to_le_bytes());
+        bytes.extend(&chunk);
+        bytes.extend(&plain[body.end..]);
+
+        let err = mcap_messages(&bytes)
+            .collect::<Result<Vec<_>, _>>()
+            .expect_err("a damaged length is an error");
+        assert!(err.to_string().contains("exceeds limit"), "{err}");
+    }
+
+    /// A record the readers do not use is skipped unparsed: mcap 0.26's parser panicked
+    /// on an attachment shorter than its fixed fields (found by the `mcap` fuzz target).
+    #[test]
+    fn a_short_attachment_record_is_skipped() {
+        let path = temp("attachment.mcap");
+        let log = Log {
+            header_json: r#"{"run_id":"deadbeef01234567"}"#.into(),
+            records: (0..3).map(record).collect(),
+            damaged_records: Vec::new(),
+            trailing_bytes: 0,
+        };
+        export_mcap(&log, &path).unwrap();
+        let good = std::fs::read(&path).unwrap();
+        let (_, _, first) = records_in(&good, 8)[0].clone();
+        let mut bytes = good[..first.end].to_vec();
+        // Log time, create time, empty name and media type, data length 0, and no room
+        // for the CRC after them.
+        bytes.push(0x09);
+        bytes.extend(32u64.to_le_bytes());
+        bytes.extend([0u8; 32]);
+        bytes.extend(&good[first.end..]);
+        let log = parse_mcap(&path, &bytes).expect("the attachment is skipped");
+        assert_eq!(log.records.len(), 3);
+        let _ = std::fs::remove_file(path);
+    }
+
+    #[test]
+    fn not_mcap_and_not_oils_are_errors() {
+        let path = temp("bad.mcap");
+        std::fs::write(&path, b"\x89MCAP0\r\ngarbage").unwrap();
+        assert!(read_mcap(&path).is_err());
+        std::fs::write(&path, b"hello").unwrap();
+        assert!(!is_mcap(&path));
+        std::fs::remove_file(&path).ok();
+    }
+}

@@ -1,0 +1,80 @@
+//! The flight software a run names ([`FswSpec`]), built as a value: the reference GNC,
+//! profile playback or a C library. The stub process and the emulator's in-process link
+//! both start from here; nothing here parses a command line.
+
+use crate::c_library::{CLibraryError, CLibraryFsw};
+use crate::fsw::{FlightSoftware, FswSpec};
+use crate::gnc::{GncConfig, GncConfigError, ReferenceGnc};
+use crate::playback::ProfilePlayback;
+use oils_shared::profile::{ProfileError, ProfileRules, ThrustProfile};
+use std::path::Path;
+
+/// Why the flight software asked for could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum FswBuildError {
+    /// Bad argument.
+    #[error("{0}")]
+    Argument(String),
+    /// Profile unreadable.
+    #[error(transparent)]
+    Profile(#[from] ProfileError),
+    /// GNC configuration invalid.
+    #[error(transparent)]
+    Gnc(#[from] GncConfigError),
+    /// C flight software could not be loaded.
+    #[error(transparent)]
+    CLibrary(#[from] CLibraryError),
+}
+
+/// Largest `--fsw-params` file, bytes.
+pub const MAX_FSW_PARAMS_BYTES: u64 = 1 << 20;
+
+/// Builds the flight software asked for (allocation happens here, before tick 0).
+/// `profile` is for playback (the file and the rules it is read with, see
+/// `oils_shared::profile`); `fsw_params` (a text file of at most
+/// [`MAX_FSW_PARAMS_BYTES`]) and `run_id` are handed to a C library's `oils_fsw_init`.
+pub fn build_fsw(
+    spec: &FswSpec,
+    profile: Option<(&Path, &ProfileRules)>,
+    fsw_params: Option<&Path>,
+    run_id: u64,
+) -> Result<Box<dyn FlightSoftware>, FswBuildError> {
+    match spec {
+        FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(GncConfig::default())?)),
+        FswSpec::CLibrary(path) => {
+            let params = match fsw_params {
+                Some(p) => read_params(p)?,
+                None => String::new(),
+            };
+            Ok(Box::new(CLibraryFsw::load(path, run_id, &params)?))
+        }
+        FswSpec::External => Err(FswBuildError::Argument(
+            "--fsw external is flown by a client started by hand, not by this stub".into(),
+        )),
+        FswSpec::Playback => {
+            let (path, rules) = profile.ok_or_else(|| {
+                FswBuildError::Argument("--fsw playback needs --profile CSV".into())
+            })?;
+            Ok(Box::new(ProfilePlayback::new(ThrustProfile::load_with(
+                path, rules,
+            )?)))
+        }
+    }
+}
+
+/// A flight software parameter file: text of at most [`MAX_FSW_PARAMS_BYTES`].
+fn read_params(p: &Path) -> Result<String, FswBuildError> {
+    use std::io::Read;
+    let bad = |why: String| FswBuildError::Argument(format!("--fsw-params {}: {why}", p.display()));
+    let file = std::fs::File::open(p).map_err(|e| bad(e.to_string()))?;
+    let mut bytes = Vec::new();
+    file.take(MAX_FSW_PARAMS_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| bad(e.to_string()))?;
+    if bytes.len() as u64 > MAX_FSW_PARAMS_BYTES {
+        return Err(bad(format!(
+            "larger than {MAX_FSW_PARAMS_BYTES} bytes, the largest parameter file"
+        )));
+    }
+    String::from_utf8(bytes).map_err(|_| bad("not UTF-8 text".into()))
+}

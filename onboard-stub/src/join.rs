@@ -1,0 +1,103 @@
+//! Joining a run as the onboard process: open the run's services, build the flight
+//! software and serve it to the end. The options are a plain value; the `oils stub`
+//! command line turns its flags into one.
+
+use crate::build::{build_fsw, FswBuildError};
+use crate::fsw::FswSpec;
+use crate::runner::{serve, StubError, StubSummary};
+use oils_shared::link::{create_node, LinkError, StubLink, WaitStrategy};
+use oils_shared::profile::{ProfileRules, RATED_THRUST_N};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+/// How the onboard process joins a run (the flags of `oils stub`).
+#[derive(Debug, Clone)]
+pub struct StubOptions {
+    /// Run id to join (hex), as printed by the emulator.
+    pub run_id: String,
+    /// Flight software to run.
+    pub fsw: FswSpec,
+    /// Thrust-command profile CSV for `gnc` playback.
+    pub profile: Option<PathBuf>,
+    /// Engine rating the profile's commands are checked against, newtons.
+    pub max_thrust_n: f64,
+    /// For a C library: the text file handed to its `oils_fsw_init`.
+    pub fsw_params: Option<PathBuf>,
+    /// busy, event or hybrid; `None`: what the emulator announces.
+    pub wait: Option<String>,
+    /// Give up after this long without telemetry, milliseconds.
+    pub timeout_ms: u64,
+    /// SCHED_FIFO priority (1-99), memory locked.
+    pub rt_priority: Option<i32>,
+    /// How long to wait for the emulator's services to appear, milliseconds.
+    pub startup_timeout_ms: u64,
+}
+
+impl StubOptions {
+    /// Options for `run_id` with the defaults of `oils stub`.
+    pub fn new(run_id: impl Into<String>) -> Self {
+        Self {
+            run_id: run_id.into(),
+            fsw: FswSpec::Gnc,
+            profile: None,
+            max_thrust_n: RATED_THRUST_N,
+            fsw_params: None,
+            wait: None,
+            timeout_ms: 5000,
+            rt_priority: None,
+            startup_timeout_ms: 10_000,
+        }
+    }
+}
+
+/// Why the onboard process could not serve the run.
+#[derive(Debug, thiserror::Error)]
+pub enum JoinError {
+    /// Bad option.
+    #[error("{0}")]
+    Argument(String),
+    /// The flight software could not be built.
+    #[error(transparent)]
+    Fsw(#[from] FswBuildError),
+    /// Link failure.
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    /// The loop failed.
+    #[error(transparent)]
+    Serve(#[from] StubError),
+}
+
+/// Joins the run and serves it to the end.
+pub fn run_stub(args: &StubOptions, stop: &AtomicBool) -> Result<StubSummary, JoinError> {
+    let run_id = u64::from_str_radix(args.run_id.trim_start_matches("0x"), 16)
+        .map_err(|_| JoinError::Argument(format!("--run-id {}: not a hex number", args.run_id)))?;
+    let wait: Option<WaitStrategy> = match &args.wait {
+        Some(w) => Some(w.parse().map_err(|_| {
+            JoinError::Argument(format!("--wait {w}: expected busy, event or hybrid"))
+        })?),
+        None => None,
+    };
+    if let Some(priority) = args.rt_priority {
+        oils_shared::clock::set_realtime_priority(priority).map_err(|e| {
+            JoinError::Argument(format!(
+                "--rt-priority {priority}: {e} (needs root or CAP_SYS_NICE)"
+            ))
+        })?;
+    }
+    if !(args.max_thrust_n.is_finite() && args.max_thrust_n > 0.0) {
+        return Err(JoinError::Argument(format!(
+            "--max-thrust-n {}: a finite number > 0 expected",
+            args.max_thrust_n
+        )));
+    }
+    let rules = ProfileRules::rated(args.max_thrust_n);
+    let mut fsw = build_fsw(
+        &args.fsw,
+        args.profile.as_deref().map(|p| (p, &rules)),
+        args.fsw_params.as_deref(),
+        run_id,
+    )?;
+    let node = create_node("oils-onboard-stub")?;
+    let link = StubLink::open(&node, run_id, wait, args.startup_timeout_ms, stop)?;
+    Ok(serve(&link, fsw.as_mut(), args.timeout_ms, stop)?)
+}

@@ -1,0 +1,149 @@
+//! The flight-software interface (one telemetry packet in, one command out) and the
+//! plain value that names which flight software flies a run.
+//!
+//! It lives beside the packets, not in the stub, because both sides reach it: the
+//! onboard stub serves a [`FlightSoftware`] over iceoryx2, and the emulator's run core
+//! calls one in its own thread (the in-process link). Neither needs the other's code.
+
+use crate::clock::monotonic_ns;
+use crate::{Command, PacketHeader, Telemetry};
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::PathBuf;
+use std::str::FromStr;
+
+/// Flight software the stub can run in the loop.
+///
+/// Contract: `step` is called once per bench step with Telemetry(k) and returns
+/// Command(k). It fills `thrust_cmd_n`, `engine_on` (0/1) and `torque_cmd_body_nm`; the
+/// IPC loop stamps the header and `stub_compute_ns`. `step` must not allocate, lock, log
+/// or read the wall clock: simulated time is `tlm.header.t_ns`.
+pub trait FlightSoftware {
+    /// Short name for reports (`gnc`, `playback`, ...).
+    fn name(&self) -> &'static str;
+    /// Answers one telemetry packet.
+    fn step(&mut self, tlm: &Telemetry) -> Command;
+    /// Whether a step failed (flight software that can report a failure, like a C
+    /// library's nonzero status). The loop checks it after every step and stops the run
+    /// instead of sending that step's command.
+    fn failure(&self) -> Option<FswFailure> {
+        None
+    }
+}
+
+/// Runs the flight software on Telemetry(k) and returns Command(k) stamped as the wire
+/// wants it: the header echoes the telemetry's run, step and time, and
+/// `stub_compute_ns` holds the flight software's own step time (monotonic clock; the
+/// digest ignores it). Every link uses this, so a command is the same whichever link
+/// carries it.
+pub fn answer<F: FlightSoftware + ?Sized>(fsw: &mut F, tlm: &Telemetry) -> Command {
+    let started_ns = monotonic_ns();
+    let mut cmd = fsw.step(tlm);
+    let compute_ns = monotonic_ns().saturating_sub(started_ns);
+    cmd.header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
+    cmd.stub_compute_ns = compute_ns;
+    cmd
+}
+
+/// A step the flight software reported as failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FswFailure {
+    /// The step whose telemetry it was answering.
+    pub step: u64,
+    /// The status it returned (nonzero).
+    pub status: i32,
+}
+
+impl fmt::Display for FswFailure {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "flight software failed at step {} (status {})",
+            self.step, self.status
+        )
+    }
+}
+
+impl std::error::Error for FswFailure {}
+
+/// Which flight software flies a run, as written on the command line and in a run
+/// configuration: `gnc`, `playback` (needs a profile), `c:PATH` (a shared library with
+/// the C ABI of `oils.h`) or `external` (a client started by hand on the run's services).
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum FswSpec {
+    /// The reference descent GNC.
+    #[default]
+    Gnc,
+    /// Open-loop playback of a thrust-command profile CSV.
+    Playback,
+    /// Flight code in a shared library with the C ABI of `oils.h`.
+    CLibrary(PathBuf),
+    /// A client of the run's services started outside the bench (C, Python, ...).
+    External,
+}
+
+impl FswSpec {
+    /// Short name for reports: `gnc`, `playback`, `c`, `external`.
+    pub fn kind_name(&self) -> &'static str {
+        match self {
+            FswSpec::Gnc => "gnc",
+            FswSpec::Playback => "playback",
+            FswSpec::CLibrary(_) => "c",
+            FswSpec::External => "external",
+        }
+    }
+}
+
+impl fmt::Display for FswSpec {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FswSpec::CLibrary(p) => write!(f, "c:{}", p.display()),
+            other => f.write_str(other.kind_name()),
+        }
+    }
+}
+
+impl FromStr for FswSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "gnc" => Ok(FswSpec::Gnc),
+            "playback" => Ok(FswSpec::Playback),
+            "external" => Ok(FswSpec::External),
+            _ => match s.strip_prefix("c:") {
+                Some(path) if !path.is_empty() => Ok(FswSpec::CLibrary(PathBuf::from(path))),
+                _ => Err(format!(
+                    "unknown flight software `{s}` (expected gnc, playback, c:PATH or external)"
+                )),
+            },
+        }
+    }
+}
+
+impl TryFrom<String> for FswSpec {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        s.parse()
+    }
+}
+
+impl From<FswSpec> for String {
+    fn from(f: FswSpec) -> String {
+        f.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spec_round_trips_through_its_text() {
+        for s in ["gnc", "playback", "external", "c:/tmp/libfsw.so"] {
+            assert_eq!(s.parse::<FswSpec>().unwrap().to_string(), s);
+        }
+        assert!("c:".parse::<FswSpec>().is_err());
+        assert!("python".parse::<FswSpec>().is_err());
+    }
+}

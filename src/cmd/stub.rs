@@ -1,0 +1,59 @@
+//! `oils stub`: the onboard-computer process. `oils run` spawns it; started by hand it
+//! joins a run whose id the emulator printed. The flags become a plain
+//! [`StubOptions`]; the stub library does the rest.
+
+use oils_onboard_stub::fsw::FswSpec;
+use oils_onboard_stub::join::StubOptions;
+use oils_shared::profile::RATED_THRUST_N;
+use std::path::PathBuf;
+
+/// Arguments of the onboard stub.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StubArgs {
+    /// Run id to join (hex), as printed by the emulator.
+    #[arg(long)]
+    pub run_id: String,
+    /// Flight software to run: gnc, playback (with --profile) or c:PATH.
+    #[arg(long, default_value = "gnc")]
+    pub fsw: FswSpec,
+    /// Thrust-command profile CSV for `--fsw playback`.
+    #[arg(long)]
+    pub profile: Option<PathBuf>,
+    /// Engine rating the profile's commands are checked against, newtons (the run's
+    /// `scenario.propulsion.max_thrust_n`; `oils run` passes it).
+    #[arg(long, default_value_t = RATED_THRUST_N)]
+    pub max_thrust_n: f64,
+    /// For `--fsw c:PATH`: a text file handed to the library's `oils_fsw_init` as its
+    /// parameters (any format the library reads; default: empty).
+    #[arg(long)]
+    pub fsw_params: Option<PathBuf>,
+    /// busy, event or hybrid; default: what the emulator announces.
+    #[arg(long)]
+    pub wait: Option<String>,
+    /// Give up after this long without telemetry, milliseconds.
+    #[arg(long, default_value_t = 5000)]
+    pub timeout_ms: u64,
+    /// Run under SCHED_FIFO at this priority (1-99) with memory locked (root or
+    /// CAP_SYS_NICE). A stub spawned by `oils run --rt-priority` inherits it anyway.
+    #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
+    pub rt_priority: Option<i32>,
+    /// How long to wait for the emulator's services to appear, milliseconds.
+    #[arg(long, default_value_t = 10000)]
+    pub startup_timeout_ms: u64,
+}
+
+impl From<&StubArgs> for StubOptions {
+    fn from(a: &StubArgs) -> Self {
+        StubOptions {
+            run_id: a.run_id.clone(),
+            fsw: a.fsw.clone(),
+            profile: a.profile.clone(),
+            max_thrust_n: a.max_thrust_n,
+            fsw_params: a.fsw_params.clone(),
+            wait: a.wait.clone(),
+            timeout_ms: a.timeout_ms,
+            rt_priority: a.rt_priority,
+            startup_timeout_ms: a.startup_timeout_ms,
+        }
+    }
+}
