@@ -14,8 +14,9 @@ use oils_lab::training::excitation::ExcitationConfig;
 use oils_lab::training::{hifi_params_of, train_configured, Quiet, TrainConfig};
 use std::path::PathBuf;
 
+/// `emulator/`, which holds the configuration, models and data the lab reads.
 fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
 fn committed_config() -> TrainConfig {
