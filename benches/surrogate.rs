@@ -2,10 +2,14 @@
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion};
 use oils_emulator::config::PropulsionConfig;
-use oils_emulator::propulsion::{build, EngineCommand, PropulsionKind};
+use oils_emulator::propulsion::{build, EngineCommand, PropulsionKind, PropulsionSpec};
 
 fn surrogate_step(c: &mut Criterion) {
-    let mut model = build(PropulsionKind::Surrogate, &PropulsionConfig::default());
+    let mut model = build(&PropulsionSpec::new(
+        PropulsionKind::Surrogate,
+        &PropulsionConfig::default(),
+    ))
+    .unwrap();
     let mut cmd = EngineCommand {
         thrust_cmd_n: [600.0; 4],
         on: [true; 4],

@@ -20,7 +20,7 @@ use oils_emulator::config::{NavNoiseConfig, ScenarioConfig};
 use oils_emulator::faults::FaultPlan;
 use oils_emulator::link::{BoundLink, InProcLink, Link};
 use oils_emulator::plant::Plant;
-use oils_emulator::propulsion::{build, PropulsionKind};
+use oils_emulator::propulsion::{build, PropulsionKind, PropulsionSpec};
 use oils_emulator::recorder::Recorder;
 use oils_emulator::scheduler::{run_observed, MissPolicy, Outcome, SchedulerConfig};
 use oils_emulator::timing::TimingThresholds;
@@ -86,7 +86,11 @@ fn allocations_over<L: Link + ?Sized>(
     let scenario = scenario();
     let mut plant = Plant::new(
         &scenario,
-        build(PropulsionKind::Ideal, &scenario.propulsion),
+        build(&PropulsionSpec::new(
+            PropulsionKind::Ideal,
+            &scenario.propulsion,
+        ))
+        .unwrap(),
         1,
     )
     .unwrap();

@@ -14,8 +14,8 @@
 use oils_emulator::config::ScenarioConfig;
 use oils_emulator::plant::{Plant, PlantStatus};
 use oils_emulator::propulsion::{
-    surrogate_for_bench, EngineCommand, ModelFiles, Propulsion, PropulsionDiagnostics,
-    PropulsionOutput,
+    build_surrogate, EngineCommand, Propulsion, PropulsionDiagnostics, PropulsionKind,
+    PropulsionOutput, PropulsionSpec,
 };
 use oils_emulator::sanitize::sanitize;
 use oils_onboard_stub::fsw::FlightSoftware;
@@ -83,15 +83,16 @@ impl Propulsion for Timed {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let runs: usize = args.get(1).map_or(5, |s| s.parse().expect("RUNS"));
-    let files = ModelFiles {
-        surrogate_model: args.get(2).map(Into::into),
-        ..ModelFiles::default()
-    };
     let cfg = ScenarioConfig::default();
+    let spec = PropulsionSpec {
+        surrogate_model: args.get(2).map(Into::into),
+        step_ns: Some(DT_NS),
+        ..PropulsionSpec::new(PropulsionKind::Surrogate, &cfg.propulsion)
+    };
     for run in 0..runs {
         let report = Arc::new(Mutex::new(Stats::default()));
         let t0 = Instant::now();
-        let surrogate = surrogate_for_bench(&cfg.propulsion, &files, DT_NS).expect("model");
+        let surrogate = build_surrogate(&spec).expect("model");
         let timed = Timed {
             inner: Box::new(surrogate),
             in_steps: Duration::ZERO,

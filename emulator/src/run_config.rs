@@ -8,7 +8,7 @@
 use crate::config::{ConfigError, ScenarioConfig};
 use crate::faults::{FaultSpec, MAX_FAULTS};
 use crate::propulsion::hifi::HifiParams;
-use crate::propulsion::PropulsionKind;
+use crate::propulsion::{PropulsionKind, PropulsionSpec};
 use crate::scheduler::{MissPolicy, Mode};
 use crate::timing::TimingThresholds;
 use oils_shared::fsw::FswSpec;
@@ -421,6 +421,17 @@ impl RunConfig {
     /// Step, nanoseconds.
     pub fn dt_ns(&self) -> u64 {
         self.dt_ms * 1_000_000
+    }
+
+    /// The propulsion model this run flies, stepped at the bench step.
+    pub fn propulsion_spec(&self) -> PropulsionSpec {
+        PropulsionSpec {
+            kind: self.propulsion,
+            engines: self.scenario.propulsion.clone(),
+            surrogate_model: self.model.clone(),
+            hifi: self.hifi.clone().unwrap_or_default(),
+            step_ns: Some(self.dt_ns()),
+        }
     }
 
     /// The wait strategy: as set, else busy-poll in lockstep (the two processes take

@@ -12,8 +12,7 @@ use crate::clock::{LockstepClock, RealtimeClock, ReplayClock, StepClock};
 use crate::faults::{FaultPlan, PlantFault};
 use crate::link::{BoundLink, InProcLink, Link, ReplayLink};
 use crate::plant::Plant;
-use crate::propulsion::build_configured;
-use crate::propulsion::hifi::HifiParams;
+use crate::propulsion;
 use crate::recorder::{Log, LogFormat, Recorder, RecorderError, SinkOpener};
 use crate::report::RunReport;
 use crate::run_config::{LinkKind, RunConfig, RunConfigError};
@@ -122,21 +121,7 @@ pub fn fresh_run_id() -> u64 {
 
 /// The plant a configuration describes, with its propulsion model (built before tick 0).
 pub fn build_plant(cfg: &RunConfig) -> Result<Plant, SessionError> {
-    let default_hifi;
-    let hifi = match &cfg.hifi {
-        Some(h) => h,
-        None => {
-            default_hifi = HifiParams::default();
-            &default_hifi
-        }
-    };
-    let propulsion = build_configured(
-        cfg.propulsion,
-        &cfg.scenario.propulsion,
-        cfg.model.as_deref(),
-        hifi,
-        cfg.dt_ns(),
-    )?;
+    let propulsion = propulsion::build(&cfg.propulsion_spec())?;
     Ok(Plant::new(&cfg.scenario, propulsion, cfg.seed)?)
 }
 

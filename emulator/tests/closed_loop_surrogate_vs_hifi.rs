@@ -24,7 +24,7 @@ use oils_emulator::config::ScenarioConfig;
 use oils_emulator::plant::{Plant, PlantStatus, TouchdownState};
 use oils_emulator::propulsion::shadow::ShadowPropulsion;
 use oils_emulator::propulsion::{
-    hifi_for_bench, surrogate_for_bench, ModelFiles, Propulsion, PropulsionDiagnostics,
+    build_hifi, build_surrogate, Propulsion, PropulsionDiagnostics, PropulsionKind, PropulsionSpec,
 };
 use oils_emulator::sanitize::sanitize;
 use oils_onboard_stub::fsw::FlightSoftware;
@@ -55,13 +55,13 @@ fn land(
 #[test]
 fn surrogate_and_hifi_land_alike() {
     let cfg = ScenarioConfig::default();
-    let files = ModelFiles::default();
-    let shadow = ShadowPropulsion::new(
-        hifi_for_bench(&cfg.propulsion, &files).unwrap(),
-        surrogate_for_bench(&cfg.propulsion, &files, DT_NS).unwrap(),
-    );
+    let spec = PropulsionSpec {
+        step_ns: Some(DT_NS),
+        ..PropulsionSpec::new(PropulsionKind::Shadow, &cfg.propulsion)
+    };
+    let shadow = ShadowPropulsion::new(build_hifi(&spec).unwrap(), build_surrogate(&spec).unwrap());
     let (hifi, diag) = land(&cfg, Box::new(shadow));
-    let surrogate = surrogate_for_bench(&cfg.propulsion, &files, DT_NS).unwrap();
+    let surrogate = build_surrogate(&spec).unwrap();
     let (sur, sur_diag) = land(&cfg, Box::new(surrogate));
     eprintln!("hifi      touchdown: {hifi:?}");
     eprintln!("surrogate touchdown: {sur:?}");

@@ -145,11 +145,15 @@ fn a_stuck_valve_holds_its_engine_while_the_others_follow_the_command() {
     use oils_emulator::config::ScenarioConfig;
     use oils_emulator::faults::PlantFault;
     use oils_emulator::plant::{ActuatorCommand, Plant};
-    use oils_emulator::propulsion::{build, PropulsionFault};
+    use oils_emulator::propulsion::{build, PropulsionFault, PropulsionSpec};
     let scenario = ScenarioConfig::default();
     let mut plant = Plant::new(
         &scenario,
-        build(PropulsionKind::Hifi, &scenario.propulsion),
+        build(&PropulsionSpec::new(
+            PropulsionKind::Hifi,
+            &scenario.propulsion,
+        ))
+        .unwrap(),
         0,
     )
     .unwrap();

@@ -2,7 +2,7 @@
 //! a counting global allocator in its own test binary.
 
 use oils_emulator::config::PropulsionConfig;
-use oils_emulator::propulsion::{build, PropulsionKind};
+use oils_emulator::propulsion::{build, PropulsionKind, PropulsionSpec};
 
 mod common;
 
@@ -11,7 +11,11 @@ static GLOBAL: common::CountingAlloc = common::CountingAlloc;
 
 #[test]
 fn shadow_step_does_not_allocate() {
-    let mut model = build(PropulsionKind::Shadow, &PropulsionConfig::default());
+    let mut model = build(&PropulsionSpec::new(
+        PropulsionKind::Shadow,
+        &PropulsionConfig::default(),
+    ))
+    .unwrap();
     // Engine switching takes the valve-refinement path of hifi too.
     let n = common::allocations_over_varied_steps(model.as_mut(), 1500);
     assert_eq!(n, 0, "step allocated {n} times");

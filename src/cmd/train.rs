@@ -184,8 +184,9 @@ fn holdout(
         Err(e) => note = format!("(descent case skipped: {e})\n"),
     }
     let hifi = oils_lab::training::hifi_params_of(cfg)?;
+    let spec = oils_lab::training::reference_spec(cfg, &hifi);
     let reference = || {
-        oils_emulator::propulsion::build_with_hifi_params(cfg.reference, &cfg.propulsion, &hifi)
+        oils_emulator::propulsion::build(&spec)
             .unwrap_or_else(|e| unreachable!("the reference was built for training: {e}"))
     };
     let models: Vec<_> = outcome.models.iter().map(|m| &m.model).collect();

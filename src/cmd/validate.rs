@@ -5,10 +5,11 @@
 use anyhow::{bail, Context, Result};
 use oils_emulator::config::ScenarioConfig;
 use oils_emulator::propulsion::hifi::runner::DESCENT_PROFILE_CSV;
+use oils_emulator::propulsion::hifi::HifiParams;
 use oils_emulator::propulsion::surrogate::model_file::ModelFile;
 use oils_emulator::propulsion::surrogate::DEFAULT_MODEL_JSON;
 use oils_emulator::propulsion::{
-    hifi_for_bench, surrogate_for_bench, BuildError, ModelFiles, Propulsion,
+    build_hifi, build_surrogate, BuildError, Propulsion, PropulsionKind, PropulsionSpec,
 };
 use oils_lab::validation::cases::{self, CaseKind};
 use oils_lab::validation::report::{Bounds, ValidationReport};
@@ -63,11 +64,6 @@ pub struct ValidateArgs {
 pub fn run(args: &ValidateArgs) -> Result<()> {
     let scenario = ScenarioConfig::default();
     let cfg = scenario.propulsion.clone();
-    let dt_ns: u64 = 10_000_000;
-    let files = ModelFiles {
-        surrogate_model: args.model.clone(),
-        hifi_params: args.hifi_params.clone(),
-    };
     // Refuse a bad model or parameter file before anything runs.
     let model_bytes = match &args.model {
         Some(p) => std::fs::read(p).with_context(|| format!("reading {}", p.display()))?,
@@ -75,8 +71,21 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
     };
     let model_file = ModelFile::parse(&String::from_utf8_lossy(&model_bytes))
         .with_context(|| format!("surrogate model {}", model_name(args)))?;
-    surrogate_for_bench(&cfg, &files, dt_ns).context("building the surrogate")?;
-    hifi_for_bench(&cfg, &files).context("building the hifi model")?;
+    // Both models step at the surrogate's own sample time.
+    let dt_ns = model_file.model.sample_time_ns;
+    let spec = PropulsionSpec {
+        surrogate_model: args.model.clone(),
+        hifi: match &args.hifi_params {
+            Some(p) => {
+                HifiParams::load(p).with_context(|| format!("hifi parameters {}", p.display()))?
+            }
+            None => HifiParams::default(),
+        },
+        step_ns: Some(dt_ns),
+        ..PropulsionSpec::new(PropulsionKind::Shadow, &cfg)
+    };
+    build_surrogate(&spec).context("building the surrogate")?;
+    build_hifi(&spec).context("building the hifi model")?;
 
     let mut all = cases::builtin();
     let descent = match &args.descent {
@@ -108,12 +117,9 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
         bail!("no case selected (check --only)");
     }
 
-    let truth = || -> Result<Box<dyn Propulsion>, BuildError> {
-        Ok(Box::new(hifi_for_bench(&cfg, &files)?))
-    };
-    let model = || -> Result<Box<dyn Propulsion>, BuildError> {
-        Ok(Box::new(surrogate_for_bench(&cfg, &files, dt_ns)?))
-    };
+    let truth = || -> Result<Box<dyn Propulsion>, BuildError> { Ok(Box::new(build_hifi(&spec)?)) };
+    let model =
+        || -> Result<Box<dyn Propulsion>, BuildError> { Ok(Box::new(build_surrogate(&spec)?)) };
     let bounds = Bounds::PAPER;
     let (reports, traces) = run_cases(
         &all,

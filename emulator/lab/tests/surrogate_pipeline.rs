@@ -8,7 +8,7 @@ use oils_emulator::propulsion::hifi::HifiPropulsion;
 use oils_emulator::propulsion::surrogate::model_file::{ModelFile, ModelFileError};
 use oils_emulator::propulsion::surrogate::valve::ValveFilter;
 use oils_emulator::propulsion::surrogate::{SurrogatePropulsion, DEFAULT_MODEL_JSON};
-use oils_emulator::propulsion::{build, EngineCommand, Propulsion, PropulsionKind};
+use oils_emulator::propulsion::{build, EngineCommand, Propulsion, PropulsionKind, PropulsionSpec};
 use oils_lab::training::derive::{self, ValveSpec};
 use oils_lab::training::excitation::ExcitationConfig;
 use oils_lab::training::{hifi_params_of, train_configured, Quiet, TrainConfig};
@@ -63,8 +63,12 @@ fn retrain_reproduces_committed_model() {
 fn committed_default_model_loads_and_starts_at_rest() {
     let file = ModelFile::parse(DEFAULT_MODEL_JSON).unwrap();
     let cfg = committed_config();
-    let reference = build(cfg.reference, &cfg.propulsion);
-    let surrogate = build(PropulsionKind::Surrogate, &PropulsionConfig::default());
+    let reference = build(&PropulsionSpec::new(cfg.reference, &cfg.propulsion)).unwrap();
+    let surrogate = build(&PropulsionSpec::new(
+        PropulsionKind::Surrogate,
+        &PropulsionConfig::default(),
+    ))
+    .unwrap();
     assert_eq!(surrogate.name(), "surrogate");
     let (r, s) = (reference.output(), surrogate.output());
     assert_eq!(r.thrust_n, s.thrust_n);
@@ -231,7 +235,7 @@ fn bad_model_files_are_refused_clearly() {
 /// the largest ejected-mass error, and the surrogate's out-of-envelope count.
 fn compare(commands: &[EngineCommand]) -> (f64, f64, f64, u64) {
     let cfg = committed_config();
-    let mut reference = build(cfg.reference, &cfg.propulsion);
+    let mut reference = build(&PropulsionSpec::new(cfg.reference, &cfg.propulsion)).unwrap();
     let mut surrogate =
         SurrogatePropulsion::default_model(&PropulsionConfig::default(), None).unwrap();
     let (mut se, mut se_naive, mut n) = (0.0, 0.0, 0.0);

@@ -16,6 +16,7 @@ pub use diagnostics::PropulsionDiagnostics;
 
 use crate::config::PropulsionConfig;
 use oils_shared::ENGINE_COUNT;
+use std::path::PathBuf;
 
 /// What the propulsion system is told for one step (already sanitised by the link).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -211,15 +212,36 @@ impl std::str::FromStr for PropulsionKind {
     }
 }
 
-/// Files some models load, chosen on the command line. `None`: the defaults (the
-/// committed surrogate model compiled in; `HifiParams::default()`, equal to
-/// `emulator/config/hifi.toml`).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct ModelFiles {
-    /// Surrogate model file.
-    pub surrogate_model: Option<std::path::PathBuf>,
-    /// Hifi parameter TOML.
-    pub hifi_params: Option<std::path::PathBuf>,
+/// A propulsion model as a run names it: which model, the engines it drives, and the
+/// files and parameters it loads. [`build`] makes the model from it; every caller (the
+/// session, training, validation, tools and tests) goes through that one builder.
+#[derive(Debug, Clone)]
+pub struct PropulsionSpec {
+    /// Which model.
+    pub kind: PropulsionKind,
+    /// The engines (rating, chamber pressure, propellant, lag).
+    pub engines: PropulsionConfig,
+    /// The surrogate's model file (`surrogate`, `shadow`); `None`: the committed model
+    /// compiled in.
+    pub surrogate_model: Option<PathBuf>,
+    /// The hifi model's parameters (`hifi`, `shadow`); default: `emulator/config/hifi.toml`.
+    pub hifi: hifi::HifiParams,
+    /// The period at which the plant will step the model, nanoseconds, checked against
+    /// the surrogate's sample time; `None`: the model's own sample time.
+    pub step_ns: Option<u64>,
+}
+
+impl PropulsionSpec {
+    /// `kind` on `engines` with the default files, stepped at its own sample time.
+    pub fn new(kind: PropulsionKind, engines: &PropulsionConfig) -> Self {
+        Self {
+            kind,
+            engines: engines.clone(),
+            surrogate_model: None,
+            hifi: hifi::HifiParams::default(),
+            step_ns: None,
+        }
+    }
 }
 
 /// A propulsion model could not be built for the bench.
@@ -233,96 +255,35 @@ pub enum BuildError {
     Hifi(#[from] hifi::HifiError),
 }
 
-/// Builds the model a bench run asked for, checked against the bench step.
-/// Allocation happens here, once, before tick 0.
-pub fn build_for_bench(
-    kind: PropulsionKind,
-    cfg: &PropulsionConfig,
-    files: &ModelFiles,
-    bench_step_ns: u64,
-) -> Result<Box<dyn Propulsion>, BuildError> {
-    let params = match &files.hifi_params {
-        Some(path) => hifi::HifiParams::load(path)?,
-        None => hifi::HifiParams::default(),
-    };
-    build_configured(
-        kind,
-        cfg,
-        files.surrogate_model.as_deref(),
-        &params,
-        bench_step_ns,
-    )
-}
-
-/// Builds a model from values: the surrogate model file (none: the committed model)
-/// and the hifi parameters (used by `hifi` and `shadow`).
-pub fn build_configured(
-    kind: PropulsionKind,
-    cfg: &PropulsionConfig,
-    surrogate_model: Option<&std::path::Path>,
-    hifi_params: &hifi::HifiParams,
-    bench_step_ns: u64,
-) -> Result<Box<dyn Propulsion>, BuildError> {
-    let files = ModelFiles {
-        surrogate_model: surrogate_model.map(std::path::Path::to_path_buf),
-        hifi_params: None,
-    };
-    let hifi = || hifi::HifiPropulsion::new(hifi_params, cfg);
-    Ok(match kind {
-        PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(cfg)),
-        PropulsionKind::Hifi => Box::new(hifi()?),
-        PropulsionKind::Surrogate => Box::new(surrogate_for_bench(cfg, &files, bench_step_ns)?),
+/// Builds the model `spec` names. Allocation happens here, once, before tick 0.
+pub fn build(spec: &PropulsionSpec) -> Result<Box<dyn Propulsion>, BuildError> {
+    Ok(match spec.kind {
+        PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(&spec.engines)),
+        PropulsionKind::Hifi => Box::new(build_hifi(spec)?),
+        PropulsionKind::Surrogate => Box::new(build_surrogate(spec)?),
         PropulsionKind::Shadow => Box::new(shadow::ShadowPropulsion::new(
-            hifi()?,
-            surrogate_for_bench(cfg, &files, bench_step_ns)?,
+            build_hifi(spec)?,
+            build_surrogate(spec)?,
         )),
     })
 }
 
-/// The hifi model with the parameter file in `files` (or the defaults).
-pub fn hifi_for_bench(
-    cfg: &PropulsionConfig,
-    files: &ModelFiles,
-) -> Result<hifi::HifiPropulsion, BuildError> {
-    let params = match &files.hifi_params {
-        Some(path) => hifi::HifiParams::load(path)?,
-        None => hifi::HifiParams::default(),
-    };
-    Ok(hifi::HifiPropulsion::new(&params, cfg)?)
+/// The hifi model of `spec` (whatever its kind), for callers that need the concrete type.
+pub fn build_hifi(spec: &PropulsionSpec) -> Result<hifi::HifiPropulsion, BuildError> {
+    Ok(hifi::HifiPropulsion::new(&spec.hifi, &spec.engines)?)
 }
 
-/// The surrogate with the model file in `files` (or the committed default).
-pub fn surrogate_for_bench(
-    cfg: &PropulsionConfig,
-    files: &ModelFiles,
-    bench_step_ns: u64,
-) -> Result<crate::propulsion::surrogate::SurrogatePropulsion, BuildError> {
-    use crate::propulsion::surrogate::SurrogatePropulsion;
-    Ok(match &files.surrogate_model {
-        Some(path) => SurrogatePropulsion::from_path(path, cfg, bench_step_ns)?,
-        None => SurrogatePropulsion::default_model(cfg, Some(bench_step_ns))?,
+/// The surrogate of `spec` (whatever its kind), for callers that need the concrete type.
+pub fn build_surrogate(
+    spec: &PropulsionSpec,
+) -> Result<surrogate::SurrogatePropulsion, BuildError> {
+    use surrogate::SurrogatePropulsion;
+    Ok(match (&spec.surrogate_model, spec.step_ns) {
+        (Some(path), step) => {
+            let file = surrogate::model_file::ModelFile::load(path)?;
+            let step = step.unwrap_or(file.model.sample_time_ns);
+            SurrogatePropulsion::new(&file, &spec.engines, step)?
+        }
+        (None, step) => SurrogatePropulsion::default_model(&spec.engines, step)?,
     })
-}
-
-/// Builds a model with default files, for tests and tools.
-///
-/// # Panics
-/// When the defaults cannot be built for `cfg` (a `hifi` whose default tanks cannot hold
-/// the scenario's propellant): use [`build_for_bench`] to get that as an error.
-pub fn build(kind: PropulsionKind, cfg: &PropulsionConfig) -> Box<dyn Propulsion> {
-    // The committed surrogate's sample time is the default bench step, 10 ms.
-    build_for_bench(kind, cfg, &ModelFiles::default(), 10_000_000)
-        .unwrap_or_else(|e| panic!("cannot build the {} propulsion model: {e}", kind.as_str()))
-}
-
-/// Builds a model with explicit `hifi` parameters (ignored by the other models).
-pub fn build_with_hifi_params(
-    kind: PropulsionKind,
-    cfg: &PropulsionConfig,
-    hifi_params: &hifi::HifiParams,
-) -> Result<Box<dyn Propulsion>, BuildError> {
-    match kind {
-        PropulsionKind::Hifi => Ok(Box::new(hifi::HifiPropulsion::new(hifi_params, cfg)?)),
-        other => build_for_bench(other, cfg, &ModelFiles::default(), 10_000_000),
-    }
 }

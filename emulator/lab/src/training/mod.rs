@@ -27,7 +27,7 @@ use fit::{Variant, VariantConfig};
 use oils_emulator::config::PropulsionConfig;
 use oils_emulator::propulsion::hifi::HifiParams;
 use oils_emulator::propulsion::surrogate::model_file::{self, ModelFile, Provenance, Selection};
-use oils_emulator::propulsion::{Propulsion, PropulsionKind};
+use oils_emulator::propulsion::{Propulsion, PropulsionKind, PropulsionSpec};
 use serde::{Deserialize, Serialize};
 
 /// Which variant goes into the model file.
@@ -244,6 +244,16 @@ pub fn hifi_params_of(cfg: &TrainConfig) -> Result<HifiParams, TrainConfigError>
     }
 }
 
+/// The reference model a training configuration names, with the hifi parameters it
+/// trains on, stepped at the surrogate's sample time.
+pub fn reference_spec(cfg: &TrainConfig, hifi: &HifiParams) -> PropulsionSpec {
+    PropulsionSpec {
+        hifi: hifi.clone(),
+        step_ns: Some(cfg.sample_time_ns),
+        ..PropulsionSpec::new(cfg.reference, &cfg.propulsion)
+    }
+}
+
 /// Runs [`train`] with the reference model the configuration names.
 pub fn train_configured(
     cfg: &TrainConfig,
@@ -253,11 +263,11 @@ pub fn train_configured(
         .validate()
         .map_err(|e| TrainConfigError(e.to_string()))?;
     let hifi = hifi_params_of(cfg)?;
+    let spec = reference_spec(cfg, &hifi);
     // Build once up front so a bad parameter set is an error, not a panic in the factory.
-    oils_emulator::propulsion::build_with_hifi_params(cfg.reference, &cfg.propulsion, &hifi)
-        .map_err(|e| TrainConfigError(e.to_string()))?;
+    oils_emulator::propulsion::build(&spec).map_err(|e| TrainConfigError(e.to_string()))?;
     let factory = || {
-        oils_emulator::propulsion::build_with_hifi_params(cfg.reference, &cfg.propulsion, &hifi)
+        oils_emulator::propulsion::build(&spec)
             .unwrap_or_else(|e| unreachable!("built once already: {e}"))
     };
     let info = ReferenceInfo::new(cfg.reference, &cfg.propulsion, &hifi);
