@@ -6,6 +6,7 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use oils_emulator::propulsion::PropulsionKind;
 use oils_emulator::recorder::LogFormat;
+use oils_lab::campaign::slurm::SlurmSubmission;
 use oils_lab::campaign::{
     self, case, compare, local, run_cases, CampaignSpec, Merged, RunOptions, Shard, Store,
 };
@@ -475,10 +476,6 @@ fn mc_case(a: &McCaseArgs, stop: &AtomicBool) -> Result<()> {
     Ok(())
 }
 
-fn sh_quote(s: &str) -> String {
-    format!("'{}'", s.replace('\'', "'\\''"))
-}
-
 fn mc_submit(a: &McSubmitArgs) -> Result<()> {
     if a.array_size == 0 {
         bail!("--array-size 0: give at least one task");
@@ -488,87 +485,38 @@ fn mc_submit(a: &McSubmitArgs) -> Result<()> {
     let store = Store::new(&dir);
     let spec = resolve(&a.spec, &store)?;
     store.open(&spec)?;
-    let k = a.array_size.min(spec.cases);
-    let oils = match &a.oils {
-        Some(p) => std::path::absolute(p)?,
-        None => std::env::current_exe().context("locating this oils binary")?,
+    let submission = SlurmSubmission {
+        name: spec.name.clone(),
+        dir: dir.clone(),
+        tasks: a.array_size.min(spec.cases),
+        cpus_per_task: a.cpus_per_task,
+        oils: match &a.oils {
+            Some(p) => std::path::absolute(p)?,
+            None => std::env::current_exe().context("locating this oils binary")?,
+        },
+        sbatch: a.sbatch.clone(),
+        sbatch_args: a.sbatch_args.clone(),
     };
-    let slurm_dir = dir.join("slurm");
-    std::fs::create_dir_all(&slurm_dir)
-        .with_context(|| format!("creating {}", slurm_dir.display()))?;
-    let (oils_q, dir_q) = (
-        sh_quote(&oils.display().to_string()),
-        sh_quote(&dir.display().to_string()),
-    );
-    let array = format!(
-        "#!/bin/bash\n\
-         # oils campaign `{name}`: shard $SLURM_ARRAY_TASK_ID of {k} (written by `oils mc submit`).\n\
-         #SBATCH --job-name=oils-mc\n\
-         #SBATCH --array=0-{last}\n\
-         #SBATCH --cpus-per-task={cpus}\n\
-         #SBATCH --output={out}/shard-%a.out\n\
-         set -euo pipefail\n\
-         exec {oils_q} mc run --out {dir_q} --shard \"${{SLURM_ARRAY_TASK_ID}}/{k}\" --jobs \"${{SLURM_CPUS_PER_TASK:-{cpus}}}\"\n",
-        name = spec.name,
-        last = k - 1,
-        cpus = a.cpus_per_task,
-        out = slurm_dir.display(),
-    );
-    let merge = format!(
-        "#!/bin/bash\n\
-         # oils campaign `{name}`: merge after every shard (written by `oils mc submit`).\n\
-         #SBATCH --job-name=oils-mc-merge\n\
-         #SBATCH --cpus-per-task=1\n\
-         #SBATCH --output={out}/merge.out\n\
-         set -euo pipefail\n\
-         exec {oils_q} mc merge {dir_q}\n",
-        name = spec.name,
-        out = slurm_dir.display(),
-    );
-    let array_path = slurm_dir.join("array.sbatch");
-    let merge_path = slurm_dir.join("merge.sbatch");
-    campaign::store::write_atomic(&array_path, array.as_bytes())?;
-    campaign::store::write_atomic(&merge_path, merge.as_bytes())?;
-    let submit = |script: &Path, extra: &[String]| -> Result<String> {
-        let mut cmd = std::process::Command::new(&a.sbatch);
-        cmd.arg("--parsable")
-            .args(extra)
-            .args(&a.sbatch_args)
-            .arg(script);
-        if a.dry_run {
-            println!("{:?}", cmd);
-            return Ok("DRY-RUN".into());
-        }
-        let out = cmd
-            .output()
-            .with_context(|| format!("running {} (is Slurm installed?)", a.sbatch))?;
-        if !out.status.success() {
-            bail!(
-                "{} {} failed: {}",
-                a.sbatch,
-                script.display(),
-                String::from_utf8_lossy(&out.stderr).trim()
-            );
-        }
-        let text = String::from_utf8_lossy(&out.stdout);
-        let id = text.trim().split(';').next().unwrap_or("").to_string();
-        if id.is_empty() || !id.bytes().all(|b| b.is_ascii_digit()) {
-            bail!("{} printed no job id: `{}`", a.sbatch, text.trim());
-        }
-        Ok(id)
-    };
-    let array_id = submit(&array_path, &[])?;
-    let merge_id = submit(&merge_path, &[format!("--dependency=afterany:{array_id}")])?;
+    if a.dry_run {
+        let (array, merge) = submission.write_scripts()?;
+        println!("{:?}", submission.sbatch_command(&array, &[]));
+        let after = ["--dependency=afterany:DRY-RUN".to_string()];
+        println!("{:?}", submission.sbatch_command(&merge, &after));
+        return Ok(());
+    }
+    let s = submission.submit()?;
     println!(
-        "submitted campaign `{}` ({} cases) to Slurm: array job {array_id} ({k} tasks), merge job {merge_id}",
-        spec.name, spec.cases
+        "submitted campaign `{}` ({} cases) to Slurm: array job {} ({} tasks), merge job {}",
+        spec.name, spec.cases, s.array_id, submission.tasks, s.merge_id
     );
     println!(
-        "follow with `squeue -j {array_id},{merge_id}`; logs in {}; results in {}",
-        slurm_dir.display(),
+        "follow with `squeue -j {},{}`; logs in {}; results in {}",
+        s.array_id,
+        s.merge_id,
+        s.slurm_dir.display(),
         dir.display()
     );
-    println!("{array_id} {merge_id}");
+    println!("{} {}", s.array_id, s.merge_id);
     Ok(())
 }
 

@@ -10,14 +10,15 @@
 //! - [`compare`]: the same cases under two propulsion models (KS statistics).
 //! - [`plots`]: footprint, histograms, traces.
 //!
-//! The Slurm backend is a job array of `oils mc run --shard I/K` tasks and a merge
-//! job (the `oils` binary writes the scripts): a shard runs the same code as a local
-//! campaign, so its results are the same files.
+//! - [`slurm`]: the Slurm backend, a job array of `oils mc run --shard I/K` tasks and a
+//!   merge job: a shard runs the same code as a local campaign, so its results are the
+//!   same files.
 
 pub mod case;
 pub mod compare;
 pub mod local;
 pub mod plots;
+pub mod slurm;
 pub mod spec;
 pub mod store;
 pub mod streams;
@@ -55,6 +56,9 @@ pub enum CampaignError {
     /// A figure could not be drawn.
     #[error(transparent)]
     Plot(#[from] crate::plot::PlotError),
+    /// Slurm refused or could not take a submission.
+    #[error("Slurm: {0}")]
+    Slurm(String),
 }
 
 /// Merges the campaign in `store`: runs the nominal case if needed, writes
