@@ -78,8 +78,28 @@ struct PlotArgs {
 /// and exit with status 1.
 fn main() {
     if let Err(e) = real_main() {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {e:#}{}", flag_hint(&e));
         std::process::exit(1);
+    }
+}
+
+/// For a refused run-configuration setting, the `oils run` flag that sets it (the run
+/// core names the configuration field; only the command line knows its flags).
+fn flag_hint(e: &anyhow::Error) -> String {
+    use oils_emulator::run_config::RunConfigError;
+    let field = e.chain().find_map(|c| match c.downcast_ref::<RunConfigError>() {
+        Some(RunConfigError::Invalid { field, .. }) => Some(*field),
+        _ => match c.downcast_ref::<oils_emulator::session::SessionError>() {
+            Some(oils_emulator::session::SessionError::Config(RunConfigError::Invalid {
+                field,
+                ..
+            })) => Some(*field),
+            _ => None,
+        },
+    });
+    match field {
+        Some(f) => format!(" [flag {}]", cmd::run::flag_of(f)),
+        None => String::new(),
     }
 }
 

@@ -253,10 +253,7 @@ impl Default for RunConfig {
 #[derive(Debug, Error)]
 pub enum RunConfigError {
     /// A setting is out of range or inconsistent with another.
-    #[error(
-        "invalid run configuration: {field} = {value} ({why}) [flag {}]",
-        flag_of(field)
-    )]
+    #[error("invalid run configuration: {field} = {value} ({why})")]
     Invalid {
         /// The setting, as named in the TOML file.
         field: &'static str,
@@ -279,16 +276,6 @@ pub enum RunConfigError {
         /// What went wrong.
         why: String,
     },
-}
-
-/// The `oils run` flag that sets a configuration field.
-fn flag_of(field: &str) -> String {
-    let name = field.strip_prefix("thresholds.").unwrap_or(field);
-    match name {
-        "duration_s" => "--duration".into(),
-        "faults" => "--fault".into(),
-        _ => format!("--{}", name.replace('_', "-")),
-    }
 }
 
 fn invalid(field: &'static str, value: impl ToString, why: impl Into<String>) -> RunConfigError {

@@ -238,6 +238,16 @@ impl RunArgs {
     }
 }
 
+/// The `oils run` flag that sets a run-configuration field (`dt_ms` is `--dt-ms`).
+pub fn flag_of(field: &str) -> String {
+    let name = field.strip_prefix("thresholds.").unwrap_or(field);
+    match name {
+        "duration_s" => "--duration".into(),
+        "faults" => "--fault".into(),
+        _ => format!("--{}", name.replace('_', "-")),
+    }
+}
+
 /// Runs `oils run`.
 pub fn run(args: &RunArgs) -> Result<()> {
     let cfg = args.to_config()?;

@@ -1,5 +1,5 @@
 //! C for the tests of three crates (shared, onboard-stub, the root's end-to-end tests,
-//! which include this file by path): the `cc` crate's compiler, and C flight software
+//! which include this file by path): the machine's C compiler, and C flight software
 //! built into a shared library the way a user would build theirs
 //! (`cc -shared -fPIC -I shared/include`).
 #![allow(dead_code)]
@@ -20,17 +20,13 @@ pub fn terminal_descent_c() -> PathBuf {
     include_dir().join("../../onboard-stub/examples/c/terminal_descent.c")
 }
 
-/// The C compiler of the `cc` crate, at `-O2` (outside a build script it needs the
-/// target named).
+/// The machine's C compiler at `-O2`: `$CC` if set, else `cc` (what a user building
+/// their flight software would call; no target triple assumed).
 pub fn c_compiler() -> std::process::Command {
-    let target = format!("{}-unknown-linux-gnu", std::env::consts::ARCH);
-    cc::Build::new()
-        .target(&target)
-        .host(&target)
-        .opt_level(2)
-        .cargo_metadata(false)
-        .get_compiler()
-        .to_command()
+    let cc = std::env::var_os("CC").unwrap_or_else(|| "cc".into());
+    let mut cmd = std::process::Command::new(cc);
+    cmd.arg("-O2");
+    cmd
 }
 
 /// Compiles `src` (and `-D` `defines`) into `out_dir/lib<name>.so`; panics with the
