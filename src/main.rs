@@ -6,7 +6,6 @@ mod cmd;
 
 use anyhow::{bail, Context};
 use clap::{Parser, Subcommand};
-use oils_onboard_stub::join::run_stub;
 use std::path::PathBuf;
 
 #[derive(Parser)]
@@ -119,13 +118,7 @@ fn real_main() -> anyhow::Result<()> {
         Cmd::Train(a) => cmd::train::run(&a),
         Cmd::Validate(a) => cmd::validate::run(&a),
         Cmd::Mc(c) => cmd::mc::run(&c),
-        Cmd::Stub(a) => {
-            let stop =
-                oils_shared::signals::termination_flag().context("installing signal handlers")?;
-            run_stub(&(&*a).into(), &stop)
-                .with_context(|| format!("onboard stub on run {}", a.run_id))?;
-            Ok(())
-        }
+        Cmd::Stub(a) => cmd::stub::run(&a),
     }
 }
 

@@ -61,7 +61,7 @@ $AS_NOBODY sh -c '
     done
     ls "$OILS_IOX2_ROOT" >/dev/null 2>&1 && echo "LISTED the domain"
     touch "$OILS_IOX2_ROOT/intruder" 2>/dev/null && echo "CREATED in the domain"
-    cat "$OILS_IOX2_ROOT/prefix" 2>/dev/null && echo "READ the token"
+    cat "$OILS_IOX2_ROOT/token" 2>/dev/null && echo "READ the token"
     sleep 0.02
   done' > "$ATTACK_LOG" 2>&1 &
 ATTACKER=$!

@@ -23,8 +23,16 @@ pub enum ExchangeError {
     #[error(transparent)]
     Link(#[from] LinkError),
     /// The in-process flight software reported a failed step.
-    #[error("flight software: {0}")]
+    #[error(transparent)]
     FlightSoftware(#[from] FswFailure),
+    /// The flight-software process bound to the run exited (watched through a pidfd).
+    #[error("the flight-software process (pid {pid}) exited without answering step {step}; the run is bound to the process that joined it (--allow-reattach lets a restarted one take over)")]
+    FlightSoftwareGone {
+        /// Its process id.
+        pid: i32,
+        /// The step whose command it did not send.
+        step: u64,
+    },
     /// A command came from another flight-software process than the one bound to the run.
     #[error(
         "flight software changed: the command for step {step} came from another process ({from}) than the one that joined the run ({bound}); the flight software restarted, or a second one joined. The run is bound to the process that joined it (--allow-reattach lets a new one take over)"
@@ -83,23 +91,33 @@ pub const MAX_REATTACHMENTS_KEPT: usize = 16;
 /// stub, a second process after the first vanished) is
 /// [`ExchangeError::ForeignFlightSoftware`], unless re-attachment is allowed: then the run
 /// is bound to the newcomer and the change recorded.
+///
+/// Without re-attachment the joined process is watched ([`EmulatorLink::watch_peer`]): its
+/// exit ends the run at once ([`ExchangeError::FlightSoftwareGone`]), not after the link
+/// timeout. With it, a dead process may yet be replaced, so it is waited for as before.
 pub struct BoundLink {
     link: EmulatorLink,
     bound: PeerPort,
     allow_reattach: bool,
     reattachments: Vec<Reattachment>,
     reattach_count: u64,
+    /// The step of the last telemetry published.
+    step: u64,
 }
 
 impl BoundLink {
     /// Binds `link` to `joined` (from [`EmulatorLink::wait_for_peer`]).
     pub fn new(link: EmulatorLink, joined: PeerPort, allow_reattach: bool) -> Self {
+        if let (false, Some(pid)) = (allow_reattach, joined.pid) {
+            link.watch_peer(pid);
+        }
         Self {
             link,
             bound: joined,
             allow_reattach,
             reattachments: Vec::with_capacity(MAX_REATTACHMENTS_KEPT),
             reattach_count: 0,
+            step: 0,
         }
     }
 
@@ -122,6 +140,7 @@ impl BoundLink {
 
 impl Link for BoundLink {
     fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {
+        self.step = tlm.header.step;
         Ok(self.link.publish(tlm)?)
     }
 
@@ -130,7 +149,16 @@ impl Link for BoundLink {
         deadline_ns: u64,
         stop: &AtomicBool,
     ) -> Result<Option<Command>, ExchangeError> {
-        let Some((cmd, publisher)) = self.link.receive_until_from(deadline_ns, stop)? else {
+        let received = match self.link.receive_until_from(deadline_ns, stop) {
+            Err(LinkError::PeerGone { pid }) => {
+                return Err(ExchangeError::FlightSoftwareGone {
+                    pid,
+                    step: self.step,
+                })
+            }
+            other => other?,
+        };
+        let Some((cmd, publisher)) = received else {
             return Ok(None);
         };
         if publisher != self.bound.publisher {
@@ -185,14 +213,12 @@ impl<F: FlightSoftware + ?Sized> InProcLink<F> {
 
 impl<F: FlightSoftware + ?Sized> Link for InProcLink<F> {
     fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {
-        // The end-of-run telemetry is not answered, as on the wire.
-        self.pending = (tlm.header.flags & oils_shared::TLM_FLAG_END_OF_RUN == 0)
-            .then(|| answer(self.fsw.as_mut(), tlm));
-        // A failed step ends the run, as it ends the stub.
-        match self.fsw.failure() {
-            Some(f) => Err(f.into()),
-            None => Ok(()),
-        }
+        // The end-of-run telemetry is not answered, as on the wire; nor is anything once
+        // a step has failed.
+        self.pending = (tlm.header.flags & oils_shared::TLM_FLAG_END_OF_RUN == 0
+            && self.fsw.failure().is_none())
+        .then(|| answer(self.fsw.as_mut(), tlm));
+        Ok(())
     }
 
     fn receive_until(
@@ -200,6 +226,11 @@ impl<F: FlightSoftware + ?Sized> Link for InProcLink<F> {
         _deadline_ns: u64,
         _stop: &AtomicBool,
     ) -> Result<Option<Command>, ExchangeError> {
+        // A failed step is the answer to its telemetry: it ends the run (reported), as
+        // it ends the stub, and its command is not applied.
+        if let Some(f) = self.fsw.failure() {
+            return Err(f.into());
+        }
         Ok(self.pending.take())
     }
 

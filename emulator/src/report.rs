@@ -2,10 +2,11 @@
 //! at the end of every run.
 
 use crate::run_config::RunConfig;
-use crate::scheduler::{Mode, RunSummary};
+use crate::scheduler::{Mode, Outcome, RunSummary};
 use crate::timing::Percentiles;
+use oils_shared::fsw::FswFailure;
 use oils_shared::link::WaitStrategy;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 
 /// Everything a run reports. Field names are the interface checks rely on.
@@ -42,6 +43,17 @@ pub struct RunReport {
     /// With `--allow-reattach`: how often a new flight-software process took the run over.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reattachments: Option<u64>,
+    /// The C library flown (`fsw = "c:PATH"`): its path and the BLAKE3 hash of the file
+    /// loaded, so a repeat of the run can tell whether it flies the same code.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fsw_library: Option<FswLibrary>,
+    /// The step the flight software reported failed, with the status it returned (a C
+    /// step's nonzero return).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fsw_failure: Option<FswFailure>,
+    /// How the onboard process started for the run ended (`oils run` spawning its stub).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub onboard_process: Option<OnboardProcess>,
     /// The run's figures.
     #[serde(flatten)]
     pub summary: RunSummary,
@@ -71,8 +83,40 @@ impl RunReport {
             config: cfg.clone(),
             warnings: Vec::new(),
             reattachments: None,
+            fsw_library: None,
+            fsw_failure: None,
+            onboard_process: None,
             summary,
         }
+    }
+
+    /// The report of a run that ended `aborted` before its loop could report: its flight
+    /// software never joined, or never returned from step `steps`. No packet was
+    /// exchanged after that step; the digest is empty.
+    pub fn aborted_early(
+        cfg: &RunConfig,
+        run_id: u64,
+        wait: Option<WaitStrategy>,
+        steps: u64,
+        error: String,
+    ) -> Self {
+        let summary = RunSummary {
+            digest: String::new(),
+            steps,
+            outcome: Outcome::Aborted,
+            error: Some(error),
+            touchdown: None,
+            sim_time_s: steps as f64 * cfg.dt_ms as f64 * 1e-3,
+            propellant_used_kg: 0.0,
+            rejected_commands: 0,
+            rejected_values: 0,
+            timing: Default::default(),
+            threshold_violations: Vec::new(),
+            log_records: 0,
+            faults: Vec::new(),
+            propulsion_diagnostics: None,
+        };
+        Self::new(cfg, run_id, wait, None, summary)
     }
 
     /// Pretty JSON.
@@ -161,6 +205,12 @@ impl RunReport {
         for w in &self.warnings {
             let _ = writeln!(out, "WARNING     {w}");
         }
+        if let Some(lib) = &self.fsw_library {
+            let _ = writeln!(out, "fsw library {} (blake3 {})", lib.path, lib.blake3);
+        }
+        if let Some(p) = &self.onboard_process {
+            let _ = writeln!(out, "onboard     pid {} {}", p.pid, p.ended);
+        }
         for f in &s.faults {
             let cleared = f
                 .cleared_t_s
@@ -181,6 +231,26 @@ impl RunReport {
         }
         out
     }
+}
+
+/// A C flight-software library as flown.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FswLibrary {
+    /// The path it was loaded from.
+    pub path: String,
+    /// BLAKE3 of the file's bytes when it was loaded, 64 hex digits.
+    pub blake3: String,
+}
+
+/// How the onboard process started for a run ended.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct OnboardProcess {
+    /// Its process id.
+    pub pid: u32,
+    /// How it ended: `exited with status 0`, `killed by SIGSEGV (signal 11)`, ...
+    pub ended: String,
+    /// The last lines it wrote to its standard error.
+    pub stderr_tail: Vec<String>,
 }
 
 /// The propulsion diagnostics in a few table lines.

@@ -336,8 +336,13 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     abort = Some(Abort::Interrupted);
                     break None;
                 }
-                // Once, at the end of the run: the message may allocate.
-                Err(e @ ExchangeError::ForeignFlightSoftware { .. }) => {
+                // Once, at the end of the run: the message may allocate. The flight
+                // software failed, died or changed: the run ends, and is reported.
+                Err(
+                    e @ (ExchangeError::ForeignFlightSoftware { .. }
+                    | ExchangeError::FlightSoftware(_)
+                    | ExchangeError::FlightSoftwareGone { .. }),
+                ) => {
                     abort = Some(Abort::Protocol(e.to_string()));
                     break None;
                 }

@@ -19,7 +19,7 @@ use crate::run_config::{LinkKind, RunConfig, RunConfigError};
 use crate::scheduler::{self, Mode, SchedulerConfig, SchedulerError};
 use oils_shared::domain::Domain;
 use oils_shared::fsw::FlightSoftware;
-use oils_shared::link::{create_node_in, EmulatorLink, LinkError, WaitStrategy};
+use oils_shared::link::{create_node_in, EmulatorLink, LinkError, PeerProcess, WaitStrategy};
 use oils_shared::profile::ProfileRules;
 use oils_shared::PROTOCOL_VERSION;
 use std::path::{Path, PathBuf};
@@ -87,8 +87,10 @@ pub enum Onboard<'a> {
     InProcess(Box<dyn FlightSoftware + 'a>),
     /// A separate onboard process over iceoryx2 (`link = "iceoryx2"`). Called once the
     /// run's services exist: it starts the process (the `oils` binary spawns
-    /// `oils stub`), or prints how to start one.
-    Peer(&'a mut dyn FnMut(&StubLaunch) -> Result<(), SessionError>),
+    /// `oils stub`) and returns its process id, or prints how to start one and returns
+    /// `None`. A process it started is watched while the run waits for it to join: if it
+    /// exits first, the run fails at once ([`LinkError::PeerExited`]).
+    Peer(&'a mut dyn FnMut(&StubLaunch) -> Result<Option<u32>, SessionError>),
 }
 
 impl Onboard<'_> {
@@ -249,6 +251,7 @@ pub fn run(
     let mut warnings = Vec::new();
     let mut reattachments = None;
     let observer = extras.observer.take();
+    let mut fsw_failure = None;
     let (summary, log_path, wait) = match onboard {
         Onboard::InProcess(fsw) => {
             let mut link = InProcLink::new(fsw);
@@ -263,6 +266,7 @@ pub fn run(
                 stop,
                 observer,
             )?;
+            fsw_failure = link.fsw().failure();
             (summary.0, summary.1, None)
         }
         Onboard::Peer(launch) => {
@@ -282,8 +286,10 @@ pub fn run(
             let node = create_node_in("oils-emulator", &domain)?;
             let link = EmulatorLink::create(&node, run_id, wait)?;
             let recorder = open_recorder(cfg, run_id, extras.sinks)?;
-            launch(&StubLaunch { run_id, wait })?;
-            let joined = link.wait_for_peer(cfg.startup_timeout_ms, stop)?;
+            let launched = launch(&StubLaunch { run_id, wait })?
+                .and_then(|pid| PeerProcess::watch(i32::try_from(pid).ok()?));
+            let joined =
+                link.wait_for_peer_watching(cfg.startup_timeout_ms, stop, launched.as_ref())?;
             let mut link = BoundLink::new(link, joined, cfg.allow_reattach);
             let summary = run_and_close(
                 &sched,
@@ -322,6 +328,7 @@ pub fn run(
     let mut report = RunReport::new(cfg, run_id, wait, log_path, summary);
     report.warnings = warnings;
     report.reattachments = reattachments;
+    report.fsw_failure = fsw_failure;
     Ok(report)
 }
 

@@ -39,6 +39,18 @@ pub fn build_fsw(
     fsw_params: Option<&Path>,
     run_id: u64,
 ) -> Result<Box<dyn FlightSoftware>, FswBuildError> {
+    build_fsw_expecting(spec, profile, fsw_params, run_id, None)
+}
+
+/// [`build_fsw`]; a C library must also have the BLAKE3 `c_blake3` when given (see
+/// [`CLibraryFsw::load_expecting`]).
+pub fn build_fsw_expecting(
+    spec: &FswSpec,
+    profile: Option<(&Path, &ProfileRules)>,
+    fsw_params: Option<&Path>,
+    run_id: u64,
+    c_blake3: Option<&str>,
+) -> Result<Box<dyn FlightSoftware>, FswBuildError> {
     match spec {
         FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(GncConfig::default())?)),
         FswSpec::CLibrary(path) => {
@@ -46,7 +58,9 @@ pub fn build_fsw(
                 Some(p) => read_params(p)?,
                 None => String::new(),
             };
-            Ok(Box::new(CLibraryFsw::load(path, run_id, &params)?))
+            Ok(Box::new(CLibraryFsw::load_expecting(
+                path, run_id, &params, c_blake3,
+            )?))
         }
         FswSpec::External => Err(FswBuildError::Argument(
             "--fsw external is flown by a client started by hand, not by this stub".into(),

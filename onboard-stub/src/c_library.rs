@@ -1,6 +1,7 @@
 //! Flight software from a shared library with the C ABI of `shared/include/oils.h`
-//! (`--fsw c:PATH`): loaded with libloading, checked (ABI version and layout hash) before
-//! anything else is called, and wrapped as a [`FlightSoftware`].
+//! (`--fsw c:PATH`): hashed (BLAKE3, for the run report), loaded with libloading,
+//! checked (ABI version and layout hash) before anything else is called, and wrapped as
+//! a [`FlightSoftware`].
 
 use crate::fsw::{FlightSoftware, FswFailure};
 use libloading::Library;
@@ -66,6 +67,26 @@ pub enum CLibraryError {
         /// The library.
         path: PathBuf,
     },
+    /// The file is not the one the run expects (it changed since it was hashed).
+    #[error("c:{path}: the file changed: its BLAKE3 is {found}, the run expects {expected}")]
+    Changed {
+        /// The library.
+        path: PathBuf,
+        /// The hash the run expects.
+        expected: String,
+        /// The file's hash now.
+        found: String,
+    },
+}
+
+/// BLAKE3 of the file at `path`, 64 lowercase hex digits: what a run report records of
+/// the C library it flew.
+pub fn file_blake3(path: &Path) -> Result<String, CLibraryError> {
+    let bytes = std::fs::read(path).map_err(|e| CLibraryError::Load {
+        path: path.to_path_buf(),
+        detail: e.to_string(),
+    })?;
+    Ok(blake3::hash(&bytes).to_hex().to_string())
 }
 
 /// A loaded C flight software with its context.
@@ -74,6 +95,7 @@ pub struct CLibraryFsw {
     step_fn: StepFn,
     fini_fn: FiniFn,
     failure: Option<FswFailure>,
+    blake3: String,
     // Last field: dropped after `Drop::drop` has called `oils_fsw_fini`.
     _library: Library,
 }
@@ -91,7 +113,27 @@ impl CLibraryFsw {
     /// Loads `path`, checks its ABI version and layout hash, and calls `oils_fsw_init`
     /// with the run id and `params` (the flight software's own parameter text).
     pub fn load(path: &Path, run_id: u64, params: &str) -> Result<Self, CLibraryError> {
+        Self::load_expecting(path, run_id, params, None)
+    }
+
+    /// [`CLibraryFsw::load`], refusing the file ([`CLibraryError::Changed`]) unless its
+    /// BLAKE3 is `expected_blake3` (when given): the stub flies the very file the
+    /// emulator hashed into the report.
+    pub fn load_expecting(
+        path: &Path,
+        run_id: u64,
+        params: &str,
+        expected_blake3: Option<&str>,
+    ) -> Result<Self, CLibraryError> {
         let owned = || path.to_path_buf();
+        let blake3 = file_blake3(path)?;
+        if let Some(expected) = expected_blake3.filter(|e| !e.eq_ignore_ascii_case(&blake3)) {
+            return Err(CLibraryError::Changed {
+                path: owned(),
+                expected: expected.to_string(),
+                found: blake3,
+            });
+        }
         // SAFETY: loading a library runs its initialisers; the user named this file as
         // the flight software to fly, which is the trust we extend to any fsw.
         let library = unsafe { Library::new(path) }.map_err(|e| CLibraryError::Load {
@@ -138,8 +180,14 @@ impl CLibraryFsw {
             step_fn,
             fini_fn,
             failure: None,
+            blake3,
             _library: library,
         })
+    }
+
+    /// BLAKE3 of the file as it was loaded ([`file_blake3`]).
+    pub fn blake3(&self) -> &str {
+        &self.blake3
     }
 }
 

@@ -2,8 +2,8 @@
 //! software and serve it to the end. The options are a plain value; the `oils stub`
 //! command line turns its flags into one.
 
-use crate::build::{build_fsw, FswBuildError};
-use crate::fsw::FswSpec;
+use crate::build::{build_fsw_expecting, FswBuildError};
+use crate::fsw::{FswFailure, FswSpec};
 use crate::runner::{serve, StubError, StubSummary};
 use oils_shared::link::{create_node, LinkError, StubLink, WaitStrategy};
 use oils_shared::profile::{ProfileRules, RATED_THRUST_N};
@@ -23,6 +23,9 @@ pub struct StubOptions {
     pub max_thrust_n: f64,
     /// For a C library: the text file handed to its `oils_fsw_init`.
     pub fsw_params: Option<PathBuf>,
+    /// For a C library: refuse the file unless its BLAKE3 is this (`oils run` passes the
+    /// hash it puts in the report).
+    pub fsw_blake3: Option<String>,
     /// busy, event or hybrid; `None`: what the emulator announces.
     pub wait: Option<String>,
     /// Give up after this long without telemetry, milliseconds.
@@ -42,6 +45,7 @@ impl StubOptions {
             profile: None,
             max_thrust_n: RATED_THRUST_N,
             fsw_params: None,
+            fsw_blake3: None,
             wait: None,
             timeout_ms: 5000,
             rt_priority: None,
@@ -65,6 +69,16 @@ pub enum JoinError {
     /// The loop failed.
     #[error(transparent)]
     Serve(#[from] StubError),
+}
+
+impl JoinError {
+    /// The step the flight software reported failed, if that is what ended the stub.
+    pub fn fsw_failure(&self) -> Option<FswFailure> {
+        match self {
+            JoinError::Serve(StubError::FlightSoftware(f)) => Some(*f),
+            _ => None,
+        }
+    }
 }
 
 /// Joins the run and serves it to the end.
@@ -91,11 +105,12 @@ pub fn run_stub(args: &StubOptions, stop: &AtomicBool) -> Result<StubSummary, Jo
         )));
     }
     let rules = ProfileRules::rated(args.max_thrust_n);
-    let mut fsw = build_fsw(
+    let mut fsw = build_fsw_expecting(
         &args.fsw,
         args.profile.as_deref().map(|p| (p, &rules)),
         args.fsw_params.as_deref(),
         run_id,
+        args.fsw_blake3.as_deref(),
     )?;
     let node = create_node("oils-onboard-stub")?;
     let link = StubLink::open(&node, run_id, wait, args.startup_timeout_ms, stop)?;

@@ -3,12 +3,17 @@
 //!
 //! The step path does no heap allocation, locking or logging: the flight software's
 //! `step` must not allocate (trait contract), and the link's calls do not.
+//!
+//! A watchdog thread beside the loop ends the process when the flight software does not
+//! return from a step (a C library in an endless loop): a termination signal only raises
+//! a flag the loop reads between steps, so without it such a stub ignores SIGINT and
+//! SIGTERM and outlives every timeout.
 
 use crate::fsw::FlightSoftware;
 use oils_shared::clock::monotonic_ns;
 use oils_shared::link::{LinkError, StubLink};
 use oils_shared::TLM_FLAG_END_OF_RUN;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// How the stub's loop ended well.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -63,16 +68,79 @@ pub const EMULATOR_CHECK_MS: u64 = 100;
 /// even then a dead emulator is given up within 10 s of wall time.
 pub const BLIND_TIMEOUT_CAP_MS: u64 = 10_000;
 
+/// Exit status of a stub whose flight software never returned from a step.
+pub const STUCK_EXIT_CODE: i32 = 3;
+
+/// After a termination signal, how long the flight software may stay in its step before
+/// the watchdog ends the process, milliseconds.
+pub const STUCK_AFTER_SIGNAL_MS: u64 = 1000;
+
+/// How often the watchdog looks, milliseconds.
+const WATCHDOG_PERIOD_MS: u64 = 50;
+
+/// Which step the flight software is in and since when (two relaxed stores a step).
+#[derive(Default)]
+struct StepWatch {
+    /// When the step began, monotonic nanoseconds; 0 between steps.
+    since_ns: AtomicU64,
+    /// The step.
+    step: AtomicU64,
+}
+
+/// Ends the process (status [`STUCK_EXIT_CODE`], the flight software not finalised) when
+/// a step has lasted `timeout_ms` (the emulator gave up on it long before), or
+/// [`STUCK_AFTER_SIGNAL_MS`] after a termination signal; returns when `done` is raised.
+fn watchdog(watch: &StepWatch, done: &AtomicBool, stop: &AtomicBool, timeout_ms: u64) {
+    while !done.load(Ordering::Relaxed) {
+        std::thread::sleep(std::time::Duration::from_millis(WATCHDOG_PERIOD_MS));
+        let since_ns = watch.since_ns.load(Ordering::Relaxed);
+        if since_ns == 0 {
+            continue;
+        }
+        let in_step_ms = monotonic_ns().saturating_sub(since_ns) / 1_000_000;
+        let signalled = stop.load(Ordering::Relaxed);
+        if in_step_ms >= timeout_ms || (signalled && in_step_ms >= STUCK_AFTER_SIGNAL_MS) {
+            eprintln!(
+                "error: onboard stub: the flight software has not returned from its step {} for {in_step_ms} ms{}; exiting with status {STUCK_EXIT_CODE}, without finalising it",
+                watch.step.load(Ordering::Relaxed),
+                if signalled { " (a termination signal came)" } else { "" }
+            );
+            // SAFETY: ends the process at once; the stuck thread cannot be unwound, and
+            // the next node's dead-node cleanup removes what iceoryx2 leaves.
+            unsafe { libc::_exit(STUCK_EXIT_CODE) };
+        }
+    }
+}
+
 /// Serves one run until the emulator sends its end-of-run telemetry.
 ///
 /// Waiting for Telemetry(k), the stub gives up when the emulator's process exits (checked
 /// every [`EMULATOR_CHECK_MS`]) or after `timeout_ms` of silence from a live emulator (an
-/// emulator that cannot be watched: at most [`BLIND_TIMEOUT_CAP_MS`]).
+/// emulator that cannot be watched: at most [`BLIND_TIMEOUT_CAP_MS`]). A step that does not
+/// return ends the process (see [`STUCK_EXIT_CODE`]).
 pub fn serve(
     link: &StubLink,
     fsw: &mut dyn FlightSoftware,
     timeout_ms: u64,
     stop: &AtomicBool,
+) -> Result<StubSummary, StubError> {
+    let watch = StepWatch::default();
+    let done = AtomicBool::new(false);
+    std::thread::scope(|s| {
+        // Started before tick 0 (spawning allocates); joined when the loop is over.
+        s.spawn(|| watchdog(&watch, &done, stop, timeout_ms));
+        let served = serve_watched(link, fsw, timeout_ms, stop, &watch);
+        done.store(true, Ordering::Relaxed);
+        served
+    })
+}
+
+fn serve_watched(
+    link: &StubLink,
+    fsw: &mut dyn FlightSoftware,
+    timeout_ms: u64,
+    stop: &AtomicBool,
+    watch: &StepWatch,
 ) -> Result<StubSummary, StubError> {
     let mut summary = StubSummary {
         commands: 0,
@@ -118,7 +186,12 @@ pub fn serve(
         if tlm.header.flags & TLM_FLAG_END_OF_RUN != 0 {
             return Ok(summary);
         }
+        watch.step.store(tlm.header.step, Ordering::Relaxed);
+        watch
+            .since_ns
+            .store(monotonic_ns().max(1), Ordering::Relaxed);
         let cmd = answer(fsw, &tlm);
+        watch.since_ns.store(0, Ordering::Relaxed);
         if let Some(failure) = fsw.failure() {
             return Err(failure.into());
         }

@@ -174,3 +174,27 @@ fn the_c_example_holds_its_weight_on_the_profile() {
     assert!(fsw.step(&t).thrust_cmd_n[0] > weight_per_engine_n + 1.0);
     assert_eq!(fsw.failure(), None);
 }
+
+#[test]
+fn a_library_is_hashed_and_refused_when_it_is_not_the_file_expected() {
+    use oils_onboard_stub::build::build_fsw_expecting;
+    use oils_onboard_stub::c_library::{file_blake3, CLibraryFsw};
+    let dir = scratch("hash");
+    let spec = probe(&dir, "hashed", &[]);
+    let FswSpec::CLibrary(path) = &spec else {
+        unreachable!()
+    };
+    let hash = file_blake3(path).unwrap();
+    assert_eq!(hash.len(), 64);
+    let fsw = CLibraryFsw::load_expecting(path, 0x22, "", Some(&hash)).unwrap();
+    assert_eq!(fsw.blake3(), hash);
+    let other = "0".repeat(64);
+    let err = match build_fsw_expecting(&spec, None, None, 0x22, Some(&other)) {
+        Ok(_) => panic!("a file with another hash loaded"),
+        Err(e) => e.to_string(),
+    };
+    assert!(
+        err.contains("the file changed") && err.contains(&hash) && err.contains(&other),
+        "{err}"
+    );
+}

@@ -4,12 +4,16 @@
 * root: ``$OILS_IOX2_ROOT``, else ``$XDG_RUNTIME_DIR/oils`` when that runtime directory is
   the user's (mode 0700), else ``/tmp/oils-<uid>``; created 0700, refused unless a real
   directory owned by the user with no group or other bits;
-* prefix: ``oils_<token>_``, the token (12 lowercase hex digits) read from ``<root>/prefix``
-  (created 0600 if absent);
+* token: 12 lowercase hex digits read from ``<root>/token`` (created 0600 if absent), the
+  domain's secret, never part of a file name;
+* prefix: ``oils_<h>_``, ``<h>`` the first 12 hex digits of SHA-256 of
+  ``oils-iceoryx2-prefix:<token>`` (``prefix_of``), so /dev/shm names do not reveal the
+  token;
 * the global management segment ``/dev/shm/<prefix>GLOBAL_SEGMENT_TAIL`` is made 0600
   before iceoryx2 looks for it (iceoryx2 would create it world-writable).
 """
 
+import hashlib
 import os
 import secrets
 import stat
@@ -19,8 +23,10 @@ import time
 import iceoryx2 as iox2
 
 ROOT_ENV = "OILS_IOX2_ROOT"
-TOKEN_FILE = "prefix"
+TOKEN_FILE = "token"
 TOKEN_LEN = 12
+PREFIX_CONTEXT = "oils-iceoryx2-prefix:"
+PREFIX_HASH_LEN = 12
 SHM_DIR = "/dev/shm"
 # iceoryx2 0.10.0: SHA-1 of the segment's type name, "_node", version, suffix.
 GLOBAL_SEGMENT_TAIL = "9204dd183d1c4d8e1ff592a30766ffa6765aa8b5_node.0_10_0.global_mgmt"
@@ -30,6 +36,12 @@ GLOBAL_SEGMENT_LEN = 16
 
 class DomainError(RuntimeError):
     """The domain directory or its files are unsafe or unusable."""
+
+
+def prefix_of(token: str) -> str:
+    """The file-name prefix of the domain whose token is ``token`` (one-way)."""
+    digest = hashlib.sha256((PREFIX_CONTEXT + token).encode()).hexdigest()
+    return f"oils_{digest[:PREFIX_HASH_LEN]}_"
 
 
 def default_root() -> str:
@@ -121,7 +133,7 @@ def _token(root: str) -> str:
 def _secure_global_segment(root: str, token: str) -> str:
     """Returns the token to use (a new one if the segment's name was taken)."""
     for _ in range(8):
-        path = os.path.join(SHM_DIR, f"oils_{token}_{GLOBAL_SEGMENT_TAIL}")
+        path = os.path.join(SHM_DIR, prefix_of(token) + GLOBAL_SEGMENT_TAIL)
         try:
             st = os.lstat(path)
         except FileNotFoundError:
@@ -162,14 +174,21 @@ def _secure_global_segment(root: str, token: str) -> str:
     raise _refuse(path, "the global management segment could not be secured (it keeps changing)")
 
 
-def config(root: str = None) -> "iox2.config.Config":
-    """The iceoryx2 configuration of the oils domain (creating and securing it)."""
+def open_domain(root: str = None) -> "tuple[str, str]":
+    """Opens (creating and securing) the oils domain: its root path, as iceoryx2 gets it
+    (absolute, ending in ``/``), and its prefix. ``root`` defaults to ``default_root()``."""
     root = os.path.abspath(root or default_root())
     _ensure_private_dir(root)
     token = _secure_global_segment(root, _token(root))
+    return root.rstrip("/") + "/", prefix_of(token)
+
+
+def config(root: str = None) -> "iox2.config.Config":
+    """The iceoryx2 configuration of the oils domain (creating and securing it)."""
+    root_path, prefix = open_domain(root)
     cfg = iox2.config.default()
-    cfg.global_cfg.prefix = iox2.FileName.new(f"oils_{token}_")
-    cfg.global_cfg.root_path = iox2.Path.new(root.rstrip("/") + "/")
+    cfg.global_cfg.prefix = iox2.FileName.new(prefix)
+    cfg.global_cfg.root_path = iox2.Path.new(root_path)
     cfg.global_cfg.node.cleanup_dead_nodes_on_creation = True
     cfg.global_cfg.node.cleanup_dead_nodes_on_destruction = True
     return cfg

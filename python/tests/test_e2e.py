@@ -1,7 +1,9 @@
 """End to end with real processes: `oils run --no-stub` and the Python example flight
 software on the run's iceoryx2 services.
 
-Needs OILS_BIN (the `oils` executable); tools/python-e2e.sh sets it.
+Needs OILS_BIN (the `oils` executable); tools/python-e2e.sh sets it, installs the package
+(`pip install ./python`) and sets OILS_FSW_EXPECT_INSTALLED: then the package under test
+must be the installed one, not the checkout's source tree.
 """
 
 import os
@@ -24,10 +26,9 @@ def fly(tmp: Path, name: str, run_id: str, extra=()):
         [os.environ["OILS_BIN"], "run", "--no-stub", "--no-log", "--run-id", run_id,
          "--scenario", str(SCENARIO), "--seed", "5", "--report", str(report), *extra],
         stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    env = dict(os.environ, PYTHONPATH=str(PYTHON_DIR))
     client = subprocess.run(
         [sys.executable, "-m", "oils_fsw.examples.terminal_descent", "--run-id", run_id],
-        stdin=subprocess.DEVNULL, capture_output=True, text=True, env=env, timeout=300)
+        stdin=subprocess.DEVNULL, capture_output=True, text=True, cwd=tmp, timeout=300)
     out, err = emulator.communicate(timeout=300)
     assert client.returncode == 0, f"client: {client.stderr}"
     assert emulator.returncode == 0, f"oils run: {out}\n{err}"
@@ -36,6 +37,17 @@ def fly(tmp: Path, name: str, run_id: str, extra=()):
 
 
 class PythonFlightSoftware(unittest.TestCase):
+    @unittest.skipUnless(os.environ.get("OILS_FSW_EXPECT_INSTALLED"), "run by tools/python-e2e.sh")
+    def test_the_package_under_test_is_the_installed_one(self):
+        import oils_fsw
+        import oils_fsw.examples.terminal_descent as example
+
+        for module in (oils_fsw, example):
+            where = Path(module.__file__).resolve()
+            self.assertNotIn(PYTHON_DIR, where.parents, f"{module.__name__} from the checkout: {where}")
+            self.assertIn("site-packages", where.parts, where)
+            self.assertIn(Path(sys.prefix).resolve(), where.parents, where)
+
     def test_lands_the_terminal_descent_with_a_repeatable_digest(self):
         limits = tomllib.loads(SCENARIO.read_text())["touchdown"]
         base = os.getpid() << 16

@@ -12,12 +12,20 @@
 //!   mode 0700; an existing one is refused unless it is a real directory (not a symlink)
 //!   owned by the user with no group or other permission bits. iceoryx2 keeps its node
 //!   and service files (monitor tokens, static service configs) under it.
-//! * **prefix**: `oils_<token>_`, where `<token>` is 12 random hex digits kept in the
-//!   root's `prefix` file (mode 0600). Every shared-memory object in `/dev/shm` carries
-//!   it; iceoryx2 creates them mode 0600, except the global management segment, which
-//!   [`Domain::secure_global_segment`] creates 0600 itself before iceoryx2 looks for it
-//!   (and repairs if it finds it wider, damaged, or taken by another user: then the
-//!   domain draws a new token, since a stranger could only have learnt the old one).
+//! * **token**: 12 random hex digits kept in the root's `token` file (mode 0600), the
+//!   domain's secret. It never appears in a file name: `/dev/shm` is listable by every
+//!   user.
+//! * **prefix**: `oils_<h>_`, where `<h>` is the first 12 hex digits of the SHA-256 of
+//!   `oils-iceoryx2-prefix:<token>` ([`prefix_of`]): a one-way function of the token, so
+//!   the names reveal nothing of it. Every shared-memory object in `/dev/shm` carries the
+//!   prefix; iceoryx2 creates them mode 0600, except the global management segment,
+//!   which [`Domain::secure_global_segment`] creates 0600 itself before iceoryx2 looks for
+//!   it (and repairs if it finds it wider, damaged, or taken by another user: then the
+//!   domain draws a new token, and so a new prefix).
+//! * Before oils derived the prefix, the token was the prefix itself, kept in a file
+//!   named `prefix` ([`LEGACY_TOKEN_FILE`]), and so visible in `/dev/shm`. This version
+//!   never reads that file: its token lives in `token`, drawn afresh. (The old file is
+//!   left alone, so an older binary running beside this one is not disturbed.)
 //!
 //! Every participant must use the same domain: children inherit the environment, and a
 //! client started by hand in the same login finds the same directory. `python/oils_fsw`
@@ -34,9 +42,17 @@ use std::path::{Path, PathBuf};
 /// Environment variable naming the domain's root directory.
 pub const ROOT_ENV: &str = "OILS_IOX2_ROOT";
 /// File in the root directory holding the domain's token.
-pub const TOKEN_FILE: &str = "prefix";
+pub const TOKEN_FILE: &str = "token";
+/// Where older versions kept the token, which was then also the prefix (so it was
+/// visible in `/dev/shm`): never read, its token never used.
+pub const LEGACY_TOKEN_FILE: &str = "prefix";
 /// Hex digits in a token.
 pub const TOKEN_LEN: usize = 12;
+/// Text hashed with the token into the prefix (domain separation: the prefix is a hash
+/// of this use of the token only).
+pub const PREFIX_CONTEXT: &str = "oils-iceoryx2-prefix:";
+/// Hex digits of the hash in a prefix.
+pub const PREFIX_HASH_LEN: usize = 12;
 /// Where POSIX shared memory lives on Linux.
 pub const SHM_DIR: &str = "/dev/shm";
 /// The global management segment's name after the prefix, for iceoryx2 0.10.0: the SHA-1
@@ -147,9 +163,9 @@ impl Domain {
         &self.root
     }
 
-    /// The prefix of every file of the domain: `oils_<token>_`.
+    /// The prefix of every file of the domain: [`prefix_of`] its token.
     pub fn prefix(&self) -> String {
-        format!("oils_{}_", self.token)
+        prefix_of(&self.token)
     }
 
     /// What opening the domain had to repair (for the caller to report), if anything.
@@ -213,8 +229,9 @@ impl Domain {
                 Segment::Foreign(uid) => {
                     let token = new_token(&self.root)?;
                     self.notes.push(format!(
-                        "{} belongs to uid {uid}, not to this user: the domain's name was taken; a new one was drawn (oils_{token}_)",
-                        path.display()
+                        "{} belongs to uid {uid}, not to this user: the domain's name was taken; a new one was drawn ({})",
+                        path.display(),
+                        prefix_of(&token)
                     ));
                     self.token = token;
                 }
@@ -260,6 +277,19 @@ fn ensure_private_dir(root: &Path) -> Result<(), DomainError> {
         )));
     }
     Ok(())
+}
+
+/// The file-name prefix of the domain whose token is `token`: `oils_`, the first
+/// [`PREFIX_HASH_LEN`] lowercase hex digits of SHA-256(`PREFIX_CONTEXT` + token), `_`.
+/// One-way: a name in `/dev/shm` does not reveal the token.
+pub fn prefix_of(token: &str) -> String {
+    use sha2::{Digest, Sha256};
+    let digest = Sha256::new()
+        .chain_update(PREFIX_CONTEXT.as_bytes())
+        .chain_update(token.as_bytes())
+        .finalize();
+    let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
+    format!("oils_{}_", &hex[..PREFIX_HASH_LEN])
 }
 
 fn valid_token(t: &str) -> bool {
@@ -454,6 +484,41 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         dir
+    }
+
+    #[test]
+    fn the_prefix_is_a_hash_of_the_token_never_the_token() {
+        // The documented derivation (docs/protocol.md, "Domain"; Python's hashlib agrees).
+        assert_eq!(prefix_of("0123456789ab"), "oils_c15e6d5b3339_");
+        let dir = scratch("prefix");
+        let root = dir.join("domain");
+        let d = Domain::open(&root).unwrap();
+        let token = std::fs::read_to_string(root.join(TOKEN_FILE)).unwrap();
+        let token = token.trim();
+        assert!(valid_token(token), "{token}");
+        assert_eq!(d.prefix(), prefix_of(token));
+        assert!(!d.prefix().contains(token));
+        let seg = d.global_segment_path();
+        assert!(!seg.to_string_lossy().contains(token), "{}", seg.display());
+        std::fs::remove_file(&seg).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn an_old_token_file_is_never_used() {
+        let dir = scratch("legacy");
+        let root = dir.join("domain");
+        std::fs::DirBuilder::new()
+            .mode(0o700)
+            .create(&root)
+            .unwrap();
+        // The old layout: the token, which was also the prefix, in `prefix`.
+        std::fs::write(root.join(LEGACY_TOKEN_FILE), "0123456789ab\n").unwrap();
+        let d = Domain::open(&root).unwrap();
+        assert_ne!(d.token, "0123456789ab");
+        assert_ne!(d.prefix(), prefix_of("0123456789ab"));
+        std::fs::remove_file(d.global_segment_path()).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -45,8 +45,8 @@ pub fn answer<F: FlightSoftware + ?Sized>(fsw: &mut F, tlm: &Telemetry) -> Comma
     cmd
 }
 
-/// A step the flight software reported as failed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// A step the flight software reported as failed (in a run report: `fsw_failure`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct FswFailure {
     /// The step whose telemetry it was answering.
     pub step: u64,

@@ -123,7 +123,29 @@ pub enum LinkError {
     /// The oils iceoryx2 domain is unusable.
     #[error(transparent)]
     Domain(#[from] DomainError),
+    /// The onboard process started for the run exited before it joined.
+    #[error("the onboard process (pid {pid}) exited {waited_ms} ms after it was started, before it joined run {run_id:016x}")]
+    PeerExited {
+        /// The run id.
+        run_id: u64,
+        /// Its process id.
+        pid: i32,
+        /// How long the emulator had waited for it.
+        waited_ms: u64,
+    },
+    /// The peer process this side watches ([`Link::watch_peer`]) has exited, and nothing
+    /// it sent is left to receive.
+    #[error("the peer process (pid {pid}) exited")]
+    PeerGone {
+        /// Its process id.
+        pid: i32,
+    },
 }
+
+/// While a side that watches its peer's process ([`Link::watch_peer`]) waits for a
+/// packet, it checks this often (wall time) whether that process still runs: a peer that
+/// died is noticed within this bound, not after a timeout.
+pub const PEER_CHECK_NS: u64 = 20_000_000;
 
 fn ice<E: Debug>(what: &'static str) -> impl FnOnce(E) -> LinkError {
     move |e| LinkError::Iceoryx {
@@ -191,6 +213,10 @@ where
     wake_notifications: AtomicU64,
     /// The peer process, watched through a pidfd (the stub watches the emulator).
     peer_process: std::sync::OnceLock<PeerProcess>,
+    /// The peer process whose exit ends a receive ([`Link::watch_peer`]).
+    watched_peer: std::sync::OnceLock<PeerProcess>,
+    /// When the watched peer is checked next, monotonic nanoseconds.
+    next_peer_check_ns: AtomicU64,
 }
 
 /// A peer's iceoryx2 publisher: who sent a packet. iceoryx2 stamps it on every sample
@@ -339,6 +365,19 @@ impl EmulatorLink {
     /// the command publisher that joined (the run is bound to it: the command service
     /// admits one publisher at a time, and every command sample names its publisher).
     pub fn wait_for_peer(&self, timeout_ms: u64, stop: &AtomicBool) -> Result<PeerPort, LinkError> {
+        self.wait_for_peer_watching(timeout_ms, stop, None)
+    }
+
+    /// [`EmulatorLink::wait_for_peer`], giving up with [`LinkError::PeerExited`] as soon as
+    /// `launched` (the onboard process started for this run) exits before it joined: a
+    /// stub that refused its flight software does not leave the emulator waiting out the
+    /// start-up timeout.
+    pub fn wait_for_peer_watching(
+        &self,
+        timeout_ms: u64,
+        stop: &AtomicBool,
+        launched: Option<&PeerProcess>,
+    ) -> Result<PeerPort, LinkError> {
         let start = monotonic_ns();
         loop {
             let subscribed = self.tx_service.dynamic_config().number_of_subscribers() >= 1;
@@ -353,6 +392,13 @@ impl EmulatorLink {
                 return Err(LinkError::Interrupted);
             }
             let waited_ms = (monotonic_ns() - start) / 1_000_000;
+            if let Some(p) = launched.filter(|p| !p.alive()) {
+                return Err(LinkError::PeerExited {
+                    run_id: self.run_id,
+                    pid: p.pid(),
+                    waited_ms,
+                });
+            }
             if waited_ms >= timeout_ms {
                 return Err(LinkError::PeerTimeout {
                     run_id: self.run_id,
@@ -568,7 +614,29 @@ where
             sleeps: AtomicU64::new(0),
             wake_notifications: AtomicU64::new(0),
             peer_process: std::sync::OnceLock::new(),
+            watched_peer: std::sync::OnceLock::new(),
+            next_peer_check_ns: AtomicU64::new(0),
         })
+    }
+
+    /// Watches process `pid` (the peer bound to the run) from now on: once it has exited
+    /// and nothing it sent is left, [`Link::receive_until`] fails with
+    /// [`LinkError::PeerGone`] (checked every [`PEER_CHECK_NS`]) instead of waiting out its
+    /// deadline. `false` where the process cannot be watched ([`PeerProcess::watch`]) or
+    /// one is watched already.
+    pub fn watch_peer(&self, pid: i32) -> bool {
+        PeerProcess::watch(pid).is_some_and(|p| self.watched_peer.set(p).is_ok())
+    }
+
+    /// The watched peer's pid if it was due for a check and has exited (no allocation).
+    fn watched_peer_exited(&self, now_ns: u64) -> Option<i32> {
+        let peer = self.watched_peer.get()?;
+        if now_ns < self.next_peer_check_ns.load(Ordering::Relaxed) {
+            return None;
+        }
+        self.next_peer_check_ns
+            .store(now_ns.saturating_add(PEER_CHECK_NS), Ordering::Relaxed);
+        (!peer.alive()).then(|| peer.pid())
     }
 
     /// The run id.
@@ -657,6 +725,13 @@ where
                 return Ok(Some(p));
             }
             let now = monotonic_ns();
+            if let Some(pid) = self.watched_peer_exited(now) {
+                // A last look: it may have sent its packet just before it exited.
+                if let Some(p) = self.try_receive_from()? {
+                    return Ok(Some(p));
+                }
+                return Err(LinkError::PeerGone { pid });
+            }
             if now >= deadline_ns {
                 return Ok(None);
             }

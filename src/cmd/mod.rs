@@ -5,5 +5,6 @@ pub mod mc;
 pub mod plot;
 pub mod run;
 pub mod stub;
+pub mod stub_process;
 pub mod train;
 pub mod validate;

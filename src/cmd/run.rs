@@ -2,18 +2,22 @@
 //! `RunConfig`; the emulator runs here; over iceoryx2 the onboard stub is spawned as a
 //! separate OS process (this same executable, `oils stub ...`).
 
+use super::stub_process::{self, SpawnedStub, StubEnd};
 use anyhow::{bail, Context, Result};
 use oils_emulator::propulsion::hifi::HifiParams;
 use oils_emulator::propulsion::PropulsionKind;
+use oils_emulator::report::{FswLibrary, RunReport};
 use oils_emulator::run_config::{load_scenario, LinkKind, RunConfig, WaitKind};
-use oils_emulator::scheduler::{MissPolicy, Mode};
+use oils_emulator::scheduler::{MissPolicy, Mode, Outcome};
 use oils_emulator::session::{self, Extras, Onboard, SessionError, StubLaunch};
 use oils_lab::mcap_log::McapOpener;
+use oils_onboard_stub::c_library::file_blake3;
 use oils_onboard_stub::fsw::FswSpec;
+use oils_onboard_stub::runner::STUCK_EXIT_CODE;
+use oils_shared::link::LinkError;
 use oils_shared::service::RunServices;
 use std::path::PathBuf;
-use std::process::{Child, Command as Process, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Arguments of a bench run. Every flag is optional: what is not given comes from
 /// `--config` / `--config-from`, else from `RunConfig::default()`.
@@ -146,6 +150,12 @@ pub struct RunArgs {
     /// services (prints them); the report says `fsw: external`.
     #[arg(long)]
     pub no_stub: bool,
+    /// With --link inproc: fly a C library (`--fsw c:PATH`) in this process, without the
+    /// stub process's isolation (refused otherwise): a crash of the library ends
+    /// `oils run` without a report; a step that never returns is given up, with a
+    /// report, after the link timeout.
+    #[arg(long)]
+    pub allow_inproc_c: bool,
 }
 
 impl RunArgs {
@@ -258,46 +268,313 @@ pub fn run(args: &RunArgs) -> Result<()> {
     if args.plots.is_some() && !cfg.log.enabled {
         bail!("--plots draws from the run's log: the configuration disables it (log.enabled)");
     }
+    let fsw_library = match &cfg.fsw {
+        FswSpec::CLibrary(path) => Some(FswLibrary {
+            path: path.display().to_string(),
+            blake3: file_blake3(path)?,
+        }),
+        _ => None,
+    };
+    if let Some(lib) = &fsw_library {
+        check_against_report(args, lib)?;
+        if cfg.link == LinkKind::Inproc && !args.allow_inproc_c {
+            bail!(
+                "--fsw {} with --link inproc: a C library in this process can take the run down with it \
+                 (a crash ends `oils run` with no report, a step that never returns ignores Ctrl-C). \
+                 Fly it over iceoryx2 (the default link): the stub process isolates it, and its crash, \
+                 failure or hang is reported. Or pass --allow-inproc-c to fly it in this process anyway",
+                cfg.fsw
+            );
+        }
+    }
     let run_id = args.run_id()?;
     let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
     let run_id = run_id.unwrap_or_else(session::fresh_run_id);
-    let extras = || Extras {
-        sinks: Some(&McapOpener),
-        ..Default::default()
-    };
-    let mut child: Option<Child> = None;
-    let mut stub_status = None;
-    let report = match cfg.link {
-        LinkKind::Inproc => {
-            let fsw = oils_lab::onboard::flight_software(&cfg, run_id)
-                .context("building the flight software")?;
-            session::run(&cfg, run_id, &stop, Onboard::InProcess(fsw), extras())
-        }
+    let mut stub_end = None;
+    let result = match cfg.link {
+        LinkKind::Inproc => fly_in_process(&cfg, run_id, &stop, fsw_library.as_ref(), args),
         LinkKind::Iceoryx2 => {
+            let outcome = oils_shared::domain::Domain::from_env()
+                .map(|d| d.root().join(format!("stub-{run_id:016x}.outcome.json")))
+                .context("the iceoryx2 domain")?;
+            let mut spawned: Option<SpawnedStub> = None;
             let mut launch = |launch: &StubLaunch| {
                 if cfg.fsw == FswSpec::External {
                     print_services(launch);
-                    return Ok(());
+                    return Ok(None);
                 }
-                child = Some(
-                    spawn_stub(&cfg, launch).map_err(|e| SessionError::Launch(format!("{e:#}")))?,
-                );
-                Ok(())
+                let hash = fsw_library.as_ref().map(|l| l.blake3.as_str());
+                let stub = stub_process::spawn(&cfg, launch, hash, outcome.clone())
+                    .map_err(|e| SessionError::Launch(format!("{e:#}")))?;
+                let pid = stub.pid();
+                spawned = Some(stub);
+                Ok(Some(pid))
             };
-            let result = session::run(&cfg, run_id, &stop, Onboard::Peer(&mut launch), extras());
-            stub_status = child.take().map(reap_stub);
+            let result = session::run(
+                &cfg,
+                run_id,
+                &stop,
+                Onboard::Peer(&mut launch),
+                Extras {
+                    sinks: Some(&McapOpener),
+                    ..Default::default()
+                },
+            );
+            stub_end = spawned.take().map(SpawnedStub::reap);
             result
         }
+    };
+    let signalled = stop.load(std::sync::atomic::Ordering::Relaxed);
+    let mut report = match result {
+        Ok(report) => report,
+        Err(e) => {
+            let never_joined = matches!(
+                e,
+                SessionError::Link(LinkError::PeerExited { .. } | LinkError::PeerTimeout { .. })
+            );
+            let why = match &stub_end {
+                Some(end) if never_joined => {
+                    let mut why = format!(
+                        "onboard stub (pid {}) {} before it joined the run",
+                        end.pid, end.ended
+                    );
+                    if let Some(words) = end.last_words() {
+                        why.push_str(&format!(": {words}"));
+                    }
+                    why
+                }
+                _ => format!("{:#}", anyhow::Error::from(e)),
+            };
+            if never_joined && args.report.is_some() {
+                // The flight software never came up: still a report, of a run aborted
+                // before step 0, as asked.
+                let mut report = RunReport::aborted_early(
+                    &cfg,
+                    run_id,
+                    Some(cfg.wait_strategy()),
+                    0,
+                    why.clone(),
+                );
+                report.fsw_library = fsw_library;
+                report.onboard_process = stub_end.as_ref().map(StubEnd::process);
+                oils_emulator::report::finish_run(&report, args.report.as_deref())?;
+            }
+            bail!("bench run: {why}");
+        }
+    };
+    report.fsw_library = fsw_library;
+    if let Some(end) = &stub_end {
+        tell_stub_end(&mut report, end, signalled);
     }
-    .context("bench run")?;
     if let Some(dir) = &args.plots {
         super::plot::after_run(&report, dir)?;
     }
     oils_emulator::report::finish_run(&report, args.report.as_deref())?;
-    if let Some(Err(e)) = stub_status {
-        bail!("onboard stub: {e}");
+    if let Some(end) = stub_end.filter(|e| !e.clean) {
+        bail!("onboard stub (pid {}) {}", end.pid, end.ended);
     }
     Ok(())
+}
+
+/// Puts how the spawned stub ended into the report; when the run was aborted for its
+/// sake (not by a signal to us), the error says what happened to it.
+fn tell_stub_end(report: &mut RunReport, end: &StubEnd, signalled: bool) {
+    report.onboard_process = Some(end.process());
+    if end.fsw_failure.is_some() {
+        report.fsw_failure = end.fsw_failure;
+    }
+    let s = &mut report.summary;
+    if s.outcome != Outcome::Aborted || end.clean || signalled {
+        return;
+    }
+    let step = s.steps;
+    let story = match end.fsw_failure {
+        Some(f) => format!("{f}; onboard stub (pid {}) {}", end.pid, end.ended),
+        None if end.killed_after_run => {
+            let core = s.error.clone().unwrap_or_default();
+            format!("{core}; onboard stub (pid {}) {}", end.pid, end.ended)
+        }
+        None => {
+            let mut story = format!(
+                "onboard stub (pid {}) {} at step {step}",
+                end.pid, end.ended
+            );
+            if let Some(words) = end.last_words() {
+                story.push_str(&format!(": {words}"));
+            }
+            story
+        }
+    };
+    s.error = Some(story);
+}
+
+/// `--config-from REPORT` repeats a run: the C library it names must still be the file
+/// that run flew (the report's `fsw_library.blake3`), unless `--fsw` names it anew.
+fn check_against_report(args: &RunArgs, lib: &FswLibrary) -> Result<()> {
+    let (Some(from), None) = (&args.config_from, &args.fsw) else {
+        return Ok(());
+    };
+    let text = std::fs::read_to_string(from)
+        .with_context(|| format!("--config-from {}", from.display()))?;
+    let Ok(report) = serde_json::from_str::<serde_json::Value>(&text) else {
+        return Ok(()); // RunConfig::load_from_report has said what is wrong with it.
+    };
+    let Ok(then) = serde_json::from_value::<FswLibrary>(report["fsw_library"].clone()) else {
+        return Ok(()); // a configuration file, or a report without the hash
+    };
+    if then.path == lib.path && !then.blake3.eq_ignore_ascii_case(&lib.blake3) {
+        bail!(
+            "--config-from {}: c:{} has changed since that run (BLAKE3 then {}, now {}): \
+             the run would not repeat. Restore the file, or pass --fsw c:{} to fly it as it is now",
+            from.display(),
+            lib.path,
+            then.blake3,
+            lib.blake3,
+            lib.path
+        );
+    }
+    Ok(())
+}
+
+/// Flies the run in this process. A C library (allowed by `--allow-inproc-c`) is
+/// built checked against the hash the report records, and watched: a step that does not
+/// return within the link timeout (the first within the start-up timeout), or within a
+/// second of a termination signal, ends the process with a report (see
+/// [`InProcessWatchdog`]).
+fn fly_in_process(
+    cfg: &RunConfig,
+    run_id: u64,
+    stop: &std::sync::Arc<std::sync::atomic::AtomicBool>,
+    fsw_library: Option<&FswLibrary>,
+    args: &RunArgs,
+) -> Result<RunReport, SessionError> {
+    let rules = oils_shared::profile::ProfileRules::rated(cfg.scenario.propulsion.max_thrust_n);
+    let fsw = oils_onboard_stub::build::build_fsw_expecting(
+        &cfg.fsw,
+        cfg.profile.as_deref().map(|p| (p, &rules)),
+        cfg.fsw_params.as_deref(),
+        run_id,
+        fsw_library.map(|l| l.blake3.as_str()),
+    )
+    .map_err(|e| SessionError::Onboard(format!("building the flight software: {e}")))?;
+    let extras = |observer| Extras {
+        sinks: Some(&McapOpener),
+        observer,
+    };
+    let Some(lib) = fsw_library else {
+        return session::run(cfg, run_id, stop, Onboard::InProcess(fsw), extras(None));
+    };
+    let watchdog = InProcessWatchdog::start(cfg, run_id, lib, stop, args.report.clone());
+    let progress = watchdog.progress();
+    let mut observe = |k: u64, _: &oils_emulator::plant::Plant| progress.stepped(k);
+    let result = session::run(
+        cfg,
+        run_id,
+        stop,
+        Onboard::InProcess(fsw),
+        extras(Some(&mut observe)),
+    );
+    watchdog.finish();
+    result
+}
+
+/// What `oils run --link inproc` with a C library watches: the steps it completes.
+#[derive(Default)]
+struct Progress {
+    /// Steps completed.
+    steps: std::sync::atomic::AtomicU64,
+    /// When the last one completed, monotonic nanoseconds.
+    at_ns: std::sync::atomic::AtomicU64,
+}
+
+impl Progress {
+    /// Called after each step (two relaxed stores; no allocation).
+    fn stepped(&self, k: u64) {
+        use std::sync::atomic::Ordering::Relaxed;
+        self.steps.store(k + 1, Relaxed);
+        self.at_ns
+            .store(oils_shared::clock::monotonic_ns(), Relaxed);
+    }
+}
+
+/// A thread that ends `oils run` when an in-process C library does not return from its
+/// step: it prints why, writes the report asked for (aborted at that step; the log holds
+/// every step before it) and exits with status 3, since the stuck thread cannot be
+/// stopped otherwise.
+struct InProcessWatchdog {
+    progress: std::sync::Arc<Progress>,
+    done: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl InProcessWatchdog {
+    fn start(
+        cfg: &RunConfig,
+        run_id: u64,
+        lib: &FswLibrary,
+        stop: &std::sync::Arc<std::sync::atomic::AtomicBool>,
+        report: Option<PathBuf>,
+    ) -> Self {
+        use std::sync::atomic::Ordering::Relaxed;
+        let progress = std::sync::Arc::new(Progress::default());
+        progress
+            .at_ns
+            .store(oils_shared::clock::monotonic_ns(), Relaxed);
+        let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let (p, d, stop) = (progress.clone(), done.clone(), stop.clone());
+        let (cfg, lib) = (cfg.clone(), lib.clone());
+        let thread = std::thread::spawn(move || {
+            let mut signalled_at = None;
+            while !d.load(Relaxed) {
+                std::thread::sleep(Duration::from_millis(50));
+                let now = oils_shared::clock::monotonic_ns();
+                let step = p.steps.load(Relaxed);
+                let waited_ms = now.saturating_sub(p.at_ns.load(Relaxed)) / 1_000_000;
+                let budget_ms = if step == 0 {
+                    cfg.startup_timeout_ms
+                } else {
+                    cfg.link_timeout_ms
+                };
+                if stop.load(Relaxed) {
+                    signalled_at.get_or_insert(now);
+                }
+                let after_signal_ms = signalled_at.map_or(0, |t| now.saturating_sub(t) / 1_000_000);
+                if d.load(Relaxed) || (waited_ms < budget_ms && after_signal_ms < 1000) {
+                    continue;
+                }
+                let why = format!(
+                    "the in-process flight software (c:{}) has not returned from step {step} for {waited_ms} ms{}; the run cannot be stopped otherwise (--allow-inproc-c), so `oils run` exits",
+                    lib.path,
+                    if signalled_at.is_some() { ", after a termination signal" } else { "" }
+                );
+                if let Some(path) = &report {
+                    let mut r = RunReport::aborted_early(&cfg, run_id, None, step, why.clone());
+                    r.fsw_library = Some(lib.clone());
+                    let _ = oils_emulator::report::finish_run(&r, Some(path));
+                }
+                eprintln!("error: bench run: {why}");
+                // SAFETY: ends the process; the thread stuck in the library cannot be
+                // unwound. The log writer has written every record it was handed.
+                unsafe { libc::_exit(STUCK_EXIT_CODE) };
+            }
+        });
+        Self {
+            progress,
+            done,
+            thread: Some(thread),
+        }
+    }
+
+    fn progress(&self) -> std::sync::Arc<Progress> {
+        self.progress.clone()
+    }
+
+    fn finish(mut self) {
+        self.done.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
 }
 
 /// What a flight software started by hand needs to join the run.
@@ -314,54 +591,6 @@ fn print_services(launch: &StubLaunch) {
             d.prefix(),
             oils_shared::domain::ROOT_ENV
         );
-    }
-}
-
-/// Starts `oils stub` for this run, as a separate OS process.
-fn spawn_stub(cfg: &RunConfig, launch: &StubLaunch) -> Result<Child> {
-    let exe = std::env::current_exe().context("locating the oils executable")?;
-    let mut p = Process::new(exe);
-    p.arg("stub")
-        .arg("--run-id")
-        .arg(format!("{:016x}", launch.run_id))
-        .arg("--wait")
-        .arg(launch.wait.as_str())
-        .arg("--fsw")
-        .arg(cfg.fsw.to_string())
-        // The stub's patience with a live but silent emulator: a realtime run slowed
-        // down by a speed factor has long periods, so never sooner than three of them (at
-        // most 185 s: a period is at most 60 s). A dead emulator the stub notices within
-        // about 0.1 s whatever this is (it watches the emulator's process).
-        .arg("--timeout-ms")
-        .arg((5000 + 3 * (cfg.dt_ms as f64 / cfg.speed) as u64).to_string())
-        .stdin(Stdio::null());
-    if let Some(profile) = &cfg.profile {
-        p.arg("--profile")
-            .arg(profile)
-            .arg("--max-thrust-n")
-            .arg(cfg.scenario.propulsion.max_thrust_n.to_string());
-    }
-    if let Some(params) = &cfg.fsw_params {
-        p.arg("--fsw-params").arg(params);
-    }
-    p.spawn().context("spawning the onboard stub")
-}
-
-/// Waits briefly for the stub to exit after the end-of-run telemetry; kills it if not.
-fn reap_stub(mut child: Child) -> Result<(), String> {
-    let until = Instant::now() + Duration::from_secs(3);
-    loop {
-        match child.try_wait() {
-            Ok(Some(status)) if status.success() => return Ok(()),
-            Ok(Some(status)) => return Err(format!("exited with {status}")),
-            Ok(None) if Instant::now() < until => std::thread::sleep(Duration::from_millis(5)),
-            Ok(None) => {
-                let _ = child.kill();
-                let _ = child.wait();
-                return Err("did not exit after the run; killed".into());
-            }
-            Err(e) => return Err(e.to_string()),
-        }
     }
 }
 

@@ -2,10 +2,11 @@
 //! joins a run whose id the emulator printed. The flags become a plain
 //! [`StubOptions`]; the stub library does the rest.
 
+use anyhow::{Context, Result};
 use oils_onboard_stub::fsw::FswSpec;
-use oils_onboard_stub::join::StubOptions;
+use oils_onboard_stub::join::{run_stub, StubOptions};
 use oils_shared::profile::RATED_THRUST_N;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Arguments of the onboard stub.
 #[derive(Debug, Clone, clap::Args)]
@@ -27,6 +28,15 @@ pub struct StubArgs {
     /// parameters (any format the library reads; default: empty).
     #[arg(long)]
     pub fsw_params: Option<PathBuf>,
+    /// For `--fsw c:PATH`: refuse the library unless its BLAKE3 (64 hex digits) is this
+    /// (`oils run` passes the hash it records in the report).
+    #[arg(long, value_name = "HEX")]
+    pub fsw_blake3: Option<String>,
+    /// Write how the stub ended to FILE as JSON (`error`, `fsw_failure` with the step and
+    /// the status a failed step returned, `commands`, `last_step`); `oils run` reads it
+    /// into its report.
+    #[arg(long, value_name = "FILE")]
+    pub outcome: Option<PathBuf>,
     /// busy, event or hybrid; default: what the emulator announces.
     #[arg(long)]
     pub wait: Option<String>,
@@ -50,10 +60,46 @@ impl From<&StubArgs> for StubOptions {
             profile: a.profile.clone(),
             max_thrust_n: a.max_thrust_n,
             fsw_params: a.fsw_params.clone(),
+            fsw_blake3: a.fsw_blake3.clone(),
             wait: a.wait.clone(),
             timeout_ms: a.timeout_ms,
             rt_priority: a.rt_priority,
             startup_timeout_ms: a.startup_timeout_ms,
         }
     }
+}
+
+/// Runs `oils stub`: joins the run and serves it; with `--outcome`, writes how it ended.
+pub fn run(a: &StubArgs) -> Result<()> {
+    let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
+    let served = run_stub(&a.into(), &stop);
+    if let Some(path) = &a.outcome {
+        let outcome = match &served {
+            Ok(s) => serde_json::json!({
+                "error": null, "fsw_failure": null,
+                "commands": s.commands, "last_step": s.last_step,
+            }),
+            Err(e) => serde_json::json!({
+                "error": format!("{e}"), "fsw_failure": e.fsw_failure(),
+            }),
+        };
+        write_outcome(path, &outcome.to_string())
+            .with_context(|| format!("--outcome {}", path.display()))?;
+    }
+    served.with_context(|| format!("onboard stub on run {}", a.run_id))?;
+    Ok(())
+}
+
+/// Writes the outcome file owner-only, not following a symlink.
+fn write_outcome(path: &Path, text: &str) -> std::io::Result<()> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .mode(0o600)
+        .custom_flags(libc::O_NOFOLLOW)
+        .open(path)?;
+    f.write_all(text.as_bytes())
 }
