@@ -63,7 +63,10 @@ fn default_descent_lands_within_limits_and_reports() {
     let text_csv = std::fs::read_to_string(&csv).unwrap();
     let mut lines = text_csv.lines();
     let header = lines.next().unwrap();
-    assert!(header.starts_with("step,t_s,flags,pos_x_m"), "{header}");
+    assert!(
+        header.starts_with("telemetry.header.step,telemetry.header.t_ns,"),
+        "{header}"
+    );
     assert_eq!(lines.count() as u64, steps + 1);
 }
 

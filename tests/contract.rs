@@ -252,19 +252,19 @@ fn contract_the_log_holds_the_truth_and_checks_itself() {
             .unwrap_or_else(|| panic!("no column {name}"))
     };
     for name in [
-        "true_pos_x_m",
-        "true_vel_z_m_s",
-        "true_q_w",
-        "true_rate_x_rad_s",
-        "true_mass_kg",
-        "true_altitude_m",
-        "true_contact",
-        "true_gas_pressure_pa",
-        "true_fuel_manifold_pressure_pa",
-        "true_fuel_valve1",
-        "true_thrust4_n",
-        "true_ejected_ox_kg",
-        "applied_thrust1_n",
+        "truth.pos_mci_m[0]",
+        "truth.vel_mci_m_s[2]",
+        "truth.q_mci_from_body[0]",
+        "truth.rate_body_rad_s[0]",
+        "truth.mass_kg",
+        "truth.altitude_m",
+        "truth.contact",
+        "propulsion.gas_pressure_pa",
+        "propulsion.manifold_pressure_pa[0]",
+        "propulsion.fuel_valve_position[0]",
+        "propulsion.thrust_n[3]",
+        "propulsion.ejected_ox_kg",
+        "command.applied.thrust_cmd_n[0]",
     ] {
         col(name);
     }
@@ -278,18 +278,18 @@ fn contract_the_log_holds_the_truth_and_checks_itself() {
     );
     // Navigation noise (on by default) is in the telemetry, not in the truth: the
     // noisy altitude differs from the true one, by the noise's size (0.5 m sigma).
-    let (alt, true_alt) = (col("altitude_m"), col("true_altitude_m"));
+    let (alt, true_alt) = (col("telemetry.altitude_m"), col("truth.altitude_m"));
     let diffs: Vec<f64> = rows.iter().map(|r| r[alt] - r[true_alt]).collect();
     assert!(diffs.iter().any(|d| *d != 0.0));
     assert!(diffs.iter().all(|d| d.abs() < 5.0), "{diffs:?}");
     // hifi's internals are there: the manifold holds pressure once the engines run,
     // and the valve strokes lie in [0, 1].
     let last = rows.last().unwrap();
-    assert!(last[col("true_fuel_manifold_pressure_pa")] > 1e5);
-    let v = last[col("true_fuel_valve1")];
+    assert!(last[col("propulsion.manifold_pressure_pa[0]")] > 1e5);
+    let v = last[col("propulsion.fuel_valve_position[0]")];
     assert!((0.0..=1.0).contains(&v), "{v}");
     // The true mass falls by the ejected propellant.
-    assert!(rows[0][col("true_mass_kg")] > last[col("true_mass_kg")]);
+    assert!(rows[0][col("truth.mass_kg")] > last[col("truth.mass_kg")]);
 
     // A record damaged on disk is named by its step, not exported as data.
     let mut bytes = std::fs::read(&log).unwrap();

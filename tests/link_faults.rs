@@ -146,11 +146,19 @@ fn sigterm_ends_the_run_cleanly_with_the_log_flushed() {
     assert!(rows.len() > 50);
     assert_eq!(rows.len() as u64, r["steps"].as_u64().unwrap() + 1);
     // The last record is the end-of-run telemetry (flag bit 3).
+    let header = std::fs::read_to_string(log.with_extension("csv")).unwrap();
+    let column = header
+        .lines()
+        .next()
+        .unwrap()
+        .split(',')
+        .position(|c| c == "command.record_flags")
+        .unwrap();
     let flags: u32 = rows
         .last()
         .unwrap()
         .split(',')
-        .nth(2)
+        .nth(column)
         .unwrap()
         .parse()
         .unwrap();

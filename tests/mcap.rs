@@ -340,6 +340,59 @@ fn the_same_run_gives_the_same_mcap_and_replays_from_it() {
     std::fs::remove_dir_all(&root).ok();
 }
 
+/// Every message of a whole run (hifi, a fault firing and clearing, so every event kind
+/// but touchdown and misses shows) against its own channel's schema, with the lab's
+/// validator: a field added to a message and not to its schema, or to the schema and
+/// not the message, fails here. The schemas require every property and allow no other.
+#[test]
+fn every_message_of_a_run_fits_its_channels_schema() {
+    let dir = scratch("mcap-schema");
+    let log = dir.join("run.mcap");
+    let o = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--propulsion",
+        "hifi",
+        "--duration",
+        "20",
+        "--fault",
+        "engine-off:2@t=5,for=2",
+        "--log-format",
+        "mcap",
+        "--log",
+        log.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let bytes = std::fs::read(&log).unwrap();
+    let mut checked: BTreeMap<String, usize> = BTreeMap::new();
+    let mut schemas: BTreeMap<u16, serde_json::Value> = BTreeMap::new();
+    for m in
+        mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::ValidateChunkCrcs.into())
+            .unwrap()
+    {
+        let m = m.unwrap();
+        let schema = m.channel.schema.as_ref().expect("a schema");
+        let schema = schemas
+            .entry(schema.id)
+            .or_insert_with(|| serde_json::from_slice(&schema.data).expect("the schema is JSON"));
+        let msg: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        if let Err(e) = oils_lab::json_schema::validate(schema, &msg) {
+            panic!("{} #{}: {e}\n{msg}", m.channel.topic, m.sequence);
+        }
+        *checked.entry(m.channel.topic.clone()).or_default() += 1;
+    }
+    assert_eq!(checked.len(), 9, "{checked:?}");
+    assert!(checked[topic::TRUTH] > 2000, "{checked:?}");
+    assert_eq!(checked[topic::SCENE], 1);
+    assert_eq!(
+        checked[topic::EVENTS],
+        4,
+        "start, fault fired, cleared, end of run"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 fn pngs(dir: &Path) -> Vec<(String, u64)> {
     let mut out: Vec<(String, u64)> = std::fs::read_dir(dir)
         .unwrap()

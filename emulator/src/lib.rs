@@ -20,6 +20,7 @@ pub mod config;
 pub mod digest;
 pub mod faults;
 pub mod link;
+pub mod log_fields;
 pub mod plant;
 pub mod propulsion;
 pub mod recorder;

@@ -9,8 +9,9 @@
 //! header     JSON     the run's whole configuration (RunConfig), run id, protocol version
 //! records    RECORD_SIZE bytes each, until the end of the file:
 //!            flags u32 | crc32 u32 | Telemetry (304 bytes) | Command (120 bytes)
-//!            | applied command, true state and the step's timing: TRUTH_VALUES f64s
-//!              (see TRUTH_COLUMNS; a timing figure the step has not is NaN)
+//!            | applied command, true state, active faults and the step's timing:
+//!              TRUTH_VALUES f64s, the slots of `log_fields::FIELDS` (a timing figure
+//!              the step has not is NaN)
 //! ```
 //! The CRC-32 covers the flags and everything after the CRC, so a damaged record is
 //! found and named by its position, never read as data.
@@ -21,10 +22,10 @@
 //! [`Recorder::finish`] (or dropping the recorder, on any error path) closes the channel,
 //! writes the rest, flushes and `fsync`s.
 
+use crate::log_fields::{self, Access, Derived, Sample, Site, Value};
 use crate::plant::{ActuatorCommand, TruthState};
-use crate::propulsion::{PropulsionInternals, PropulsionOutput};
 use crossbeam::channel::{bounded, Receiver, Sender, TrySendError};
-use oils_shared::{AsBytes, Command, Telemetry, ENGINE_COUNT};
+use oils_shared::{AsBytes, Command, Telemetry};
 use serde::{Deserialize, Serialize};
 use std::fs::File;
 use std::io::{BufWriter, Read, Write};
@@ -38,70 +39,6 @@ pub const MAGIC: &[u8; 8] = b"OILSLOG3";
 const MAGIC_V2: &[u8; 8] = b"OILSLOG2";
 /// Magic of the first format (wire packets only), refused with a clear message.
 const MAGIC_V1: &[u8; 8] = b"OILSLOG1";
-/// Columns of the applied command and the true state, in record order, with units.
-pub const TRUTH_COLUMNS: [&str; TRUTH_VALUES] = [
-    "applied_thrust1_n",
-    "applied_thrust2_n",
-    "applied_thrust3_n",
-    "applied_thrust4_n",
-    "applied_on1",
-    "applied_on2",
-    "applied_on3",
-    "applied_on4",
-    "applied_torque_x_nm",
-    "applied_torque_y_nm",
-    "applied_torque_z_nm",
-    "true_pos_x_m",
-    "true_pos_y_m",
-    "true_pos_z_m",
-    "true_vel_x_m_s",
-    "true_vel_y_m_s",
-    "true_vel_z_m_s",
-    "true_q_w",
-    "true_q_x",
-    "true_q_y",
-    "true_q_z",
-    "true_rate_x_rad_s",
-    "true_rate_y_rad_s",
-    "true_rate_z_rad_s",
-    "true_mass_kg",
-    "true_altitude_m",
-    "true_contact",
-    "true_thrust1_n",
-    "true_thrust2_n",
-    "true_thrust3_n",
-    "true_thrust4_n",
-    "true_mean_thrust1_n",
-    "true_mean_thrust2_n",
-    "true_mean_thrust3_n",
-    "true_mean_thrust4_n",
-    "true_chamber_pressure1_pa",
-    "true_chamber_pressure2_pa",
-    "true_chamber_pressure3_pa",
-    "true_chamber_pressure4_pa",
-    "true_gas_pressure_pa",
-    "true_fuel_tank_pressure_pa",
-    "true_ox_tank_pressure_pa",
-    "true_ejected_fuel_kg",
-    "true_ejected_ox_kg",
-    "true_fuel_flow_kg_s",
-    "true_ox_flow_kg_s",
-    "true_regulator_outlet_pa",
-    "true_fuel_manifold_pressure_pa",
-    "true_ox_manifold_pressure_pa",
-    "true_fuel_valve1",
-    "true_ox_valve1",
-    "true_fuel_valve2",
-    "true_ox_valve2",
-    "true_fuel_valve3",
-    "true_ox_valve3",
-    "true_fuel_valve4",
-    "true_ox_valve4",
-    "faults_active",
-    "round_trip_ns",
-    "wake_error_ns",
-    "transport_ns",
-];
 /// Number of f64 values after the packets in a record.
 pub const TRUTH_VALUES: usize = 61;
 const TLM_SIZE: usize = core::mem::size_of::<Telemetry>();
@@ -155,122 +92,35 @@ pub struct StepTimes {
 }
 
 impl Record {
-    /// The applied command and true state as the log's f64 values ([`TRUTH_COLUMNS`]).
+    /// The applied command, true state, active faults and timing as the log's f64
+    /// values: the fields of [`log_fields::FIELDS`] with a slot, each at its slot.
     pub fn truth_values(&self) -> [f64; TRUTH_VALUES] {
-        let a = &self.applied;
-        let t = &self.truth;
-        let p = &t.propulsion;
-        let i = &t.internals;
         let mut v = [0.0; TRUTH_VALUES];
-        let mut n = 0;
-        let mut put = |xs: &[f64]| {
-            v[n..n + xs.len()].copy_from_slice(xs);
-            n += xs.len();
-        };
-        put(&a.engines.thrust_cmd_n);
-        put(&a.engines.on.map(f64::from));
-        put(&a.torque_cmd_body_nm);
-        put(&t.pos_mci_m);
-        put(&t.vel_mci_m_s);
-        put(&t.q_mci_from_body);
-        put(&t.rate_body_rad_s);
-        put(&[t.mass_kg, t.altitude_m, f64::from(t.contact)]);
-        put(&p.thrust_n);
-        put(&p.mean_thrust_n);
-        put(&p.chamber_pressure_pa);
-        put(&[
-            p.gas_pressure_pa,
-            p.fuel_tank_pressure_pa,
-            p.ox_tank_pressure_pa,
-            p.ejected_fuel_kg,
-            p.ejected_ox_kg,
-            p.fuel_flow_kg_s,
-            p.ox_flow_kg_s,
-            i.regulator_outlet_pa,
-        ]);
-        put(&i.manifold_pressure_pa);
-        for valves in &i.valve_position {
-            put(valves);
+        for f in log_fields::FIELDS {
+            if let Access::Slot {
+                at, stride, get, ..
+            } = f.access
+            {
+                for i in 0..f.count() {
+                    v[at + i * stride] = f.kind.to_f64(get(self, i));
+                }
+            }
         }
-        // Exact: at most 64 faults, and masks stay below 2^53 for up to 53 of them.
-        put(&[self.faults_active as f64]);
-        // Exact below 2^53 ns (104 days).
-        let tm = &self.timing;
-        put(&[
-            tm.round_trip_ns.map_or(f64::NAN, |v| v as f64),
-            tm.wake_error_ns.map_or(f64::NAN, |v| v as f64),
-            tm.transport_ns.map_or(f64::NAN, |v| v as f64),
-        ]);
-        debug_assert_eq!(n, TRUTH_VALUES);
         v
     }
 
-    /// Fills the applied command and true state from the log's f64 values.
+    /// Sets every slot field from the log's f64 values.
     fn set_truth_values(&mut self, v: &[f64; TRUTH_VALUES]) {
-        let mut n = 0;
-        let mut take = |len: usize| {
-            let s = &v[n..n + len];
-            n += len;
-            s
-        };
-        let arr4 = |s: &[f64]| [s[0], s[1], s[2], s[3]];
-        let arr3 = |s: &[f64]| [s[0], s[1], s[2]];
-        let mut applied = ActuatorCommand::default();
-        applied.engines.thrust_cmd_n = arr4(take(ENGINE_COUNT));
-        applied.engines.on = arr4(take(ENGINE_COUNT)).map(|x| x != 0.0);
-        applied.torque_cmd_body_nm = arr3(take(3));
-        let pos_mci_m = arr3(take(3));
-        let vel_mci_m_s = arr3(take(3));
-        let q_mci_from_body = arr4(take(4));
-        let rate_body_rad_s = arr3(take(3));
-        let scalars = arr3(take(3));
-        let thrust_n = arr4(take(ENGINE_COUNT));
-        let mean_thrust_n = arr4(take(ENGINE_COUNT));
-        let chamber_pressure_pa = arr4(take(ENGINE_COUNT));
-        let p = take(8);
-        let propulsion = PropulsionOutput {
-            thrust_n,
-            mean_thrust_n,
-            chamber_pressure_pa,
-            gas_pressure_pa: p[0],
-            fuel_tank_pressure_pa: p[1],
-            ox_tank_pressure_pa: p[2],
-            ejected_fuel_kg: p[3],
-            ejected_ox_kg: p[4],
-            fuel_flow_kg_s: p[5],
-            ox_flow_kg_s: p[6],
-        };
-        let regulator_outlet_pa = p[7];
-        let manifold = take(2);
-        let mut valve_position = [[0.0; 2]; ENGINE_COUNT];
-        for valves in &mut valve_position {
-            let s = take(2);
-            *valves = [s[0], s[1]];
+        for f in log_fields::FIELDS {
+            if let Access::Slot {
+                at, stride, set, ..
+            } = f.access
+            {
+                for i in 0..f.count() {
+                    set(self, i, f.kind.from_f64(v[at + i * stride]));
+                }
+            }
         }
-        self.faults_active = take(1)[0] as u64;
-        let tm = take(3);
-        let finite = |x: f64| x.is_finite().then_some(x);
-        self.timing = StepTimes {
-            round_trip_ns: finite(tm[0]).map(|v| v as u64),
-            wake_error_ns: finite(tm[1]).map(|v| v as i64),
-            transport_ns: finite(tm[2]).map(|v| v as u64),
-        };
-        self.applied = applied;
-        self.truth = TruthState {
-            pos_mci_m,
-            vel_mci_m_s,
-            q_mci_from_body,
-            rate_body_rad_s,
-            mass_kg: scalars[0],
-            altitude_m: scalars[1],
-            contact: scalars[2] != 0.0,
-            propulsion,
-            internals: PropulsionInternals {
-                regulator_outlet_pa,
-                manifold_pressure_pa: [manifold[0], manifold[1]],
-                valve_position,
-            },
-        };
     }
 
     fn encode(&self, out: &mut [u8; RECORD_SIZE]) {
@@ -637,74 +487,44 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
     })
 }
 
-/// Writes a log's records as CSV: one row per step, named columns with units.
+/// Writes a log's records as CSV: one row per record, one column per value of every
+/// field of [`log_fields::FIELDS`] but the echoes, named by topic and path with units
+/// and frames (`truth.pos_mci_m[0]`, as Foxglove names the MCAP field). Every cell is a
+/// number: flags 1/0, ids in decimal, an absent figure `NaN`.
 pub fn export_csv(log: &Log, out: &mut impl Write) -> std::io::Result<()> {
-    write!(
-        out,
-        "step,t_s,flags,pos_x_m,pos_y_m,pos_z_m,vel_x_m_s,vel_y_m_s,vel_z_m_s,q_w,q_x,q_y,q_z,\
-         rate_x_rad_s,rate_y_rad_s,rate_z_rad_s,accel_x_m_s2,accel_y_m_s2,accel_z_m_s2,altitude_m,mass_kg,\
-         gas_pressure_pa,fuel_tank_pressure_pa,ox_tank_pressure_pa"
-    )?;
-    for e in 1..=4 {
-        write!(out, ",thrust{e}_n,chamber_pressure{e}_pa")?;
-    }
-    for e in 1..=4 {
-        write!(out, ",cmd{e}_n,on{e}")?;
-    }
-    write!(out, ",torque_x_nm,torque_y_nm,torque_z_nm,stub_compute_ns")?;
-    for name in TRUTH_COLUMNS {
-        write!(out, ",{name}")?;
-    }
-    writeln!(out)?;
+    writeln!(out, "{}", log_fields::csv_columns().join(","))?;
+    let site = log.records.first().map(|r| Site::below(&r.truth));
+    let mut line = String::new();
     for r in &log.records {
-        let t = &r.telemetry;
-        let n = &t.nav;
-        write!(
-            out,
-            "{},{},{}",
-            t.header.step,
-            t.header.t_ns as f64 * 1e-9,
-            r.flags
-        )?;
-        for v in n
-            .pos_mci_m
-            .iter()
-            .chain(&n.vel_mci_m_s)
-            .chain(&n.q_mci_from_body)
-            .chain(&n.rate_body_rad_s)
-            .chain(&t.accel_body_m_s2)
-        {
-            write!(out, ",{v}")?;
+        let derived = site.map_or_else(Derived::default, |s| Derived::of(&r.truth, &s));
+        let sample = Sample {
+            record: r,
+            derived: &derived,
+        };
+        line.clear();
+        for f in log_fields::FIELDS.iter().filter(|f| f.in_csv()) {
+            for i in 0..f.count() {
+                use std::fmt::Write as _;
+                if !line.is_empty() {
+                    line.push(',');
+                }
+                // Writing to a String cannot fail.
+                let _ = match f.get(&sample, i) {
+                    Value::F64(x) => write!(line, "{x}"),
+                    Value::Bool(b) => write!(line, "{}", u8::from(b)),
+                    Value::U64(n) => write!(line, "{n}"),
+                    Value::I64(n) => write!(line, "{n}"),
+                    Value::Absent => write!(line, "NaN"),
+                };
+            }
         }
-        let p = &t.propulsion;
-        write!(
-            out,
-            ",{},{},{},{},{}",
-            t.altitude_m,
-            t.mass_estimate_kg,
-            p.gas_pressure_pa,
-            p.fuel_tank_pressure_pa,
-            p.ox_tank_pressure_pa
-        )?;
-        for e in &p.engines {
-            write!(out, ",{},{}", e.thrust_n, e.chamber_pressure_pa)?;
-        }
-        let c = &r.command;
-        for e in 0..4 {
-            write!(out, ",{},{}", c.thrust_cmd_n[e], c.engine_on[e])?;
-        }
-        let q = &c.torque_cmd_body_nm;
-        write!(out, ",{},{},{},{}", q[0], q[1], q[2], c.stub_compute_ns)?;
-        for v in r.truth_values() {
-            write!(out, ",{v}")?;
-        }
-        writeln!(out)?;
+        writeln!(out, "{line}")?;
     }
     out.flush()
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn temp(name: &str) -> PathBuf {
@@ -736,11 +556,126 @@ mod tests {
         export_csv(&log, &mut csv).unwrap();
         let text = String::from_utf8(csv).unwrap();
         assert_eq!(text.lines().count(), 1001);
-        let header = text.lines().next().unwrap();
-        let row = text.lines().nth(1000).unwrap();
-        assert_eq!(header.split(',').count(), row.split(',').count());
-        assert!(row.starts_with("999,"));
+        let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+        let row: Vec<&str> = text.lines().nth(1000).unwrap().split(',').collect();
+        assert_eq!(header.len(), row.len());
+        assert_eq!(header[0], "telemetry.header.step");
+        assert_eq!(row[0], "999");
+        let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+        assert_eq!(row[col("telemetry.altitude_m")], "499.5");
+        assert_eq!(row[col("command.thrust_cmd_n[2]")], "1399");
+        assert_eq!(row[col("timing.round_trip_ns")], "NaN");
+        assert!(row.iter().all(|v| v.parse::<f64>().is_ok()), "{row:?}");
         std::fs::remove_file(&path).ok();
+    }
+
+    /// A record with a different value in every field (so a field stored in the wrong
+    /// place, or not at all, changes the bytes).
+    pub(crate) fn distinct_record() -> Record {
+        let mut x = 0.0;
+        let mut next = || {
+            x += 1.25;
+            x
+        };
+        let mut r = Record {
+            flags: REC_COMMAND_RECEIVED | REC_FAULT_FIRED,
+            faults_active: 0b1011,
+            timing: StepTimes {
+                round_trip_ns: Some(12_345),
+                wake_error_ns: Some(-678),
+                transport_ns: Some(9_012),
+            },
+            ..Default::default()
+        };
+        r.telemetry.header = oils_shared::PacketHeader::new(0x1234_5678_9abc_def0, 77, 770_000_000);
+        r.telemetry.header.flags = 2;
+        let t = &mut r.telemetry;
+        for v in t
+            .nav
+            .pos_mci_m
+            .iter_mut()
+            .chain(&mut t.nav.vel_mci_m_s)
+            .chain(&mut t.nav.q_mci_from_body)
+            .chain(&mut t.nav.rate_body_rad_s)
+            .chain(&mut t.accel_body_m_s2)
+        {
+            *v = next();
+        }
+        t.altitude_m = next();
+        t.mass_estimate_kg = next();
+        t.propulsion.gas_pressure_pa = next();
+        t.propulsion.fuel_tank_pressure_pa = next();
+        t.propulsion.ox_tank_pressure_pa = next();
+        for (e, eng) in t.propulsion.engines.iter_mut().enumerate() {
+            eng.thrust_n = next();
+            eng.chamber_pressure_pa = next();
+            eng.valve_open = e as u32 % 2;
+            eng.flags = e as u32 + 3;
+        }
+        r.command.header = r.telemetry.header;
+        r.command.header.flags = 0;
+        for v in r
+            .command
+            .thrust_cmd_n
+            .iter_mut()
+            .chain(&mut r.command.torque_cmd_body_nm)
+        {
+            *v = next();
+        }
+        r.command.engine_on = [1, 0, 1, 1];
+        r.command.stub_compute_ns = 4321;
+        r.applied.engines.thrust_cmd_n = [next(), next(), next(), next()];
+        r.applied.engines.on = [true, false, false, true];
+        r.applied.torque_cmd_body_nm = [next(), next(), next()];
+        let tr = &mut r.truth;
+        for v in tr
+            .pos_mci_m
+            .iter_mut()
+            .chain(&mut tr.vel_mci_m_s)
+            .chain(&mut tr.q_mci_from_body)
+            .chain(&mut tr.rate_body_rad_s)
+        {
+            *v = next();
+        }
+        tr.mass_kg = next();
+        tr.altitude_m = next();
+        tr.contact = true;
+        let p = &mut tr.propulsion;
+        for v in p
+            .thrust_n
+            .iter_mut()
+            .chain(&mut p.mean_thrust_n)
+            .chain(&mut p.chamber_pressure_pa)
+        {
+            *v = next();
+        }
+        p.gas_pressure_pa = next();
+        p.fuel_tank_pressure_pa = next();
+        p.ox_tank_pressure_pa = next();
+        p.ejected_fuel_kg = next();
+        p.ejected_ox_kg = next();
+        p.fuel_flow_kg_s = next();
+        p.ox_flow_kg_s = next();
+        let i = &mut tr.internals;
+        i.regulator_outlet_pa = next();
+        i.manifold_pressure_pa = [next(), next()];
+        for v in i.valve_position.iter_mut().flatten() {
+            *v = next();
+        }
+        r
+    }
+
+    /// The record's byte layout, pinned: the CRC-32 of a record with a different value in
+    /// every field, as OILSLOG3 wrote it before the field table (#31). A field moved,
+    /// converted differently or dropped changes it.
+    #[test]
+    fn the_record_layout_is_the_oilslog3_one() {
+        let r = distinct_record();
+        let mut bytes = [0u8; RECORD_SIZE];
+        r.encode(&mut bytes);
+        assert_eq!(RECORD_SIZE, 920);
+        assert_eq!(crc32fast::hash(&bytes), 3_707_164_916, "layout changed");
+        assert_eq!(Record::decode(&bytes), Some(r));
     }
 
     #[test]

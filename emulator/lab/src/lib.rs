@@ -14,6 +14,8 @@
 
 pub mod campaign;
 pub mod hifi_figures;
+pub mod json_schema;
+pub mod log_json;
 pub mod mcap_log;
 pub mod onboard;
 pub mod plot;

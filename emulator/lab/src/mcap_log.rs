@@ -2,7 +2,8 @@
 //! ([`oils_emulator::recorder`]), one message per record on each per-step channel, stamped with
 //! simulated time (`log_time` = `publish_time` = `t_ns`).
 //!
-//! Channels (JSON messages, JSON-schema schemas):
+//! Channels (JSON messages, JSON-schema schemas). The five per-step messages and their
+//! schemas come from the core's table of record fields ([`crate::log_json`]):
 //!
 //! | topic | schema | per record |
 //! |---|---|---|
@@ -22,7 +23,8 @@
 //!
 //! Why JSON and not protobuf: Foxglove reads both; JSON needs no code generation and no
 //! protobuf crate, every message is readable as text in Foxglove's raw-message panel and
-//! in any tool, the schemas are plain JSON in this file, and `serde_json` writes every
+//! in any tool, the schemas are plain JSON (the per-step ones made from the field table,
+//! Foxglove's in this file), and `serde_json` writes every
 //! f64 as its shortest round-trip form, so nothing is rounded. Protobuf would be smaller
 //! before compression and faster to encode; the measured cost of JSON is in the README
 //! ("Log formats"), and it is paid on the writer thread, not the stepping thread.
@@ -34,19 +36,16 @@
 //! `oils`. Chunk boundaries depend on the content only, so the same run gives the same
 //! bytes. [`read_mcap`] turns such a file back into a [`Log`].
 
+use crate::log_json;
 use mcap::records::{MessageHeader, Metadata};
 use mcap::{Compression, WriteOptions, Writer};
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
-use oils_emulator::plant::{ActuatorCommand, TruthState};
-use oils_emulator::propulsion::{EngineCommand, PropulsionInternals, PropulsionOutput};
+use nalgebra::{UnitQuaternion, Vector3};
+use oils_emulator::log_fields::{Derived, Sample, Site, Topic, MESSAGE_FORMAT};
 use oils_emulator::recorder::{
     Log, LogFormat, Record, RecordSink, Recorder, RecorderError, SinkOpener, REC_COMMAND_RECEIVED,
     REC_DEADLINE_MISS, REC_END_OF_RUN, REC_REJECTED_VALUES,
 };
-use oils_shared::{
-    Command, EngineReading, NavState, PacketHeader, PropulsionReadings, Telemetry, ENGINE_COUNT,
-};
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::{BufWriter, Seek, Write};
@@ -85,6 +84,15 @@ pub mod topic {
     /// The channels with exactly one message per record.
     pub const PER_STEP: [&str; 7] = [TELEMETRY, COMMAND, TRUTH, PROPULSION, TIMING, TF, POSE];
 }
+
+/// The field table's topics and their channels, in channel-id order.
+const PER_STEP_TOPICS: [(Topic, &str); 5] = [
+    (Topic::Telemetry, topic::TELEMETRY),
+    (Topic::Command, topic::COMMAND),
+    (Topic::Truth, topic::TRUTH),
+    (Topic::Propulsion, topic::PROPULSION),
+    (Topic::Timing, topic::TIMING),
+];
 
 /// MCAP log errors.
 #[derive(Debug, Error)]
@@ -134,9 +142,10 @@ impl From<McapLogError> for RecorderError {
 }
 
 // ---------------------------------------------------------------------------------------
-// Messages. A float that may be non-finite is an `F`: written as a number or `null`.
+// Messages. The five per-step messages come from the core's field table
+// (`crate::log_json`); the Foxglove messages below are this file's own.
 
-/// An f64 that serialises as a JSON number, or `null` when not finite (read back as NaN).
+/// An f64 that serialises as a JSON number, or `null` when not finite.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 struct F(f64);
 
@@ -147,253 +156,15 @@ impl Serialize for F {
     }
 }
 
-impl<'de> Deserialize<'de> for F {
-    /// Parses the number's own text with Rust's exact parser (serde_json's default float
-    /// parser may be one ulp off); `null` is NaN.
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let raw: &'de serde_json::value::RawValue = Deserialize::deserialize(d)?;
-        match raw.get() {
-            "null" => Ok(F(f64::NAN)),
-            text => text
-                .parse::<f64>()
-                .map(F)
-                .map_err(|e| serde::de::Error::custom(format!("number `{text}`: {e}"))),
-        }
-    }
-}
-
-fn fs<const N: usize>(v: [f64; N]) -> [F; N] {
-    v.map(F)
-}
-
-fn un<const N: usize>(v: [F; N]) -> [f64; N] {
-    v.map(|x| x.0)
-}
-
-/// A u64 that JavaScript cannot hold exactly (run id, schema hash): hex text.
+/// A u64 that JavaScript cannot hold exactly (run id): hex text.
 fn hex(v: u64) -> String {
     format!("{v:016x}")
 }
 
-fn unhex(s: &str) -> u64 {
-    u64::from_str_radix(s, 16).unwrap_or(0)
-}
-
-#[derive(Serialize, Deserialize)]
-struct HeaderMsg {
-    protocol_version: u32,
-    flags: u32,
-    schema_hash: String,
-    run_id: String,
-    step: u64,
-    t_ns: i64,
-}
-
-impl HeaderMsg {
-    fn of(h: &PacketHeader) -> Self {
-        Self {
-            protocol_version: h.protocol_version,
-            flags: h.flags,
-            schema_hash: hex(h.schema_hash),
-            run_id: hex(h.run_id),
-            step: h.step,
-            t_ns: h.t_ns,
-        }
-    }
-    fn header(&self) -> PacketHeader {
-        PacketHeader {
-            protocol_version: self.protocol_version,
-            flags: self.flags,
-            schema_hash: unhex(&self.schema_hash),
-            run_id: unhex(&self.run_id),
-            step: self.step,
-            t_ns: self.t_ns,
-        }
-    }
-}
-
-#[derive(Serialize, Deserialize)]
-struct NavMsg {
-    pos_mci_m: [F; 3],
-    vel_mci_m_s: [F; 3],
-    q_mci_from_body: [F; 4],
-    rate_body_rad_s: [F; 3],
-}
-
-#[derive(Serialize, Deserialize)]
-struct EngineMsg {
-    thrust_n: F,
-    chamber_pressure_pa: F,
-    valve_open: u32,
-    flags: u32,
-}
-
-#[derive(Serialize, Deserialize)]
-struct ReadingsMsg {
-    gas_pressure_pa: F,
-    fuel_tank_pressure_pa: F,
-    ox_tank_pressure_pa: F,
-    engines: [EngineMsg; ENGINE_COUNT],
-}
-
-#[derive(Serialize, Deserialize)]
-struct TelemetryMsg {
-    header: HeaderMsg,
-    t_s: f64,
-    nav: NavMsg,
-    accel_body_m_s2: [F; 3],
-    altitude_m: F,
-    mass_estimate_kg: F,
-    propulsion: ReadingsMsg,
-}
-
-impl TelemetryMsg {
-    fn of(t: &Telemetry) -> Self {
-        let n = &t.nav;
-        let p = &t.propulsion;
-        Self {
-            header: HeaderMsg::of(&t.header),
-            t_s: t.header.t_ns as f64 * 1e-9,
-            nav: NavMsg {
-                pos_mci_m: fs(n.pos_mci_m),
-                vel_mci_m_s: fs(n.vel_mci_m_s),
-                q_mci_from_body: fs(n.q_mci_from_body),
-                rate_body_rad_s: fs(n.rate_body_rad_s),
-            },
-            accel_body_m_s2: fs(t.accel_body_m_s2),
-            altitude_m: F(t.altitude_m),
-            mass_estimate_kg: F(t.mass_estimate_kg),
-            propulsion: ReadingsMsg {
-                gas_pressure_pa: F(p.gas_pressure_pa),
-                fuel_tank_pressure_pa: F(p.fuel_tank_pressure_pa),
-                ox_tank_pressure_pa: F(p.ox_tank_pressure_pa),
-                engines: p.engines.map(|e| EngineMsg {
-                    thrust_n: F(e.thrust_n),
-                    chamber_pressure_pa: F(e.chamber_pressure_pa),
-                    valve_open: e.valve_open,
-                    flags: e.flags,
-                }),
-            },
-        }
-    }
-    fn telemetry(self) -> Telemetry {
-        let p = self.propulsion;
-        Telemetry {
-            header: self.header.header(),
-            nav: NavState {
-                pos_mci_m: un(self.nav.pos_mci_m),
-                vel_mci_m_s: un(self.nav.vel_mci_m_s),
-                q_mci_from_body: un(self.nav.q_mci_from_body),
-                rate_body_rad_s: un(self.nav.rate_body_rad_s),
-            },
-            accel_body_m_s2: un(self.accel_body_m_s2),
-            altitude_m: self.altitude_m.0,
-            mass_estimate_kg: self.mass_estimate_kg.0,
-            propulsion: PropulsionReadings {
-                gas_pressure_pa: p.gas_pressure_pa.0,
-                fuel_tank_pressure_pa: p.fuel_tank_pressure_pa.0,
-                ox_tank_pressure_pa: p.ox_tank_pressure_pa.0,
-                engines: p.engines.map(|e| EngineReading {
-                    thrust_n: e.thrust_n.0,
-                    chamber_pressure_pa: e.chamber_pressure_pa.0,
-                    valve_open: e.valve_open,
-                    flags: e.flags,
-                }),
-            },
-        }
-    }
-}
-
-#[derive(Serialize, Deserialize)]
-struct AppliedMsg {
-    thrust_cmd_n: [F; ENGINE_COUNT],
-    on: [bool; ENGINE_COUNT],
-    torque_cmd_body_nm: [F; 3],
-}
-
-#[derive(Serialize, Deserialize)]
-struct CommandMsg {
-    /// The record's `REC_*` flags.
-    record_flags: u32,
-    received: bool,
-    deadline_miss: bool,
-    rejected_values: bool,
-    header: HeaderMsg,
-    thrust_cmd_n: [F; ENGINE_COUNT],
-    engine_on: [u32; ENGINE_COUNT],
-    torque_cmd_body_nm: [F; 3],
-    stub_compute_ns: u64,
-    applied: AppliedMsg,
-}
-
-impl CommandMsg {
-    fn of(r: &Record) -> Self {
-        let c = &r.command;
-        let a = &r.applied;
-        Self {
-            record_flags: r.flags,
-            received: r.flags & REC_COMMAND_RECEIVED != 0,
-            deadline_miss: r.flags & REC_DEADLINE_MISS != 0,
-            rejected_values: r.flags & REC_REJECTED_VALUES != 0,
-            header: HeaderMsg::of(&c.header),
-            thrust_cmd_n: fs(c.thrust_cmd_n),
-            engine_on: c.engine_on,
-            torque_cmd_body_nm: fs(c.torque_cmd_body_nm),
-            stub_compute_ns: c.stub_compute_ns,
-            applied: AppliedMsg {
-                thrust_cmd_n: fs(a.engines.thrust_cmd_n),
-                on: a.engines.on,
-                torque_cmd_body_nm: fs(a.torque_cmd_body_nm),
-            },
-        }
-    }
-}
-
-#[derive(Serialize, Deserialize)]
-struct TruthMsg {
-    t_s: f64,
-    pos_mci_m: [F; 3],
-    vel_mci_m_s: [F; 3],
-    q_mci_from_body: [F; 4],
-    rate_body_rad_s: [F; 3],
-    mass_kg: F,
-    altitude_m: F,
-    contact: bool,
-    /// Derived (not read back): radial velocity, m/s (negative: descending).
-    vertical_speed_m_s: F,
-    /// Derived: velocity across the local vertical, m/s.
-    horizontal_speed_m_s: F,
-    /// Derived: angle between the thrust axis (body +Z) and the local vertical, degrees.
-    tilt_deg: F,
-    /// Derived: body rates, deg/s.
-    rate_body_deg_s: [F; 3],
-    /// Derived: position in the site frame (east, north, up), metres.
-    pos_site_m: [F; 3],
-}
-
-#[derive(Serialize, Deserialize)]
-struct PropulsionMsg {
-    t_s: f64,
-    thrust_cmd_n: [F; ENGINE_COUNT],
-    thrust_n: [F; ENGINE_COUNT],
-    mean_thrust_n: [F; ENGINE_COUNT],
-    chamber_pressure_pa: [F; ENGINE_COUNT],
-    gas_pressure_pa: F,
-    fuel_tank_pressure_pa: F,
-    ox_tank_pressure_pa: F,
-    ejected_fuel_kg: F,
-    ejected_ox_kg: F,
-    fuel_flow_kg_s: F,
-    ox_flow_kg_s: F,
-    regulator_outlet_pa: F,
-    manifold_pressure_pa: [F; 2],
-    fuel_valve_position: [F; ENGINE_COUNT],
-    ox_valve_position: [F; ENGINE_COUNT],
-}
-
 /// Per-step timing, nanoseconds; `None` where a step has no such figure (no command
-/// received; wake error outside realtime; transport in process).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+/// received; wake error outside realtime; transport in process). The `/oils/timing`
+/// message holds these.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct StepTiming {
     /// Step index.
     pub step: u64,
@@ -525,19 +296,28 @@ struct LogMsg<'a> {
 /// JSON schema of a number that may be `null` (non-finite).
 const NUM: &str = r#"{"type":["number","null"]}"#;
 
-fn arr(n: usize) -> String {
-    format!(r#"{{"type":"array","items":{NUM},"minItems":{n},"maxItems":{n}}}"#)
-}
-
-fn obj(title: &str, fields: &[(&str, String)]) -> String {
+/// An object schema: every field required unless `optional` names it, no other field
+/// allowed (so the schema-validation test catches a field added to a message and not
+/// to its schema, or the other way round).
+fn obj_with(title: &str, fields: &[(&str, String)], optional: &[&str]) -> String {
     let props: Vec<String> = fields
         .iter()
         .map(|(name, schema)| format!(r#""{name}":{schema}"#))
         .collect();
+    let required: Vec<String> = fields
+        .iter()
+        .filter(|(name, _)| !optional.contains(name))
+        .map(|(name, _)| format!(r#""{name}""#))
+        .collect();
     format!(
-        r#"{{"title":"{title}","type":"object","properties":{{{}}}}}"#,
-        props.join(",")
+        r#"{{"title":"{title}","type":"object","properties":{{{}}},"required":[{}],"additionalProperties":false}}"#,
+        props.join(","),
+        required.join(",")
     )
+}
+
+fn obj(title: &str, fields: &[(&str, String)]) -> String {
+    obj_with(title, fields, &[])
 }
 
 fn num() -> String {
@@ -574,146 +354,23 @@ fn quat_schema() -> String {
     )
 }
 
-fn header_schema() -> String {
-    obj(
-        "oils.PacketHeader",
-        &[
-            ("protocol_version", int()),
-            ("flags", int()),
-            ("schema_hash", string()),
-            ("run_id", string()),
-            ("step", int()),
-            ("t_ns", int()),
-        ],
-    )
-}
-
 fn list(item: String) -> String {
     format!(r#"{{"type":"array","items":{item}}}"#)
 }
 
-/// `(topic, schema name, schema JSON)` of every channel, in channel-id order.
+/// `(topic, schema name, schema JSON)` of every channel, in channel-id order: the five
+/// per-step messages of the field table, then Foxglove's.
 fn channels() -> Vec<(&'static str, &'static str, String)> {
-    let e = ENGINE_COUNT;
-    let telemetry = obj(
-        "oils.Telemetry",
-        &[
-            ("header", header_schema()),
-            ("t_s", num()),
+    let mut out: Vec<(&'static str, &'static str, String)> = PER_STEP_TOPICS
+        .iter()
+        .map(|&(t, name)| {
             (
-                "nav",
-                obj(
-                    "oils.NavState",
-                    &[
-                        ("pos_mci_m", arr(3)),
-                        ("vel_mci_m_s", arr(3)),
-                        ("q_mci_from_body", arr(4)),
-                        ("rate_body_rad_s", arr(3)),
-                    ],
-                ),
-            ),
-            ("accel_body_m_s2", arr(3)),
-            ("altitude_m", num()),
-            ("mass_estimate_kg", num()),
-            (
-                "propulsion",
-                obj(
-                    "oils.PropulsionReadings",
-                    &[
-                        ("gas_pressure_pa", num()),
-                        ("fuel_tank_pressure_pa", num()),
-                        ("ox_tank_pressure_pa", num()),
-                        (
-                            "engines",
-                            list(obj(
-                                "oils.EngineReading",
-                                &[
-                                    ("thrust_n", num()),
-                                    ("chamber_pressure_pa", num()),
-                                    ("valve_open", int()),
-                                    ("flags", int()),
-                                ],
-                            )),
-                        ),
-                    ],
-                ),
-            ),
-        ],
-    );
-    let applied = obj(
-        "oils.AppliedCommand",
-        &[
-            ("thrust_cmd_n", arr(e)),
-            ("on", list(boolean())),
-            ("torque_cmd_body_nm", arr(3)),
-        ],
-    );
-    let command = obj(
-        "oils.Command",
-        &[
-            ("record_flags", int()),
-            ("received", boolean()),
-            ("deadline_miss", boolean()),
-            ("rejected_values", boolean()),
-            ("header", header_schema()),
-            ("thrust_cmd_n", arr(e)),
-            ("engine_on", list(int())),
-            ("torque_cmd_body_nm", arr(3)),
-            ("stub_compute_ns", int()),
-            ("applied", applied),
-        ],
-    );
-    let truth = obj(
-        "oils.TrueState",
-        &[
-            ("t_s", num()),
-            ("pos_mci_m", arr(3)),
-            ("vel_mci_m_s", arr(3)),
-            ("q_mci_from_body", arr(4)),
-            ("rate_body_rad_s", arr(3)),
-            ("mass_kg", num()),
-            ("altitude_m", num()),
-            ("contact", boolean()),
-            ("vertical_speed_m_s", num()),
-            ("horizontal_speed_m_s", num()),
-            ("tilt_deg", num()),
-            ("rate_body_deg_s", arr(3)),
-            ("pos_site_m", arr(3)),
-        ],
-    );
-    let propulsion = obj(
-        "oils.Propulsion",
-        &[
-            ("t_s", num()),
-            ("thrust_cmd_n", arr(e)),
-            ("thrust_n", arr(e)),
-            ("mean_thrust_n", arr(e)),
-            ("chamber_pressure_pa", arr(e)),
-            ("gas_pressure_pa", num()),
-            ("fuel_tank_pressure_pa", num()),
-            ("ox_tank_pressure_pa", num()),
-            ("ejected_fuel_kg", num()),
-            ("ejected_ox_kg", num()),
-            ("fuel_flow_kg_s", num()),
-            ("ox_flow_kg_s", num()),
-            ("regulator_outlet_pa", num()),
-            ("manifold_pressure_pa", arr(2)),
-            ("fuel_valve_position", arr(e)),
-            ("ox_valve_position", arr(e)),
-        ],
-    );
-    let opt_int = r#"{"type":["integer","null"]}"#.to_string();
-    let timing = obj(
-        "oils.StepTiming",
-        &[
-            ("step", int()),
-            ("t_s", num()),
-            ("stub_compute_ns", opt_int.clone()),
-            ("round_trip_ns", opt_int.clone()),
-            ("wake_error_ns", opt_int.clone()),
-            ("transport_ns", opt_int),
-        ],
-    );
+                name,
+                log_json::schema_name(t),
+                log_json::schema(t).to_string(),
+            )
+        })
+        .collect();
     let transform = obj(
         "foxglove.FrameTransform",
         &[
@@ -775,7 +432,8 @@ fn channels() -> Vec<(&'static str, &'static str, String)> {
             ],
         )
     };
-    let entity = obj(
+    // Each entity has the primitives it uses.
+    let entity = obj_with(
         "foxglove.SceneEntity",
         &[
             ("timestamp", time_schema()),
@@ -786,6 +444,7 @@ fn channels() -> Vec<(&'static str, &'static str, String)> {
             ("cubes", list(prim("foxglove.CubePrimitive"))),
             ("cylinders", list(prim("foxglove.CylinderPrimitive"))),
         ],
+        &["spheres", "cubes", "cylinders"],
     );
     let scene = obj(
         "foxglove.SceneUpdate",
@@ -794,65 +453,17 @@ fn channels() -> Vec<(&'static str, &'static str, String)> {
             ("entities", list(entity)),
         ],
     );
-    vec![
-        (topic::TELEMETRY, "oils.Telemetry", telemetry),
-        (topic::COMMAND, "oils.Command", command),
-        (topic::TRUTH, "oils.TrueState", truth),
-        (topic::PROPULSION, "oils.Propulsion", propulsion),
-        (topic::TIMING, "oils.StepTiming", timing),
+    out.extend([
         (topic::TF, "foxglove.FrameTransforms", transforms),
         (topic::POSE, "foxglove.PoseInFrame", pose),
         (topic::EVENTS, "foxglove.Log", log),
         (topic::SCENE, "foxglove.SceneUpdate", scene),
-    ]
+    ]);
+    out
 }
 
 // ---------------------------------------------------------------------------------------
 // Writing.
-
-/// The local frame fixed at the first record: origin on the surface below the vehicle,
-/// axes east, north, up.
-#[derive(Debug, Clone, Copy)]
-struct Site {
-    origin_mci_m: Vector3<f64>,
-    q_mci_from_site: UnitQuaternion<f64>,
-}
-
-impl Site {
-    fn below(truth: &TruthState) -> Self {
-        let r = Vector3::from(truth.pos_mci_m);
-        let up = r.try_normalize(1e-9).unwrap_or(Vector3::z());
-        let east = Vector3::z()
-            .cross(&up)
-            .try_normalize(1e-9)
-            .unwrap_or(Vector3::x());
-        let north = up.cross(&east);
-        let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[east, north, up]));
-        let surface = (r.norm() - truth.altitude_m).max(0.0);
-        Self {
-            origin_mci_m: up * surface,
-            q_mci_from_site: UnitQuaternion::from_rotation_matrix(&rot),
-        }
-    }
-
-    fn site_of(&self, p_mci: &Vector3<f64>) -> Vector3<f64> {
-        self.q_mci_from_site.inverse() * (p_mci - self.origin_mci_m)
-    }
-}
-
-/// Speeds and tilt relative to the local vertical.
-fn local(truth: &TruthState) -> (f64, f64, f64) {
-    let r = Vector3::from(truth.pos_mci_m);
-    let v = Vector3::from(truth.vel_mci_m_s);
-    let up = r.try_normalize(1e-9).unwrap_or(Vector3::z());
-    let vertical = v.dot(&up);
-    let horizontal = (v - up * vertical).norm();
-    let [w, x, y, z] = truth.q_mci_from_body;
-    let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
-    let axis = q * Vector3::z();
-    let tilt = axis.dot(&up).clamp(-1.0, 1.0).acos().to_degrees();
-    (vertical, horizontal, tilt)
-}
 
 /// Turns records into MCAP messages on a writer; keeps what spans records (channel ids,
 /// the site frame, sequence numbers, the previous contact state).
@@ -865,11 +476,6 @@ struct Encoder {
     written: u64,
 }
 
-const CH_TELEMETRY: usize = 0;
-const CH_COMMAND: usize = 1;
-const CH_TRUTH: usize = 2;
-const CH_PROPULSION: usize = 3;
-const CH_TIMING: usize = 4;
 const CH_TF: usize = 5;
 const CH_POSE: usize = 6;
 const CH_EVENTS: usize = 7;
@@ -879,7 +485,7 @@ impl Encoder {
     fn new<W: Write + Seek>(w: &mut Writer<W>, header_json: &str) -> mcap::McapResult<Self> {
         let mut metadata = BTreeMap::new();
         metadata.insert("header_json".to_string(), header_json.to_string());
-        metadata.insert("format".to_string(), "oils-mcap-1".to_string());
+        metadata.insert("format".to_string(), format!("oils-mcap-{MESSAGE_FORMAT}"));
         w.write_metadata(&Metadata {
             name: METADATA_NAME.to_string(),
             metadata,
@@ -940,7 +546,6 @@ impl Encoder {
     fn write<W: Write + Seek>(&mut self, w: &mut Writer<W>, r: &Record) -> mcap::McapResult<()> {
         let tlm = &r.telemetry;
         let t_ns = tlm.header.t_ns.max(0) as u64;
-        let t_s = tlm.header.t_ns as f64 * 1e-9;
         let step = tlm.header.step;
         let truth = &r.truth;
         let first = self.site.is_none();
@@ -959,51 +564,21 @@ impl Encoder {
             self.event(w, t_ns, &e)?;
         }
 
-        self.put(w, CH_TELEMETRY, t_ns, &TelemetryMsg::of(tlm))?;
-        self.put(w, CH_COMMAND, t_ns, &CommandMsg::of(r))?;
-
+        let derived = Derived::of(truth, &site);
+        let sample = Sample {
+            record: r,
+            derived: &derived,
+        };
+        for (ch, (t, _)) in PER_STEP_TOPICS.iter().enumerate() {
+            self.put(w, ch, t_ns, &log_json::message(*t, &sample))?;
+        }
         let pos = Vector3::from(truth.pos_mci_m);
-        let (vertical, horizontal, tilt) = local(truth);
-        let pos_site = site.site_of(&pos);
-        let truth_msg = TruthMsg {
-            t_s,
-            pos_mci_m: fs(truth.pos_mci_m),
-            vel_mci_m_s: fs(truth.vel_mci_m_s),
-            q_mci_from_body: fs(truth.q_mci_from_body),
-            rate_body_rad_s: fs(truth.rate_body_rad_s),
-            mass_kg: F(truth.mass_kg),
-            altitude_m: F(truth.altitude_m),
-            contact: truth.contact,
-            vertical_speed_m_s: F(vertical),
-            horizontal_speed_m_s: F(horizontal),
-            tilt_deg: F(tilt),
-            rate_body_deg_s: fs(truth.rate_body_rad_s.map(f64::to_degrees)),
-            pos_site_m: fs([pos_site.x, pos_site.y, pos_site.z]),
-        };
-        self.put(w, CH_TRUTH, t_ns, &truth_msg)?;
-
-        let p = &truth.propulsion;
-        let i = &truth.internals;
-        let prop = PropulsionMsg {
-            t_s,
-            thrust_cmd_n: fs(r.applied.engines.thrust_cmd_n),
-            thrust_n: fs(p.thrust_n),
-            mean_thrust_n: fs(p.mean_thrust_n),
-            chamber_pressure_pa: fs(p.chamber_pressure_pa),
-            gas_pressure_pa: F(p.gas_pressure_pa),
-            fuel_tank_pressure_pa: F(p.fuel_tank_pressure_pa),
-            ox_tank_pressure_pa: F(p.ox_tank_pressure_pa),
-            ejected_fuel_kg: F(p.ejected_fuel_kg),
-            ejected_ox_kg: F(p.ejected_ox_kg),
-            fuel_flow_kg_s: F(p.fuel_flow_kg_s),
-            ox_flow_kg_s: F(p.ox_flow_kg_s),
-            regulator_outlet_pa: F(i.regulator_outlet_pa),
-            manifold_pressure_pa: fs(i.manifold_pressure_pa),
-            fuel_valve_position: fs(i.valve_position.map(|v| v[0])),
-            ox_valve_position: fs(i.valve_position.map(|v| v[1])),
-        };
-        self.put(w, CH_PROPULSION, t_ns, &prop)?;
-        self.put(w, CH_TIMING, t_ns, &step_timing(r))?;
+        let pos_site = Vector3::from(derived.pos_site_m);
+        let (vertical, horizontal, tilt) = (
+            derived.vertical_speed_m_s,
+            derived.horizontal_speed_m_s,
+            derived.tilt_deg,
+        );
 
         let q_site_from_body = site.q_mci_from_site.inverse()
             * UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
@@ -1471,14 +1046,26 @@ pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
         why,
     };
     let mut header_json = None;
+    let mut format = 1;
     for item in McapReader::metadata(bytes) {
         if let McapItem::Metadata(m) = item.map_err(mcap_err)? {
             if m.name == METADATA_NAME {
                 header_json = m.metadata.get("header_json").cloned();
+                format = m
+                    .metadata
+                    .get("format")
+                    .and_then(|f| f.strip_prefix("oils-mcap-"))
+                    .and_then(|n| n.parse().ok())
+                    .unwrap_or(1);
             }
         }
     }
     let header_json = header_json.ok_or_else(|| not("no `oils` metadata record".into()))?;
+    if format > MESSAGE_FORMAT {
+        return Err(not(format!(
+            "message format oils-mcap-{format} is newer than this program's ({MESSAGE_FORMAT})"
+        )));
+    }
     let mut records: Vec<Record> = Vec::new();
     let mut index: BTreeMap<u64, usize> = BTreeMap::new();
     // Every per-step channel has one message per record: its sequence number is the
@@ -1491,81 +1078,15 @@ pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
     };
     for msg in mcap_messages(bytes) {
         let msg = msg.map_err(mcap_err)?;
-        let topic = &*msg.topic;
-        let bad = |e: serde_json::Error| not(format!("{topic} at t = {} ns: {e}", msg.log_time));
-        match topic {
-            topic::TELEMETRY => {
-                let m: TelemetryMsg = serde_json::from_slice(&msg.data).map_err(bad)?;
-                let i = slot(u64::from(msg.sequence), &mut records);
-                records[i].telemetry = m.telemetry();
-            }
-            topic::COMMAND => {
-                let m: CommandMsg = serde_json::from_slice(&msg.data).map_err(bad)?;
-                let i = slot(u64::from(msg.sequence), &mut records);
-                let r = &mut records[i];
-                r.flags = m.record_flags;
-                r.command = Command {
-                    header: m.header.header(),
-                    thrust_cmd_n: un(m.thrust_cmd_n),
-                    engine_on: m.engine_on,
-                    torque_cmd_body_nm: un(m.torque_cmd_body_nm),
-                    stub_compute_ns: m.stub_compute_ns,
-                };
-                r.applied = ActuatorCommand {
-                    engines: EngineCommand {
-                        thrust_cmd_n: un(m.applied.thrust_cmd_n),
-                        on: m.applied.on,
-                    },
-                    torque_cmd_body_nm: un(m.applied.torque_cmd_body_nm),
-                };
-            }
-            topic::TRUTH => {
-                let m: TruthMsg = serde_json::from_slice(&msg.data).map_err(bad)?;
-                let i = slot(u64::from(msg.sequence), &mut records);
-                let t = &mut records[i].truth;
-                t.pos_mci_m = un(m.pos_mci_m);
-                t.vel_mci_m_s = un(m.vel_mci_m_s);
-                t.q_mci_from_body = un(m.q_mci_from_body);
-                t.rate_body_rad_s = un(m.rate_body_rad_s);
-                t.mass_kg = m.mass_kg.0;
-                t.altitude_m = m.altitude_m.0;
-                t.contact = m.contact;
-            }
-            topic::PROPULSION => {
-                let m: PropulsionMsg = serde_json::from_slice(&msg.data).map_err(bad)?;
-                let i = slot(u64::from(msg.sequence), &mut records);
-                let t = &mut records[i].truth;
-                t.propulsion = PropulsionOutput {
-                    thrust_n: un(m.thrust_n),
-                    mean_thrust_n: un(m.mean_thrust_n),
-                    chamber_pressure_pa: un(m.chamber_pressure_pa),
-                    gas_pressure_pa: m.gas_pressure_pa.0,
-                    fuel_tank_pressure_pa: m.fuel_tank_pressure_pa.0,
-                    ox_tank_pressure_pa: m.ox_tank_pressure_pa.0,
-                    ejected_fuel_kg: m.ejected_fuel_kg.0,
-                    ejected_ox_kg: m.ejected_ox_kg.0,
-                    fuel_flow_kg_s: m.fuel_flow_kg_s.0,
-                    ox_flow_kg_s: m.ox_flow_kg_s.0,
-                };
-                let fuel = un(m.fuel_valve_position);
-                let ox = un(m.ox_valve_position);
-                t.internals = PropulsionInternals {
-                    regulator_outlet_pa: m.regulator_outlet_pa.0,
-                    manifold_pressure_pa: un(m.manifold_pressure_pa),
-                    valve_position: std::array::from_fn(|e| [fuel[e], ox[e]]),
-                };
-            }
-            topic::TIMING => {
-                let m: StepTiming = serde_json::from_slice(&msg.data).map_err(bad)?;
-                let i = slot(u64::from(msg.sequence), &mut records);
-                records[i].timing = oils_emulator::recorder::StepTimes {
-                    round_trip_ns: m.round_trip_ns,
-                    wake_error_ns: m.wake_error_ns,
-                    transport_ns: m.transport_ns,
-                };
-            }
-            _ => {}
-        }
+        let Some(&(t, _)) = PER_STEP_TOPICS
+            .iter()
+            .find(|(_, name)| **name == *msg.topic)
+        else {
+            continue;
+        };
+        let i = slot(u64::from(msg.sequence), &mut records);
+        log_json::read_message(t, &msg.data, format, &mut records[i])
+            .map_err(|e| not(format!("{} at t = {} ns: {e}", msg.topic, msg.log_time)))?;
     }
     Ok(Log {
         header_json,
@@ -1577,27 +1098,7 @@ pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
 
 /// Per-step timing from an MCAP log's `/oils/timing` channel (in record order).
 pub fn read_mcap_timing(path: &Path) -> Result<Vec<StepTiming>, McapLogError> {
-    let bytes = std::fs::read(path).map_err(|source| McapLogError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let mcap_err = |source| McapLogError::Mcap {
-        path: path.to_path_buf(),
-        source,
-    };
-    let mut out = Vec::new();
-    for msg in mcap_messages(&bytes) {
-        let msg = msg.map_err(mcap_err)?;
-        if &*msg.topic == topic::TIMING {
-            out.push(
-                serde_json::from_slice(&msg.data).map_err(|e| McapLogError::NotOils {
-                    path: path.to_path_buf(),
-                    why: format!("{}: {e}", topic::TIMING),
-                })?,
-            );
-        }
-    }
-    Ok(out)
+    Ok(read_mcap(path)?.records.iter().map(step_timing).collect())
 }
 
 /// Reads a run log in either format: OILSLOG3 or MCAP (by the file's magic).
@@ -1612,6 +1113,9 @@ pub fn read_any(path: &Path) -> Result<Log, RecorderError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use oils_emulator::plant::TruthState;
+    use oils_emulator::propulsion::PropulsionInternals;
+    use oils_shared::PacketHeader;
 
     fn temp(name: &str) -> PathBuf {
         std::env::temp_dir().join(format!("oils-mcap-{}-{name}", std::process::id()))
