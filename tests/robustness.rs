@@ -394,3 +394,59 @@ fn hifi_output_is_bounded() {
         assert!(stderr(&out).contains(wanted), "{}", text(&out));
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// Issue #36: configuration, model and campaign defects.
+
+/// The digest line of a run's table.
+fn digest_of(o: &Output) -> String {
+    stdout(o)
+        .lines()
+        .find_map(|l| l.strip_prefix("digest"))
+        .map(|d| d.trim().to_string())
+        .unwrap_or_else(|| panic!("no digest: {}", text(o)))
+}
+
+/// `engine_thrust_scale = [0.9985811925219601, ...]` came back one ulp off from the log
+/// header and the report (serde_json's default float parser): `oils replay` diverged at
+/// step 1 and `--config-from` flew another digest. Both logs formats.
+#[test]
+fn a_scenario_float_reads_back_exactly_for_replay_and_config_from() {
+    let dir = scratch("robust-exact-float");
+    let scenario = write(
+        &dir,
+        "scale.toml",
+        &(std::fs::read_to_string(terminal_descent_scenario()).unwrap()
+            + "\n[lander]\nengine_thrust_scale = [0.9985811925219601, 1.0, 1.0, 1.0]\n"),
+    );
+    for ext in ["oilslog", "mcap"] {
+        let log = dir.join(format!("run.{ext}"));
+        let report = dir.join(format!("run-{ext}.json"));
+        let out = run_oils(&[
+            "run",
+            "--link",
+            "inproc",
+            "--propulsion",
+            "ideal",
+            "--duration",
+            "3",
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--log",
+            log.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out));
+        let digest = digest_of(&out);
+        // (The text: serde_json's default parser would read it back one ulp off.)
+        let written = std::fs::read_to_string(&report).unwrap();
+        assert!(written.contains("0.9985811925219601"), "{written}");
+        let replay = run_oils(&["replay", log.to_str().unwrap()]);
+        assert!(replay.status.success(), "{ext}: {}", text(&replay));
+        assert_eq!(digest_of(&replay), digest, "{ext}");
+        let again = run_oils(&["run", "--config-from", report.to_str().unwrap(), "--no-log"]);
+        assert!(again.status.success(), "{}", text(&again));
+        assert_eq!(digest_of(&again), digest, "{ext}: --config-from");
+    }
+}

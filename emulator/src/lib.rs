@@ -7,8 +7,9 @@
 //! behind one trait, the learned surrogate's runtime among them), [`sanitize`] (the
 //! link's guard), [`link`] (the exchange: iceoryx2, in-process, replay), [`clock`]
 //! (lockstep, realtime, replay pacing), [`faults`], [`scheduler`] (the one step loop),
-//! [`timing`], [`digest`], [`recorder`], [`report`], and [`session`] (one run, with the
-//! flight software handed in as a value).
+//! [`timing`], [`digest`], [`recorder`], [`report`], [`session`] (one run, with the
+//! flight software handed in as a value), and [`exact_json`] (what the bench writes,
+//! read back bit for bit).
 //!
 //! The lab (`oils-lab`: training, validation, campaigns, plots, MCAP) builds on this
 //! crate; nothing here depends on it, on a command line or on plotting.
@@ -18,6 +19,7 @@
 pub mod clock;
 pub mod config;
 pub mod digest;
+pub mod exact_json;
 pub mod faults;
 pub mod link;
 pub mod plant;
