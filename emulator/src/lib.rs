@@ -9,7 +9,7 @@
 //! (lockstep, realtime, replay pacing), [`faults`], [`scheduler`] (the one step loop),
 //! [`timing`], [`digest`], [`recorder`], [`report`], [`session`] (one run, with the
 //! flight software handed in as a value), and [`exact_json`] (what the bench writes,
-//! read back bit for bit).
+//! read back bit for bit), and [`fixed_len`] (arrays read at exactly their length).
 //!
 //! The lab (`oils-lab`: training, validation, campaigns, plots, MCAP) builds on this
 //! crate; nothing here depends on it, on a command line or on plotting.
@@ -21,6 +21,7 @@ pub mod config;
 pub mod digest;
 pub mod exact_json;
 pub mod faults;
+pub mod fixed_len;
 pub mod link;
 pub mod plant;
 pub mod propulsion;
