@@ -450,3 +450,47 @@ fn a_scenario_float_reads_back_exactly_for_replay_and_config_from() {
         assert_eq!(digest_of(&again), digest, "{ext}: --config-from");
     }
 }
+
+/// A coefficient of 1e11 (inside the 1e12 bound of each number) flew to COMPLETED with
+/// 1.08e13 N per engine and no guard counted; 3000 copies of each term (110 MB) flew
+/// too. Now a model beyond its physical bounds is refused at load or ends the run
+/// aborted, a term given twice is refused, and a file above the size bound is refused
+/// before it is read.
+#[test]
+fn an_unphysical_or_oversized_model_does_not_fly() {
+    let dir = scratch("robust-model-bounds");
+    let committed = || -> serde_json::Value {
+        serde_json::from_str(include_str!("../emulator/models/surrogate-default.json")).unwrap()
+    };
+    let mut v = committed();
+    v["model"]["submodels"][0]["rows"][0]["terms"][0]["coef"] = serde_json::json!(1e11);
+    let model = write(&dir, "coef.json", &v.to_string());
+    let out = inproc(&["--model", model.to_str().unwrap()]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(!stdout(&out).contains("COMPLETED"), "{}", text(&out));
+    assert!(text(&out).contains("not physical"), "{}", text(&out));
+
+    let mut v = committed();
+    let terms = v["model"]["submodels"][0]["rows"][0]["terms"]
+        .as_array_mut()
+        .unwrap();
+    let copies = terms.to_vec();
+    terms.extend(copies);
+    let model = write(&dir, "twice.json", &v.to_string());
+    let out = inproc(&["--model", model.to_str().unwrap()]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(stderr(&out).contains("appears twice"), "{}", text(&out));
+
+    let huge = dir.join("huge.json");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(110_000_000)
+        .unwrap();
+    let out = inproc(&["--model", huge.to_str().unwrap()]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("110000000 bytes; a model file is at most"),
+        "{}",
+        text(&out)
+    );
+}
