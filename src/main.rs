@@ -177,8 +177,8 @@ fn export(a: &ExportArgs) -> anyhow::Result<()> {
     }
     if let Some(path) = &a.profile {
         // The engine rating the run used is in the log's header.
-        let header: serde_json::Value =
-            serde_json::from_str(&log.header_json).context("log header is not JSON")?;
+        let header = oils_emulator::exact_json::value_from_str(&log.header_json)
+            .context("log header is not JSON")?;
         let max_thrust_n = header["config"]["scenario"]["propulsion"]["max_thrust_n"]
             .as_f64()
             .context("log header lacks config.scenario.propulsion.max_thrust_n")?;

@@ -1,7 +1,7 @@
 //! Issue #24 item 7: property tests of the loaders (the longer fuzz runs are in `fuzz/`).
 //! Whatever the input, the profile reader, the configuration loaders, the model file
 //! loader and the log reader return a value or an error, never panic; what they accept
-//! obeys their rules.
+//! obeys their rules. And every float the bench writes reads back bit for bit.
 
 use oils_emulator::config::ScenarioConfig;
 use oils_emulator::propulsion::hifi::HifiParams;
@@ -9,6 +9,9 @@ use oils_emulator::propulsion::surrogate::model_file::ModelFile;
 use oils_emulator::propulsion::surrogate::DEFAULT_MODEL_JSON;
 use oils_emulator::recorder::{parse_log, Record, Recorder};
 use oils_emulator::run_config::RunConfig;
+use oils_emulator::session;
+use oils_lab::campaign::case::{CaseResult, Touchdown, Trace};
+use oils_lab::campaign::Store;
 use oils_lab::mcap_log::{export_mcap, parse_mcap};
 use oils_shared::profile::{ThrustProfile, MAX_PROFILE_END_S, RATED_THRUST_N};
 use proptest::prelude::*;
@@ -235,4 +238,125 @@ fn good_log() -> Vec<u8> {
         bytes
     })
     .clone()
+}
+
+/// Any finite f64, every bit pattern equally likely (subnormals, huge, -0.0 included).
+fn any_finite() -> impl Strategy<Value = f64> {
+    any::<u64>()
+        .prop_map(f64::from_bits)
+        .prop_filter("finite", |x| x.is_finite())
+}
+
+/// Any finite f32, by bit pattern.
+fn any_finite_f32() -> impl Strategy<Value = f32> {
+    any::<u32>()
+        .prop_map(f32::from_bits)
+        .prop_filter("finite", |x| x.is_finite())
+}
+
+/// A run configuration with `x` spread over its float fields (not validated: a writer
+/// and its reader must keep whatever they are given).
+fn config_with(x: &[f64]) -> RunConfig {
+    let mut c = RunConfig {
+        speed: x[0],
+        duration_s: x[1],
+        deadline_frac: x[2],
+        ..RunConfig::default()
+    };
+    let s = &mut c.scenario;
+    s.lander.engine_thrust_scale = [x[3], x[4], x[5], x[6]];
+    s.lander.engine_misalignment_deg[1][0] = x[7];
+    s.initial.altitude_m = x[8];
+    s.moon.mu_m3_s2 = x[9];
+    s.model_error.bias_n[2] = x[10];
+    c.thresholds.max_wake_p99_us = Some(x[11]);
+    let mut hifi = HifiParams::default();
+    hifi.bottle.initial_pressure_pa = x[0];
+    c.hifi = Some(hifi);
+    c
+}
+
+/// Bit-exact comparison: serde_json writes a float's shortest round-trip digits, which
+/// differ for any two bit patterns (0.0 and -0.0 included).
+macro_rules! same {
+    ($a:expr, $b:expr) => {
+        serde_json::to_string($a).unwrap() == serde_json::to_string($b).unwrap()
+    };
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    /// Issue #36: `engine_thrust_scale = 0.9985811925219601` came back one ulp off from
+    /// a report and a log header (serde_json's default float parser), so `oils replay`
+    /// diverged at step 1 and `--config-from` gave another digest; a merge rewrote the
+    /// nominal run's figures. Every writer and reader of the bench's floats: the run
+    /// configuration as TOML (`--print-config`, `--config`, campaign.toml), as a report's
+    /// `config` (`--config-from`), in a log header (`oils replay`), and a campaign's
+    /// case and nominal records.
+    #[test]
+    fn every_float_the_bench_writes_reads_back_bit_for_bit(
+        x in prop::collection::vec(any_finite(), 12),
+        t in prop::collection::vec(any_finite_f32(), 3),
+    ) {
+        let dir = std::env::temp_dir().join(format!("oils-prop-floats-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let cfg = config_with(&x);
+
+        let toml_path = dir.join("run.toml");
+        std::fs::write(&toml_path, cfg.to_toml()).unwrap();
+        let back = RunConfig::load_toml(&toml_path).unwrap();
+        prop_assert!(same!(&back, &cfg), "TOML: {:?}", x);
+
+        // What RunReport::to_json writes around the configuration.
+        let report = serde_json::to_string_pretty(&serde_json::json!({
+            "run_id": "0000000000000001", "config": cfg, "sim_time_s": x[1],
+        })).unwrap();
+        let report_path = dir.join("report.json");
+        std::fs::write(&report_path, report).unwrap();
+        let back = RunConfig::load_from_report(&report_path).unwrap();
+        prop_assert!(same!(&back, &cfg), "report: {:?}", x);
+
+        let (back, run_id) = session::read_log_header(&session::log_header(&cfg, 7)).unwrap();
+        prop_assert_eq!(run_id, 7);
+        prop_assert!(same!(&back, &cfg), "log header: {:?}", x);
+
+        let store = Store::new(&dir.join("campaign"));
+        std::fs::create_dir_all(dir.join("campaign/cases")).unwrap();
+        for index in [Some(3), None] {
+            let record = CaseResult {
+                index,
+                seed: 1,
+                outcome: "landed".into(),
+                error: None,
+                digest: "ab".into(),
+                steps: 2,
+                sim_time_s: x[0],
+                touchdown: Some(Touchdown {
+                    t_s: x[1],
+                    vertical_speed_mps: x[2],
+                    horizontal_speed_mps: x[3],
+                    tilt_deg: x[4],
+                }),
+                propellant_used_kg: x[5],
+                downrange_m: Some(x[6]),
+                crossrange_m: Some(x[7]),
+                fault_events: 0,
+                faults: vec![],
+                out_of_envelope: None,
+                applied: [("altitude".to_string(), x[8]), ("engine_scale[2]".to_string(), x[9])].into(),
+                trace: Trace {
+                    t_s: vec![t[0]],
+                    altitude_m: vec![t[1]],
+                    horizontal_speed_m_s: vec![t[2]],
+                    vertical_speed_m_s: vec![t[0]],
+                },
+                wall_s: x[10],
+            };
+            store.write_case(&record).unwrap();
+            let path = index.map_or(store.nominal_path(), |i| store.case_path(i));
+            let back = store.read_result(&path).unwrap().unwrap();
+            prop_assert!(same!(&back, &record), "case record: {:?} {:?}", x, t);
+        }
+    }
 }

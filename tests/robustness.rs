@@ -394,3 +394,103 @@ fn hifi_output_is_bounded() {
         assert!(stderr(&out).contains(wanted), "{}", text(&out));
     }
 }
+
+// ---------------------------------------------------------------------------------------
+// Issue #36: configuration, model and campaign defects.
+
+/// The digest line of a run's table.
+fn digest_of(o: &Output) -> String {
+    stdout(o)
+        .lines()
+        .find_map(|l| l.strip_prefix("digest"))
+        .map(|d| d.trim().to_string())
+        .unwrap_or_else(|| panic!("no digest: {}", text(o)))
+}
+
+/// `engine_thrust_scale = [0.9985811925219601, ...]` came back one ulp off from the log
+/// header and the report (serde_json's default float parser): `oils replay` diverged at
+/// step 1 and `--config-from` flew another digest. Both logs formats.
+#[test]
+fn a_scenario_float_reads_back_exactly_for_replay_and_config_from() {
+    let dir = scratch("robust-exact-float");
+    let scenario = write(
+        &dir,
+        "scale.toml",
+        &(std::fs::read_to_string(terminal_descent_scenario()).unwrap()
+            + "\n[lander]\nengine_thrust_scale = [0.9985811925219601, 1.0, 1.0, 1.0]\n"),
+    );
+    for ext in ["oilslog", "mcap"] {
+        let log = dir.join(format!("run.{ext}"));
+        let report = dir.join(format!("run-{ext}.json"));
+        let out = run_oils(&[
+            "run",
+            "--link",
+            "inproc",
+            "--propulsion",
+            "ideal",
+            "--duration",
+            "3",
+            "--scenario",
+            scenario.to_str().unwrap(),
+            "--log",
+            log.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out));
+        let digest = digest_of(&out);
+        // (The text: serde_json's default parser would read it back one ulp off.)
+        let written = std::fs::read_to_string(&report).unwrap();
+        assert!(written.contains("0.9985811925219601"), "{written}");
+        let replay = run_oils(&["replay", log.to_str().unwrap()]);
+        assert!(replay.status.success(), "{ext}: {}", text(&replay));
+        assert_eq!(digest_of(&replay), digest, "{ext}");
+        let again = run_oils(&["run", "--config-from", report.to_str().unwrap(), "--no-log"]);
+        assert!(again.status.success(), "{}", text(&again));
+        assert_eq!(digest_of(&again), digest, "{ext}: --config-from");
+    }
+}
+
+/// A coefficient of 1e11 (inside the 1e12 bound of each number) flew to COMPLETED with
+/// 1.08e13 N per engine and no guard counted; 3000 copies of each term (110 MB) flew
+/// too. Now a model beyond its physical bounds is refused at load or ends the run
+/// aborted, a term given twice is refused, and a file above the size bound is refused
+/// before it is read.
+#[test]
+fn an_unphysical_or_oversized_model_does_not_fly() {
+    let dir = scratch("robust-model-bounds");
+    let committed = || -> serde_json::Value {
+        serde_json::from_str(include_str!("../emulator/models/surrogate-default.json")).unwrap()
+    };
+    let mut v = committed();
+    v["model"]["submodels"][0]["rows"][0]["terms"][0]["coef"] = serde_json::json!(1e11);
+    let model = write(&dir, "coef.json", &v.to_string());
+    let out = inproc(&["--model", model.to_str().unwrap()]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(!stdout(&out).contains("COMPLETED"), "{}", text(&out));
+    assert!(text(&out).contains("not physical"), "{}", text(&out));
+
+    let mut v = committed();
+    let terms = v["model"]["submodels"][0]["rows"][0]["terms"]
+        .as_array_mut()
+        .unwrap();
+    let copies = terms.to_vec();
+    terms.extend(copies);
+    let model = write(&dir, "twice.json", &v.to_string());
+    let out = inproc(&["--model", model.to_str().unwrap()]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(stderr(&out).contains("appears twice"), "{}", text(&out));
+
+    let huge = dir.join("huge.json");
+    std::fs::File::create(&huge)
+        .unwrap()
+        .set_len(110_000_000)
+        .unwrap();
+    let out = inproc(&["--model", huge.to_str().unwrap()]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(
+        stderr(&out).contains("110000000 bytes; a model file is at most"),
+        "{}",
+        text(&out)
+    );
+}

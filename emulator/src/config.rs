@@ -4,8 +4,31 @@
 //! Every number is a default, never a constant buried in code: a TOML file given with
 //! `--scenario FILE` overrides any subset of fields.
 
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize};
 use thiserror::Error;
+
+/// One reader per fixed-size array field, refusing another length by the field's
+/// dotted name (toml drops extra elements unread; issue #36).
+macro_rules! fixed_len {
+    ($($name:ident: $ty:ty => $key:literal),* $(,)?) => {$(
+        fn $name<'de, D: Deserializer<'de>>(d: D) -> Result<$ty, D::Error> {
+            crate::fixed_len::deserialize(d, $key)
+        }
+    )*};
+}
+
+fixed_len! {
+    inertia_wet: [f64; 3] => "lander.inertia_wet_kg_m2",
+    inertia_dry: [f64; 3] => "lander.inertia_dry_kg_m2",
+    engine_positions: [[f64; 3]; 4] => "lander.engine_positions_body_m",
+    rcs_moment_arm: [f64; 3] => "lander.rcs_moment_arm_m",
+    com_offset: [f64; 3] => "lander.com_offset_body_m",
+    engine_thrust_scale: [f64; 4] => "lander.engine_thrust_scale",
+    engine_misalignment: [[f64; 2]; 4] => "lander.engine_misalignment_deg",
+    attitude_error: [f64; 3] => "initial.attitude_error_deg",
+    body_rate: [f64; 3] => "initial.body_rate_rad_s",
+    bias: [f64; 4] => "model_error.bias_n",
+}
 
 /// A configuration value is out of its meaningful range.
 #[derive(Debug, Error, Clone, PartialEq)]
@@ -167,16 +190,20 @@ pub struct LanderConfig {
     /// Mass without main propellant, kilograms (1750 wet - 1000 propellant).
     pub dry_mass_kg: f64,
     /// Principal moments of inertia with full tanks, kg m^2 (assumed: a 2 m box).
+    #[serde(deserialize_with = "inertia_wet")]
     pub inertia_wet_kg_m2: [f64; 3],
     /// Principal moments of inertia with empty tanks, kg m^2 (assumed).
+    #[serde(deserialize_with = "inertia_dry")]
     pub inertia_dry_kg_m2: [f64; 3],
     /// Main engine positions relative to the centre of mass, body axes, metres; each
     /// engine thrusts along +Z body through its position.
+    #[serde(deserialize_with = "engine_positions")]
     pub engine_positions_body_m: [[f64; 3]; 4],
     /// Thrust of one attitude thruster, newtons (sourced: 8 x 58 N).
     pub rcs_thrust_n: f64,
     /// Moment arm of the thruster couples about body x, y, z, metres (assumed); each
     /// axis is served by a pair, so the saturation torque is 2 x thrust x arm.
+    #[serde(deserialize_with = "rcs_moment_arm")]
     pub rcs_moment_arm_m: [f64; 3],
     /// Attitude thruster specific impulse, seconds (assumed).
     pub rcs_isp_s: f64,
@@ -185,12 +212,15 @@ pub struct LanderConfig {
     /// Offset of the true centre of mass from the design one, body axes, metres (a
     /// dispersion; the flight software does not know it). Engine moment arms are
     /// measured from the true centre.
+    #[serde(deserialize_with = "com_offset")]
     pub com_offset_body_m: [f64; 3],
     /// Delivered thrust of each engine over what its propulsion model computes, at the
     /// same propellant flow (a thrust-coefficient or alignment loss; 1 = as modelled).
+    #[serde(deserialize_with = "engine_thrust_scale")]
     pub engine_thrust_scale: [f64; 4],
     /// Misalignment of each engine's thrust axis from body +Z, degrees: rotation about
     /// body X, then about body Y (a dispersion; 0 = aligned).
+    #[serde(deserialize_with = "engine_misalignment")]
     pub engine_misalignment_deg: [[f64; 2]; 4],
 }
 
@@ -320,8 +350,10 @@ pub struct InitialStateConfig {
     pub crossrange_speed_m_s: f64,
     /// Attitude error: rotation of the body from its nominal start attitude about body
     /// X, Y, Z, degrees (applied in that order).
+    #[serde(deserialize_with = "attitude_error")]
     pub attitude_error_deg: [f64; 3],
     /// Body rates at the start, rad/s.
+    #[serde(deserialize_with = "body_rate")]
     pub body_rate_rad_s: [f64; 3],
 }
 
@@ -554,6 +586,7 @@ pub struct ModelErrorConfig {
     /// Inject at all.
     pub enabled: bool,
     /// Steady thrust error of each engine, newtons.
+    #[serde(deserialize_with = "bias")]
     pub bias_n: [f64; 4],
     /// Mean of a transient's starting error, newtons.
     pub transient_mean_n: f64,
@@ -733,6 +766,58 @@ mod tests {
                 assert!(!e.why.is_empty(), "{e}");
             }
         }
+    }
+
+    /// Issue #36: a fifth `engine_thrust_scale` element, even `"x"`, was dropped
+    /// silently (a short array was refused). Every fixed-size array, nested ones at
+    /// each level, now refuses another length by name.
+    #[test]
+    fn arrays_of_another_length_are_refused_by_name() {
+        for (table, key, len, want) in [
+            ("lander", "engine_thrust_scale", 4, 4),
+            ("lander", "inertia_wet_kg_m2", 3, 3),
+            ("lander", "inertia_dry_kg_m2", 3, 3),
+            ("lander", "rcs_moment_arm_m", 3, 3),
+            ("lander", "com_offset_body_m", 3, 3),
+            ("initial", "attitude_error_deg", 3, 3),
+            ("initial", "body_rate_rad_s", 3, 3),
+            ("model_error", "bias_n", 4, 4),
+        ] {
+            let ones = vec!["0.0"; len].join(", ");
+            let ok = format!("[{table}]\n{key} = [{ones}]\n");
+            toml::from_str::<ScenarioConfig>(&ok).unwrap_or_else(|e| panic!("{ok}: {e}"));
+            for extra in [", \"x\"", ", 1.0", ", 1.0, 1.0"] {
+                let text = format!("[{table}]\n{key} = [{ones}{extra}]\n");
+                let e = toml::from_str::<ScenarioConfig>(&text)
+                    .unwrap_err()
+                    .to_string();
+                let got = len + extra.matches(',').count();
+                assert!(
+                    e.contains(&format!(
+                        "`{table}.{key}` has {got} elements, expected {want}"
+                    )),
+                    "{text}: {e}"
+                );
+            }
+        }
+        let e = toml::from_str::<ScenarioConfig>(
+            "[lander]\nengine_positions_body_m = [[0.6, 0.6, -0.8], [0.6, 0.6, -0.8], [0.6, 0.6, -0.8], [0.6, 0.6, -0.8, 9.0]]\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("`lander.engine_positions_body_m` has 4 elements, expected 3"),
+            "{e}"
+        );
+        let e = toml::from_str::<ScenarioConfig>(
+            "[lander]\nengine_misalignment_deg = [[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]]\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("`lander.engine_misalignment_deg` has 5 elements, expected 4"),
+            "{e}"
+        );
     }
 
     #[test]

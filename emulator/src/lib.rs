@@ -7,8 +7,9 @@
 //! behind one trait, the learned surrogate's runtime among them), [`sanitize`] (the
 //! link's guard), [`link`] (the exchange: iceoryx2, in-process, replay), [`clock`]
 //! (lockstep, realtime, replay pacing), [`faults`], [`scheduler`] (the one step loop),
-//! [`timing`], [`digest`], [`recorder`], [`report`], and [`session`] (one run, with the
-//! flight software handed in as a value).
+//! [`timing`], [`digest`], [`recorder`], [`report`], [`session`] (one run, with the
+//! flight software handed in as a value), and [`exact_json`] (what the bench writes,
+//! read back bit for bit), and [`fixed_len`] (arrays read at exactly their length).
 //!
 //! The lab (`oils-lab`: training, validation, campaigns, plots, MCAP) builds on this
 //! crate; nothing here depends on it, on a command line or on plotting.
@@ -18,7 +19,9 @@
 pub mod clock;
 pub mod config;
 pub mod digest;
+pub mod exact_json;
 pub mod faults;
+pub mod fixed_len;
 pub mod link;
 pub mod log_fields;
 pub mod plant;

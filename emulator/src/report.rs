@@ -264,8 +264,8 @@ fn diagnostics_lines(out: &mut String, d: &crate::propulsion::PropulsionDiagnost
     if let Some(g) = &d.surrogate_guards {
         let _ = writeln!(
             out,
-            "guards      surrogate: {} steps with commands clamped to the on-range, {} with a non-finite prediction (previous value kept), {} with a prediction clamped to be physical",
-            g.clamped_commands, g.non_finite_predictions, g.clamped_predictions
+            "guards      surrogate: {} steps with commands clamped to the on-range, {} with a non-finite prediction (previous value kept), {} with a prediction clamped to be physical, {} beyond its physical bound",
+            g.clamped_commands, g.non_finite_predictions, g.clamped_predictions, g.bounded_predictions
         );
     }
     if let Some(n) = d.hifi_non_finite_rollbacks {

@@ -453,8 +453,9 @@ impl RunConfig {
             path: path.to_path_buf(),
             why,
         };
-        let value: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| file_err(format!("not JSON: {e}")))?;
+        // Exactly as written: serde_json's own parser may read a float one ulp off.
+        let value = crate::exact_json::value_from_str(&text)
+            .map_err(|e| file_err(format!("not JSON: {e}")))?;
         let config = match value.get("config") {
             Some(c) => c.clone(),
             None => value,

@@ -192,6 +192,7 @@ enum Abort {
     Protocol(String),
     TooManyMisses(u64),
     NotFinite { step: u64, what: &'static str },
+    PropulsionFailed { step: u64, why: &'static str },
     LogFailed { step: u64 },
 }
 
@@ -207,6 +208,9 @@ impl Abort {
             Abort::NotFinite { step, what } => format!(
                 "the plant's {what} is not finite after step {step}; the physics broke down (check the scenario and model parameters)"
             ),
+            Abort::PropulsionFailed { step, why } => {
+                format!("the propulsion model failed at step {step}: {why}")
+            }
             Abort::LogFailed { step } => format!(
                 "the log writer failed at step {step}; the run was stopped there"
             ),
@@ -451,6 +455,8 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         status = plant.step(&applied, cfg.dt_ns);
         if let Some(what) = plant.first_non_finite() {
             abort = Some(Abort::NotFinite { step: k, what });
+        } else if let Some(why) = plant.propulsion_failure() {
+            abort = Some(Abort::PropulsionFailed { step: k, why });
         }
         if let Some(observe) = observer.as_mut() {
             observe(k, plant);

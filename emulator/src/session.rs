@@ -174,13 +174,28 @@ fn step_clock(cfg: &RunConfig) -> Box<dyn StepClock> {
 }
 
 /// The log header: the whole run configuration, so a log can be replayed or re-run.
-fn log_header(cfg: &RunConfig, run_id: u64) -> String {
+pub fn log_header(cfg: &RunConfig, run_id: u64) -> String {
     serde_json::json!({
         "protocol_version": PROTOCOL_VERSION,
         "run_id": format!("{run_id:016x}"),
         "config": cfg,
     })
     .to_string()
+}
+
+/// The run configuration and run id of a [`log_header`], every number exactly as
+/// written: serde_json's own parser may read a float one ulp off, and a replay would
+/// then diverge at step 1 (issue #36).
+pub fn read_log_header(header_json: &str) -> Result<(RunConfig, u64), String> {
+    let header = crate::exact_json::value_from_str(header_json)
+        .map_err(|e| format!("header is not JSON: {e}"))?;
+    let config: RunConfig = serde_json::from_value(header["config"].clone())
+        .map_err(|e| format!("header has no usable run configuration: {e}"))?;
+    let run_id = header["run_id"]
+        .as_str()
+        .and_then(|s| u64::from_str_radix(s, 16).ok())
+        .ok_or_else(|| "header has no run id".to_string())?;
+    Ok((config, run_id))
 }
 
 fn open_recorder(
@@ -415,14 +430,7 @@ pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, Se
             log.damaged_records[0]
         )));
     }
-    let header: serde_json::Value = serde_json::from_str(&log.header_json)
-        .map_err(|e| bad(format!("header is not JSON: {e}")))?;
-    let config: RunConfig = serde_json::from_value(header["config"].clone())
-        .map_err(|e| bad(format!("header has no usable run configuration: {e}")))?;
-    let run_id = header["run_id"]
-        .as_str()
-        .and_then(|s| u64::from_str_radix(s, 16).ok())
-        .ok_or_else(|| bad("header has no run id".into()))?;
+    let (config, run_id) = read_log_header(&log.header_json).map_err(bad)?;
     config.validate()?;
     let mut plant = build_plant(&config)?;
     let mut faults = fault_plan(&config, &plant)?;

@@ -445,8 +445,8 @@ fn a_centre_of_mass_offset_gives_the_engines_a_moment_arm() {
 }
 
 /// Issue #24: a hifi model whose state became non-finite rolled the step back and then
-/// froze its outputs, and the run went on to COMPLETED. A propulsion failure is now a
-/// non-finite quantity the scheduler aborts on, by name.
+/// froze its outputs, and the run went on to COMPLETED. A propulsion failure is now
+/// named by the plant, and the scheduler aborts on it.
 #[test]
 fn a_failed_propulsion_model_is_named_by_the_plant() {
     use oils_emulator::propulsion::{Propulsion, PropulsionOutput};
@@ -473,8 +473,9 @@ fn a_failed_propulsion_model_is_named_by_the_plant() {
     let cmd = ActuatorCommand::default();
     for _ in 0..2 {
         plant.step(&cmd, 10_000_000);
-        assert_eq!(plant.first_non_finite(), None);
+        assert_eq!(plant.propulsion_failure(), None);
     }
     plant.step(&cmd, 10_000_000);
-    assert_eq!(plant.first_non_finite(), Some("test propulsion state"));
+    assert_eq!(plant.propulsion_failure(), Some("test propulsion state"));
+    assert_eq!(plant.first_non_finite(), None, "the state itself is finite");
 }

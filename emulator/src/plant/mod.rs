@@ -590,8 +590,14 @@ impl Plant {
         } else if !finite(&[p.ejected_fuel_kg, p.ejected_ox_kg]) {
             Some("ejected propellant mass")
         } else {
-            self.propulsion.failure()
+            None
         }
+    }
+
+    /// Why the propulsion model can no longer step, if it cannot
+    /// ([`crate::propulsion::Propulsion::failure`]); checked after every step.
+    pub fn propulsion_failure(&self) -> Option<&'static str> {
+        self.propulsion.failure()
     }
 
     /// The vehicle and its propulsion as they truly are now (no navigation noise): what

@@ -64,6 +64,11 @@ pub struct SurrogateGuards {
     /// Steps with a prediction clamped to be physical (thrust and pressure >= 0,
     /// ejected masses never falling).
     pub clamped_predictions: u64,
+    /// Steps with a prediction beyond its physical bound, clamped to it (thrust above
+    /// `MAX_THRUST_OVER_RATING` x `max_thrust_n`, gas pressure above
+    /// `MAX_GAS_PRESSURE_PA`; `propulsion::surrogate::model`): a model that is not
+    /// physical. `MAX_BOUNDED_STEPS` of them end the run aborted.
+    pub bounded_predictions: u64,
 }
 
 /// Number of outputs a [`DivergenceAccumulator`] tracks: 4 thrusts, gas pressure, ejected

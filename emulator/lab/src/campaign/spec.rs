@@ -173,6 +173,7 @@ pub struct FaultDispersion {
     /// Probability that a case gets it.
     pub probability: f64,
     /// Window of the trigger time, seconds of simulated time.
+    #[serde(deserialize_with = "window_s")]
     pub window_s: [f64; 2],
     /// How long it lasts, seconds (absent: to the end).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -180,6 +181,11 @@ pub struct FaultDispersion {
     /// Propulsion models it applies to (empty: all).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub models: Vec<PropulsionKind>,
+}
+
+/// `window_s` at exactly two elements (toml drops extra ones unread; issue #36).
+fn window_s<'de, D: serde::Deserializer<'de>>(d: D) -> Result<[f64; 2], D::Error> {
+    oils_emulator::fixed_len::deserialize(d, "fault.window_s")
 }
 
 impl FaultDispersion {
@@ -403,5 +409,16 @@ mod tests {
         assert!(e.contains("fault `f`"), "{e}");
         let e = bad("cases = 5\nseed = 1\n[base]\ndt_ms = 0\n");
         assert!(e.contains("dt_ms"), "{e}");
+        // Issue #36: a third window element was dropped silently.
+        let e = bad("cases = 5\nseed = 1\n[[fault]]\nname = \"f\"\nfault = \"engine_off:1\"\nprobability = 0.5\nwindow_s = [1.0, 2.0, \"x\"]\n");
+        assert!(
+            e.contains("`fault.window_s` has 3 elements, expected 2"),
+            "{e}"
+        );
+        let e = bad("cases = 5\nseed = 1\n[base.scenario.lander]\nengine_thrust_scale = [1.0, 1.0, 1.0, 1.0, 1.0]\n");
+        assert!(
+            e.contains("`lander.engine_thrust_scale` has 5 elements, expected 4"),
+            "{e}"
+        );
     }
 }

@@ -126,12 +126,14 @@ impl Store {
     /// Reads a stored result; `Ok(None)` if there is none.
     pub fn read_result(&self, path: &Path) -> Result<Option<CaseResult>, CampaignError> {
         match std::fs::read_to_string(path) {
-            Ok(text) => serde_json::from_str(&text).map(Some).map_err(|e| {
-                CampaignError::Store(format!(
-                    "{}: not a case result ({e}); delete it to run the case again",
-                    path.display()
-                ))
-            }),
+            Ok(text) => oils_emulator::exact_json::from_str(&text)
+                .map(Some)
+                .map_err(|e| {
+                    CampaignError::Store(format!(
+                        "{}: not a case result ({e}); delete it to run the case again",
+                        path.display()
+                    ))
+                }),
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
             Err(source) => Err(CampaignError::Io {
                 path: path.to_path_buf(),

@@ -618,7 +618,7 @@ impl Propulsion for HifiPropulsion {
     fn failure(&self) -> Option<&'static str> {
         self.fault
             .is_some()
-            .then_some("hifi propulsion state (non-finite; the step was rolled back)")
+            .then_some("the hifi propulsion state became non-finite (the step was rolled back)")
     }
 
     fn diagnostics(&self) -> Option<super::PropulsionDiagnostics> {

@@ -73,8 +73,10 @@ impl SurrogatePropulsion {
         bench_step_ns: u64,
     ) -> Result<Self, ModelFileError> {
         file.check_step(bench_step_ns)?;
+        let mut predictor = Predictor::new(&file.model);
+        predictor.set_limits(predictor::Limits::of_rating(cfg.max_thrust_n));
         Ok(Self {
-            predictor: Predictor::new(&file.model),
+            predictor,
             sample_time_ns: file.model.sample_time_ns,
             per_sample_s: 1e9 / file.model.sample_time_ns as f64,
             chamber_pa_per_n: cfg.chamber_pressure_max_pa / cfg.max_thrust_n,
@@ -201,6 +203,13 @@ impl Propulsion for SurrogatePropulsion {
                 ..self.output_of(&start, &now, per_s)
             },
         }
+    }
+
+    /// A model that keeps predicting beyond its physical bounds is not one to fly on.
+    fn failure(&self) -> Option<&'static str> {
+        (self.predictor.guards().bounded_predictions >= self::model::MAX_BOUNDED_STEPS).then_some(
+            "the surrogate predicted thrust above 2 x max_thrust_n or gas pressure above 1e8 Pa on 10 steps (clamped each time): the model is not physical",
+        )
     }
 
     fn diagnostics(&self) -> Option<crate::propulsion::PropulsionDiagnostics> {

@@ -241,6 +241,26 @@ impl Model {
                         )));
                     }
                 }
+                // Each monomial once (issue #36: 3000 copies of every term loaded).
+                if r.terms.len() > s.library_size {
+                    return Err(ctx(&format!(
+                        "{}: {} active terms, more than the library's {}",
+                        r.output,
+                        r.terms.len(),
+                        s.library_size
+                    )));
+                }
+                let mut seen = std::collections::HashSet::with_capacity(r.terms.len());
+                for t in &r.terms {
+                    let mut monomial = t.factors;
+                    monomial.sort_unstable();
+                    if !seen.insert(monomial) {
+                        return Err(ctx(&format!(
+                            "{}: term {} appears twice (a library has each term once)",
+                            r.output, t.name
+                        )));
+                    }
+                }
             }
         }
         if covered.iter().any(|&c| c != 1) {
@@ -340,6 +360,18 @@ pub const MAX_DEGREE: usize = 3;
 pub const MAX_MAGNITUDE: f64 = 1e12;
 /// Smallest feature standard deviation (training writes 1.0 for a constant feature).
 pub const MIN_FEATURE_STD: f64 = 1e-15;
+
+/// The most thrust a prediction may give, as a multiple of the engine's rating
+/// (`max_thrust_n`; the committed model peaks at 0.996 of it over the default descent):
+/// beyond it a model is not physical (issue #36: a coefficient of 1e11, inside
+/// [`MAX_MAGNITUDE`], flew 1.08e13 N per engine to COMPLETED). Such a prediction is
+/// clamped and counted.
+pub const MAX_THRUST_OVER_RATING: f64 = 2.0;
+/// The most gas pressure a prediction may give, pascals (1000 bar, the bound of every
+/// pressure the bench reads; the bottle starts at 280).
+pub const MAX_GAS_PRESSURE_PA: f64 = 1e8;
+/// Steps with a prediction beyond those bounds after which a run ends aborted.
+pub const MAX_BOUNDED_STEPS: u64 = 10;
 
 fn bounded(x: f64) -> bool {
     x.is_finite() && x.abs() <= MAX_MAGNITUDE

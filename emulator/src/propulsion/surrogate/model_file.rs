@@ -96,6 +96,10 @@ pub struct ModelFile {
     pub model: Model,
 }
 
+/// Largest model file read, bytes (the committed model is 132 kB): a larger one is
+/// refused before it is read (issue #36: 3000 copies of each term, 110 MB, took 1.4 GB).
+pub const MAX_MODEL_FILE_BYTES: u64 = 32 << 20;
+
 /// Why a model file was refused.
 #[derive(Debug, thiserror::Error)]
 pub enum ModelFileError {
@@ -106,6 +110,14 @@ pub enum ModelFileError {
         path: String,
         /// Cause.
         source: std::io::Error,
+    },
+    /// The file is larger than [`MAX_MODEL_FILE_BYTES`].
+    #[error("surrogate model file {path} is {bytes} bytes; a model file is at most {MAX_MODEL_FILE_BYTES}")]
+    TooLarge {
+        /// Path (`<text>` for text handed in).
+        path: String,
+        /// Its size.
+        bytes: u64,
     },
     /// The file ends early.
     #[error("surrogate model file is truncated (JSON ends at line {line}, column {column})")]
@@ -179,6 +191,12 @@ impl ModelFile {
 
     /// Parses and checks a file's text (the sample time is checked by [`Self::check_step`]).
     pub fn parse(text: &str) -> Result<Self, ModelFileError> {
+        if text.len() as u64 > MAX_MODEL_FILE_BYTES {
+            return Err(ModelFileError::TooLarge {
+                path: "<text>".into(),
+                bytes: text.len() as u64,
+            });
+        }
         // Look at the header first so a wrong version is named as such even when the
         // rest of the layout changed.
         let value: serde_json::Value =
@@ -204,12 +222,15 @@ impl ModelFile {
 
     /// Steps a predictor from the model's initial state with every engine off, then
     /// at the top of the on-range, then at its bottom: every state must stay finite
-    /// (bounded numbers make that likely, this makes it certain for the nominal path).
+    /// (bounded numbers make that likely, this makes it certain for the nominal path),
+    /// and within the physical bounds of an engine rated at the top of the on-range
+    /// (the rating training commands up to; [`super::predictor::Limits::of_rating`]).
     fn check_nominal_steps(&self) -> Result<(), ModelFileError> {
         use super::features::INPUT_DIM;
         use oils_shared::ENGINE_COUNT;
         let mut p = super::predictor::Predictor::new(&self.model);
         let [lo, hi] = self.model.on_command_range_n;
+        let limits = super::predictor::Limits::of_rating(hi);
         let mut on = [0.0; INPUT_DIM];
         for e in 0..ENGINE_COUNT {
             on[ENGINE_COUNT + e] = 1.0;
@@ -233,6 +254,16 @@ impl ModelFile {
                         step + 1
                     )));
                 }
+                let thrust_n = state[..ENGINE_COUNT].iter().fold(0.0f64, |m, t| m.max(*t));
+                let gas_pa = state[super::features::STATE_P];
+                if thrust_n > limits.thrust_n || gas_pa > limits.gas_pressure_pa {
+                    return Err(ModelFileError::Invalid(format!(
+                        "after {} nominal steps ({what}) the model predicts {thrust_n:.6e} N of thrust and {gas_pa:.6e} Pa of gas pressure: beyond {} x the top of its on-range ({hi} N) or {:e} Pa, not physical",
+                        step + 1,
+                        super::model::MAX_THRUST_OVER_RATING,
+                        super::model::MAX_GAS_PRESSURE_PA,
+                    )));
+                }
             }
         }
         Ok(())
@@ -240,10 +271,18 @@ impl ModelFile {
 
     /// Reads and checks a file.
     pub fn load(path: &Path) -> Result<Self, ModelFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ModelFileError::Io {
+        let io = |source| ModelFileError::Io {
             path: path.display().to_string(),
             source,
-        })?;
+        };
+        let bytes = std::fs::metadata(path).map_err(io)?.len();
+        if bytes > MAX_MODEL_FILE_BYTES {
+            return Err(ModelFileError::TooLarge {
+                path: path.display().to_string(),
+                bytes,
+            });
+        }
+        let text = std::fs::read_to_string(path).map_err(io)?;
         Self::parse(&text)
     }
 
@@ -298,5 +337,129 @@ impl Variant {
             Variant::Paper => "paper",
             Variant::SharedEngine => "shared-engine",
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::PropulsionConfig;
+    use crate::propulsion::surrogate::model::{
+        MAX_BOUNDED_STEPS, MAX_GAS_PRESSURE_PA, MAX_THRUST_OVER_RATING,
+    };
+    use crate::propulsion::surrogate::{SurrogatePropulsion, DEFAULT_MODEL_JSON};
+    use crate::propulsion::{EngineCommand, Propulsion};
+
+    fn committed() -> serde_json::Value {
+        serde_json::from_str(DEFAULT_MODEL_JSON).unwrap()
+    }
+
+    fn refused(v: &serde_json::Value) -> String {
+        match ModelFile::parse(&v.to_string()) {
+            Err(e @ ModelFileError::Invalid(_)) => e.to_string(),
+            other => panic!("not refused as invalid: {other:?}"),
+        }
+    }
+
+    /// Issue #36: a model of 3000 copies of each term (110 MB, 1.4 GB resident) flew.
+    #[test]
+    fn a_term_given_twice_is_refused() {
+        let mut v = committed();
+        let terms = &mut v["model"]["submodels"][0]["rows"][0]["terms"];
+        let first = terms[0].clone();
+        terms.as_array_mut().unwrap().push(first);
+        let e = refused(&v);
+        assert!(e.contains("appears twice"), "{e}");
+        // The same monomial with its factors in another order is the same term.
+        let mut v = committed();
+        let terms = &mut v["model"]["submodels"][1]["rows"][0]["terms"];
+        let mut t = terms[0].clone();
+        let f = t["factors"].as_array_mut().unwrap();
+        f.reverse();
+        terms.as_array_mut().unwrap().push(t);
+        let e = refused(&v);
+        assert!(e.contains("appears twice"), "{e}");
+    }
+
+    #[test]
+    fn a_model_file_above_the_size_bound_is_refused_before_it_is_read() {
+        let dir = std::env::temp_dir().join(format!("oils-model-size-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("huge.json");
+        // Sparse: nothing of it is ever read.
+        std::fs::File::create(&path)
+            .unwrap()
+            .set_len(MAX_MODEL_FILE_BYTES + 1)
+            .unwrap();
+        let e = ModelFile::load(&path).unwrap_err();
+        assert!(matches!(e, ModelFileError::TooLarge { .. }), "{e}");
+        assert!(e.to_string().contains("at most 33554432"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+        let text = DEFAULT_MODEL_JSON.to_string() + &" ".repeat(MAX_MODEL_FILE_BYTES as usize);
+        let e = ModelFile::parse(&text).unwrap_err();
+        assert!(matches!(e, ModelFileError::TooLarge { .. }), "{e}");
+        ModelFile::load(Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/models/surrogate-default.json"
+        )))
+        .unwrap();
+    }
+
+    /// Issue #36: a coefficient of 1e11 (inside the 1e12 bound of each number) flew to
+    /// COMPLETED at 1.08e13 N per engine, no guard counted. At load, the nominal steps
+    /// must stay within the physical bounds.
+    #[test]
+    fn a_model_beyond_its_physical_bounds_on_the_nominal_steps_is_refused() {
+        for (row, intercept) in [(0, 1e9), (0, 2000.0)] {
+            let mut v = committed();
+            v["model"]["submodels"][0]["rows"][row]["intercept"] = serde_json::json!(intercept);
+            let e = refused(&v);
+            assert!(e.contains("not physical"), "{e}");
+        }
+        let mut v = committed();
+        // Gas pressure rising 100 bar a step from 280 bar.
+        v["model"]["submodels"][1]["rows"][0]["intercept"] = serde_json::json!(1e7);
+        let e = refused(&v);
+        assert!(e.contains("Pa of gas pressure"), "{e}");
+    }
+
+    /// What the load check cannot see (a term outside the nominal steps' phases) the
+    /// runtime bounds: clamped, counted, and after MAX_BOUNDED_STEPS the model fails.
+    #[test]
+    fn predictions_beyond_the_physical_bounds_are_clamped_counted_and_end_the_run() {
+        let mut file = ModelFile::parse(DEFAULT_MODEL_JSON).unwrap();
+        file.model.submodels[0].rows[0].intercept = 1e9;
+        let cfg = PropulsionConfig::default();
+        let mut s = SurrogatePropulsion::new(&file, &cfg, file.model.sample_time_ns).unwrap();
+        let cmd = EngineCommand {
+            thrust_cmd_n: [600.0; 4],
+            on: [true; 4],
+        };
+        for _ in 0..MAX_BOUNDED_STEPS {
+            assert_eq!(s.failure(), None);
+            let out = s.step(&cmd, file.model.sample_time_ns);
+            assert!(out
+                .thrust_n
+                .iter()
+                .all(|&t| t == MAX_THRUST_OVER_RATING * cfg.max_thrust_n));
+        }
+        let why = s.failure().expect("the model failed");
+        let guards = s.diagnostics().unwrap().surrogate_guards.unwrap();
+        assert_eq!(guards.bounded_predictions, MAX_BOUNDED_STEPS);
+        // The message states the bounds as the constants have them.
+        for part in [
+            format!("above {MAX_THRUST_OVER_RATING} x max_thrust_n"),
+            format!("above {MAX_GAS_PRESSURE_PA:e} Pa"),
+            format!("on {MAX_BOUNDED_STEPS} steps"),
+        ] {
+            assert!(why.contains(&part), "{why}: {part}");
+        }
+        // The committed model, the same commands: nothing bounded.
+        let mut s = SurrogatePropulsion::default_model(&cfg, None).unwrap();
+        for _ in 0..500 {
+            s.step(&cmd, file.model.sample_time_ns);
+        }
+        let guards = s.diagnostics().unwrap().surrogate_guards.unwrap();
+        assert_eq!((guards.bounded_predictions, s.failure()), (0, None));
     }
 }

@@ -87,6 +87,47 @@ pub struct Predictor {
     lanes: Vec<Lanes>,
     out_of_envelope_steps: u64,
     guards: crate::propulsion::diagnostics::SurrogateGuards,
+    /// Per state output, the largest value a prediction may take ([`Limits`]).
+    upper: StateVec,
+}
+
+/// The largest thrust and gas pressure a prediction may take: beyond them it is not
+/// physical, and is clamped to the bound and counted
+/// ([`SurrogateGuards::bounded_predictions`]). Ejected masses have none (they may
+/// only grow, and the plant stops at the propellant load).
+///
+/// [`SurrogateGuards::bounded_predictions`]: crate::propulsion::diagnostics::SurrogateGuards::bounded_predictions
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    /// Thrust of one engine, newtons.
+    pub thrust_n: f64,
+    /// Helium bottle pressure, pascals.
+    pub gas_pressure_pa: f64,
+}
+
+impl Limits {
+    /// No bound (training: a candidate is scored on what it predicts).
+    pub const NONE: Self = Self {
+        thrust_n: f64::INFINITY,
+        gas_pressure_pa: f64::INFINITY,
+    };
+
+    /// The bounds of an engine rated `max_thrust_n`:
+    /// [`MAX_THRUST_OVER_RATING`](super::model::MAX_THRUST_OVER_RATING) times it and
+    /// [`MAX_GAS_PRESSURE_PA`](super::model::MAX_GAS_PRESSURE_PA).
+    pub fn of_rating(max_thrust_n: f64) -> Self {
+        Self {
+            thrust_n: super::model::MAX_THRUST_OVER_RATING * max_thrust_n,
+            gas_pressure_pa: super::model::MAX_GAS_PRESSURE_PA,
+        }
+    }
+
+    fn upper(&self) -> StateVec {
+        let mut u = [f64::INFINITY; super::features::STATE_DIM];
+        u[..ENGINE_COUNT].fill(self.thrust_n);
+        u[super::features::STATE_P] = self.gas_pressure_pa;
+        u
+    }
 }
 
 impl Predictor {
@@ -111,9 +152,15 @@ impl Predictor {
             lanes: vec![[0.0; ENGINE_COUNT]; max_dim + 1],
             out_of_envelope_steps: 0,
             guards: Default::default(),
+            upper: Limits::NONE.upper(),
         };
         p.reset_to(&model.initial_state);
         p
+    }
+
+    /// Bounds what a prediction may be (none until set).
+    pub fn set_limits(&mut self, limits: Limits) {
+        self.upper = limits.upper();
     }
 
     /// Restarts from a state at rest: engines off for all of the history, every past
@@ -203,7 +250,7 @@ impl Predictor {
                     let y = sum_engines(&s.rows[0], &u.groups[0], &self.lanes);
                     for (engine, &o) in s.outputs.iter().enumerate() {
                         let v = s.target.apply(prev[o], y[engine]);
-                        next[o] = guarded(o, v, prev[o], &mut guard);
+                        next[o] = guarded(o, v, prev[o], self.upper[o], &mut guard);
                     }
                 }
                 // One feature vector, one row per output.
@@ -211,7 +258,8 @@ impl Predictor {
                     outside |= gather(s, u, &self.ring, 0, &mut self.x);
                     for (r, &o) in s.outputs.iter().enumerate() {
                         let y = sum(&s.rows[r], &u.groups[r], &self.x);
-                        next[o] = guarded(o, s.target.apply(prev[o], y), prev[o], &mut guard);
+                        let v = s.target.apply(prev[o], y);
+                        next[o] = guarded(o, v, prev[o], self.upper[o], &mut guard);
                     }
                 }
             }
@@ -219,6 +267,7 @@ impl Predictor {
         outside |= guard.non_finite;
         self.guards.non_finite_predictions += u64::from(guard.non_finite);
         self.guards.clamped_predictions += u64::from(guard.clamped);
+        self.guards.bounded_predictions += u64::from(guard.bounded);
         self.out_of_envelope_steps += u64::from(outside);
         self.ring.states[head] = next;
         next
@@ -435,17 +484,18 @@ fn sum_engines(row: &OutputRow, groups: &[TermGroup], x: &[Lanes]) -> Lanes {
     y
 }
 
-/// The physical guards: thrust and gas pressure never negative, ejected masses never
-/// falling; a prediction that is not finite keeps the previous value and sets
-/// `nonfinite`, so the step is counted.
 /// What the guards did on one step.
 #[derive(Debug, Clone, Copy, Default)]
 struct Guard {
     non_finite: bool,
     clamped: bool,
+    bounded: bool,
 }
 
-fn guarded(o: usize, v: f64, prev: f64, guard: &mut Guard) -> f64 {
+/// The physical guards: thrust and gas pressure never negative, ejected masses never
+/// falling, nothing above `upper` ([`Limits`]); a prediction that is not finite keeps
+/// the previous value and sets `non_finite`, so the step is counted.
+fn guarded(o: usize, v: f64, prev: f64, upper: f64, guard: &mut Guard) -> f64 {
     let v = if v.is_finite() {
         v
     } else {
@@ -458,7 +508,10 @@ fn guarded(o: usize, v: f64, prev: f64, guard: &mut Guard) -> f64 {
         v.max(0.0)
     };
     guard.clamped |= g != v;
-    g
+    // `min` with an infinite bound is the value itself, bit for bit.
+    let b = g.min(upper);
+    guard.bounded |= b != g;
+    b
 }
 
 #[cfg(test)]
