@@ -8,7 +8,7 @@
 //! - [`mcap_log`]: MCAP logs (Foxglove), written in the loop through the core's
 //!   `RecordSink` and read back for export, plots and replay.
 //! - [`onboard`]: the flight software a configuration names, flown in process.
-//! - [`plot`], [`run_plots`], [`hifi_figures`]: figures.
+//! - [`plot`], [`run_plots`], [`timing_plots`], [`hifi_figures`]: figures.
 #![warn(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -18,5 +18,6 @@ pub mod mcap_log;
 pub mod onboard;
 pub mod plot;
 pub mod run_plots;
+pub mod timing_plots;
 pub mod training;
 pub mod validation;
