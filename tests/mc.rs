@@ -305,7 +305,7 @@ fn results_hold_one_row_per_case_the_summary_and_the_plots() {
     assert!(p50 > 0.0 && p50 < 5.0, "{p50}");
     for png in [
         "footprint.png",
-        "touchdown-speed.png",
+        "touchdown.png",
         "propellant.png",
         "altitude-speed.png",
     ] {

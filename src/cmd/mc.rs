@@ -1,6 +1,7 @@
 //! `oils mc`: Monte Carlo campaigns. `run` (local, all cores, or one shard), `merge`,
 //! `case` (one case again, bit for bit), `submit --slurm` (a job array and a merge
-//! job), `compare` (the same cases under two propulsion models).
+//! job), `compare` (the same cases under two propulsion models), `report` (the
+//! campaign's HTML page).
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -28,6 +29,18 @@ pub enum McCmd {
     Submit(McSubmitArgs),
     /// Run the same cases under two propulsion models and compare the dispersions.
     Compare(McCompareArgs),
+    /// Merge a campaign and write its self-contained HTML page, DIR/report.html.
+    Report(McReportArgs),
+}
+
+/// `oils mc report`.
+#[derive(Debug, clap::Args)]
+pub struct McReportArgs {
+    /// Campaign directory.
+    pub dir: PathBuf,
+    /// Report even if some cases have no result yet (they are listed as missing).
+    #[arg(long)]
+    pub partial: bool,
 }
 
 /// What selects and changes the campaign.
@@ -165,6 +178,7 @@ pub fn run(cmd: &McCmd) -> Result<()> {
         McCmd::Case(a) => mc_case(a, &stop),
         McCmd::Submit(a) => mc_submit(a),
         McCmd::Compare(a) => mc_compare(a, &stop),
+        McCmd::Report(a) => mc_report(a, &stop),
     }
 }
 
@@ -335,7 +349,30 @@ fn mc_run(a: &McRunArgs, stop: &AtomicBool) -> Result<()> {
     write_timing(&store, &report, jobs_of(a.jobs))?;
     let merged = campaign::merge(&spec, &store, false, !a.no_plots, stop)?;
     print_summary(&merged, &a.out);
+    write_page(&spec, &merged, &a.out)
+}
+
+/// `DIR/report.html` with the figures `DIR/plots/` holds.
+fn write_page(spec: &CampaignSpec, merged: &Merged, dir: &Path) -> Result<()> {
+    let figures: Vec<PathBuf> = campaign::plots::FIGURES
+        .iter()
+        .map(|f| dir.join("plots").join(f))
+        .filter(|p| p.exists())
+        .collect();
+    let page = oils_lab::report_page::write_campaign(spec, merged, dir, &figures)
+        .context("writing the campaign's page")?;
+    println!("report page            {}", page.display());
     Ok(())
+}
+
+fn mc_report(a: &McReportArgs, stop: &AtomicBool) -> Result<()> {
+    let store = Store::new(&a.dir);
+    let spec = store
+        .stored_spec()?
+        .with_context(|| format!("{} holds no campaign (no campaign.toml)", a.dir.display()))?;
+    let merged = campaign::merge(&spec, &store, a.partial, true, stop)?;
+    print_summary(&merged, &a.dir);
+    write_page(&spec, &merged, &a.dir)
 }
 
 fn mc_merge(a: &McMergeArgs, stop: &AtomicBool) -> Result<()> {
@@ -345,7 +382,7 @@ fn mc_merge(a: &McMergeArgs, stop: &AtomicBool) -> Result<()> {
         .with_context(|| format!("{} holds no campaign (no campaign.toml)", a.dir.display()))?;
     let merged = campaign::merge(&spec, &store, a.partial, !a.no_plots, stop)?;
     print_summary(&merged, &a.dir);
-    Ok(())
+    write_page(&spec, &merged, &a.dir)
 }
 
 fn fmt_stat(merged: &Merged, name: &str, unit: &str) -> String {
@@ -541,9 +578,21 @@ fn mc_compare(a: &McCompareArgs, stop: &AtomicBool) -> Result<()> {
         write_timing(&store, &report, jobs_of(a.jobs))?;
         let m = campaign::merge(&spec, &store, false, !a.no_plots, stop)?;
         print_summary(&m, &dir);
-        merged.push(m);
+        write_page(&spec, &m, &dir)?;
+        merged.push((spec, m));
     }
+    let (spec, merged): (Vec<CampaignSpec>, Vec<Merged>) = merged.into_iter().unzip();
     let c = compare::compare(&merged[0], &merged[1]);
+    if !a.no_plots {
+        let fig = campaign::plots::write_compare(
+            &spec[0],
+            &merged[0],
+            &merged[1],
+            &c,
+            &a.out.join("plots"),
+        )?;
+        println!("overlays               {}", fig.display());
+    }
     campaign::store::write_atomic(
         &a.out.join("compare.json"),
         (serde_json::to_string_pretty(&c)? + "\n").as_bytes(),

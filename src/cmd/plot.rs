@@ -26,6 +26,11 @@ fn title_of(header_json: &str) -> String {
 
 /// Draws the figures of the run logged at `log` into `dir`.
 pub fn run(log: &Path, dir: &Path) -> Result<()> {
+    draw(log, dir).map(|_| ())
+}
+
+/// Draws the figures of the run logged at `log` into `dir`; returns their paths.
+fn draw(log: &Path, dir: &Path) -> Result<Vec<std::path::PathBuf>> {
     let data = read_any(log).with_context(|| format!("reading {}", log.display()))?;
     if !data.damaged_records.is_empty() {
         eprintln!(
@@ -48,14 +53,19 @@ pub fn run(log: &Path, dir: &Path) -> Result<()> {
         data.records.len(),
         dir.display()
     );
-    Ok(())
+    Ok(written)
 }
 
-/// `oils run --plots DIR`: the figures of the run just finished, from its log.
+/// `oils run --plots DIR`: the figures of the run just finished, from its log, and its
+/// page `DIR/report.html`.
 pub fn after_run(report: &RunReport, dir: &Path) -> Result<()> {
     let log = report
         .log
         .as_deref()
         .context("--plots: the run wrote no log")?;
-    run(Path::new(log), dir)
+    let figures = draw(Path::new(log), dir)?;
+    let page = oils_lab::report_page::write_run(report, dir, &figures)
+        .context("writing the run's page")?;
+    eprintln!("oils run: report page {}", page.display());
+    Ok(())
 }

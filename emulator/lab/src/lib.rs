@@ -8,7 +8,8 @@
 //! - [`mcap_log`]: MCAP logs (Foxglove), written in the loop through the core's
 //!   `RecordSink` and read back for export, plots and replay.
 //! - [`onboard`]: the flight software a configuration names, flown in process.
-//! - [`plot`], [`run_plots`], [`hifi_figures`]: figures.
+//! - [`plot`], [`run_plots`], [`timing_plots`], [`hifi_figures`]: figures.
+//! - [`report_page`]: the self-contained HTML page of a campaign or a run.
 #![warn(missing_docs)]
 #![forbid(unsafe_code)]
 
@@ -19,6 +20,8 @@ pub mod log_json;
 pub mod mcap_log;
 pub mod onboard;
 pub mod plot;
+pub mod report_page;
 pub mod run_plots;
+pub mod timing_plots;
 pub mod training;
 pub mod validation;

@@ -198,7 +198,7 @@ pub fn write_png(path: &Path, title: &str, panels: &[Panel]) -> Result<(), PlotE
 
 /// A tick's value in at most four significant digits: a log axis's ticks are powers of
 /// ten computed in floating point, which print as `9.999999999999999e-6` unrounded.
-fn tick_label(v: f64) -> String {
+pub(crate) fn tick_label(v: f64) -> String {
     let a = v.abs();
     if v == 0.0 || !v.is_finite() {
         return format!("{v}");

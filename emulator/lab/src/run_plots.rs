@@ -1,12 +1,14 @@
 //! The figures of one run (`oils plot LOG --out DIR`, `oils run --plots DIR`): the
 //! vehicle from the true state recorded per step (never the noisy telemetry), the
 //! engines' commanded against delivered thrust, the propulsion system's masses and
-//! pressures, and the per-step timing as histograms. Drawn with [`crate::plot`] (bundled
+//! pressures, and the per-step timing as percentile plots and a timeline of misses
+//! ([`crate::timing_plots`]). Drawn with [`crate::plot`] (bundled
 //! font, no system library), in the style of the hifi and validation figures.
 
 use crate::mcap_log::{step_timing, StepTiming};
 use crate::plot::{write_png, Panel, PlotError, Series};
-use oils_emulator::recorder::{Log, Record, REC_COMMAND_RECEIVED};
+use crate::timing_plots::{StepMark, TimingLimits};
+use oils_emulator::recorder::{Log, Record, REC_DEADLINE_MISS};
 use oils_shared::ENGINE_COUNT;
 use std::path::{Path, PathBuf};
 
@@ -14,7 +16,7 @@ use std::path::{Path, PathBuf};
 const MAX_POINTS: usize = 20_000;
 
 /// The file names `write_all` writes, in order.
-pub const FIGURES: [&str; 7] = [
+pub const FIGURES: [&str; 8] = [
     "altitude-speeds.png",
     "ground-track.png",
     "thrust.png",
@@ -22,6 +24,7 @@ pub const FIGURES: [&str; 7] = [
     "pressures.png",
     "attitude-rates.png",
     "timing.png",
+    "timing-timeline.png",
 ];
 
 type Pts = Vec<(f64, f64)>;
@@ -131,36 +134,6 @@ fn crossrange_m(first: &Record, r: &Record) -> f64 {
 
 fn s<'a>(label: &'a str, points: &'a Pts) -> Series<'a> {
     Series { label, points }
-}
-
-/// Histogram of values (microseconds) on log-spaced bins, as a stair line
-/// `(bin edge, count)`; `None` when there is nothing to draw.
-fn histogram_us(values: &[f64]) -> Option<Pts> {
-    let v: Vec<f64> = values
-        .iter()
-        .copied()
-        .filter(|x| x.is_finite() && *x > 0.0)
-        .collect();
-    if v.is_empty() {
-        return None;
-    }
-    let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    const BINS: usize = 60;
-    let (l0, l1) = (lo.log10(), hi.log10().max(lo.log10() + 1e-3));
-    let width = (l1 - l0) / BINS as f64;
-    let mut counts = [0u64; BINS];
-    for x in &v {
-        let i = (((x.log10() - l0) / width) as usize).min(BINS - 1);
-        counts[i] += 1;
-    }
-    let edge = |i: usize| 10f64.powf(l0 + width * i as f64);
-    let mut pts = Vec::with_capacity(2 * BINS + 2);
-    for (i, c) in counts.iter().enumerate() {
-        pts.push((edge(i), *c as f64));
-        pts.push((edge(i + 1), *c as f64));
-    }
-    Some(pts)
 }
 
 /// A figure could not be made.
@@ -462,107 +435,35 @@ pub fn write_all(
     )?;
     written.push(path(5));
 
-    // 7. Timing histograms.
+    // 7. Timing: percentile plots and the timeline of misses and overruns.
     let own: Vec<StepTiming>;
     let timing = match timing {
         Some(t) => t,
         None => {
-            own = recs
-                .iter()
-                .filter(|r| r.flags & REC_COMMAND_RECEIVED != 0)
-                .map(step_timing)
-                .collect();
+            // Every step: a step without a command still has its wake error, and the
+            // misses are the tail a timing figure is for.
+            own = recs.iter().map(step_timing).collect();
             &own
         }
     };
-    let us = |f: fn(&StepTiming) -> Option<f64>| -> Vec<f64> {
-        timing.iter().filter_map(f).map(|ns| ns * 1e-3).collect()
-    };
-    let kinds: [(&str, Vec<f64>); 4] = [
-        ("round trip", us(|t| t.round_trip_ns.map(|v| v as f64))),
-        ("wake error", us(|t| t.wake_error_ns.map(|v| v as f64))),
-        ("stub compute", us(|t| t.stub_compute_ns.map(|v| v as f64))),
-        ("transport", us(|t| t.transport_ns.map(|v| v as f64))),
-    ];
-    let hists: Vec<(String, Pts)> = kinds
+    let marks: Vec<StepMark> = recs
         .iter()
-        .filter_map(|(name, v)| {
-            histogram_us(v).map(|h| {
-                let mut sorted = v.clone();
-                sorted.sort_by(f64::total_cmp);
-                let q = |p: f64| sorted[((sorted.len() - 1) as f64 * p).round() as usize];
-                (
-                    format!(
-                        "{name}: p50 {:.2} us, p99 {:.2} us, max {:.2} us, {} steps",
-                        q(0.5),
-                        q(0.99),
-                        sorted[sorted.len() - 1],
-                        sorted.len()
-                    ),
-                    h,
-                )
-            })
+        .map(|r| StepMark {
+            t_s: t_s(r),
+            deadline_miss: r.flags & REC_DEADLINE_MISS != 0,
         })
         .collect();
-    let missing: Vec<&str> = kinds
-        .iter()
-        .filter(|(_, v)| v.is_empty())
-        .map(|(n, _)| *n)
-        .collect();
-    let note = if missing.is_empty() {
-        String::new()
-    } else {
-        format!(
-            " ({} not in this log per step: see the run report)",
-            missing.join(", ")
-        )
-    };
-    let titles: Vec<String> = hists
-        .iter()
-        .enumerate()
-        .map(|(i, (t, _))| {
-            if i == 0 {
-                format!("{t}{note}")
-            } else {
-                t.clone()
-            }
-        })
-        .collect();
-    let mut panels: Vec<Panel> = hists
-        .iter()
-        .zip(&titles)
-        .map(|((_, h), t)| {
-            let mut p = Panel::new(t, "time [us] (log)", "steps", vec![s("", h)]);
-            p.log_x = true;
-            p
-        })
-        .collect();
-    let flat: Pts = vec![(0.0, 0.0), (1.0, 0.0)];
-    if panels.is_empty() {
-        panels.push(Panel::new(
-            "No per-step timing in this log",
-            "-",
-            "-",
-            vec![s("", &flat)],
-        ));
-    }
-    write_png(&path(6), &heading("Timing per step"), &panels)?;
-    written.push(path(6));
+    let header: serde_json::Value = serde_json::from_str(&log.header_json).unwrap_or_default();
+    let limits = TimingLimits::of_config(&header["config"]);
+    written.extend(crate::timing_plots::write_all(
+        timing, &marks, &limits, dir, title,
+    )?);
     Ok(written)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn histogram_counts_every_value_once() {
-        let v: Vec<f64> = (1..=1000).map(|i| i as f64).collect();
-        let h = histogram_us(&v).unwrap();
-        let total: f64 = h.iter().step_by(2).map(|p| p.1).sum();
-        assert_eq!(total, 1000.0);
-        assert!(histogram_us(&[f64::NAN, 0.0]).is_none());
-    }
 
     #[test]
     fn thrust_axis_of_identity_is_z_and_tilt_follows_rotation() {

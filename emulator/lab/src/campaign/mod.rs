@@ -8,7 +8,8 @@
 //! - [`local`]: the local backend (rayon over all cores, shards, resume, budgets).
 //! - [`summary`]: merging into `cases.csv` and `summary.json`.
 //! - [`compare`]: the same cases under two propulsion models (KS statistics).
-//! - [`plots`]: footprint, histograms, traces.
+//! - [`drivers`]: which applied values drive the failures (rank correlations).
+//! - [`plots`]: footprint, histograms, CDFs, drivers, traces, model overlays.
 //!
 //! - [`slurm`]: the Slurm backend, a job array of `oils mc run --shard I/K` tasks and a
 //!   merge job: a shard runs the same code as a local campaign, so its results are the
@@ -16,6 +17,7 @@
 
 pub mod case;
 pub mod compare;
+pub mod drivers;
 pub mod local;
 pub mod plots;
 pub mod slurm;
@@ -74,7 +76,7 @@ pub fn merge(
     let merged = summary::collect(spec, store, nominal, partial)?;
     summary::write(store, &merged)?;
     if plots {
-        plots::write_all(&merged, &store.dir().join("plots"))?;
+        plots::write_all(spec, &merged, &store.dir().join("plots"))?;
     }
     Ok(merged)
 }

@@ -41,6 +41,19 @@ pub struct CampaignSpec {
     /// Faults that may strike a case.
     #[serde(default, rename = "fault", skip_serializing_if = "Vec::is_empty")]
     pub faults: Vec<FaultDispersion>,
+    /// What the results are held against in the figures and the report page.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub requirements: Option<Requirements>,
+}
+
+/// Requirements a campaign is judged against (drawn in the figures, counted on the page).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Requirements {
+    /// Landing zone: full downrange and crossrange axes of an ellipse about the site
+    /// (until the scenario has a site: the nominal case's touchdown point), metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub footprint_m: Option<[f64; 2]>,
 }
 
 fn default_name() -> String {
@@ -359,6 +372,13 @@ impl CampaignSpec {
             spec.validate()
                 .map_err(|e| bad(format!("fault `{}`: {e}", f.name)))?;
         }
+        if let Some(zone) = self.requirements.and_then(|r| r.footprint_m) {
+            if !zone.iter().all(|x| x.is_finite() && *x > 0.0) {
+                return Err(bad(format!(
+                    "requirements.footprint_m = {zone:?} (two lengths > 0 metres)"
+                )));
+            }
+        }
         Ok(())
     }
 
@@ -407,6 +427,8 @@ mod tests {
         assert!(e.contains("reserved"), "{e}");
         let e = bad("cases = 5\nseed = 1\n[[fault]]\nname = \"f\"\nfault = \"engine_off:9\"\nprobability = 0.5\nwindow_s = [1.0, 2.0]\n");
         assert!(e.contains("fault `f`"), "{e}");
+        let e = bad("cases = 5\nseed = 1\n[requirements]\nfootprint_m = [0.0, 1.0]\n");
+        assert!(e.contains("footprint_m"), "{e}");
         let e = bad("cases = 5\nseed = 1\n[base]\ndt_ms = 0\n");
         assert!(e.contains("dt_ms"), "{e}");
         // Issue #36: a third window element was dropped silently.

@@ -162,7 +162,8 @@ pub struct Summary {
     pub nominal: NominalSummary,
     /// Statistics per figure (touchdown figures over the cases that touched down).
     pub figures: BTreeMap<String, FigureStats>,
-    /// The touchdown footprint's 3-sigma ellipse, relative to the nominal touchdown.
+    /// The landed cases' touchdown footprint's 3-sigma ellipse, relative to the nominal
+    /// touchdown.
     pub footprint_3sigma: Option<Ellipse>,
     /// Worst cases by figure: indices, worst first (5 each).
     pub worst: BTreeMap<String, Vec<u64>>,
@@ -172,6 +173,9 @@ pub struct Summary {
     pub failure_count: u64,
     /// Indices without a result (only with `--partial`).
     pub missing: Vec<u64>,
+    /// What drives the failures: each applied value's rank correlation with failure
+    /// and with the touchdown figures, strongest first ([`super::drivers`]).
+    pub drivers: Vec<super::drivers::Driver>,
 }
 
 /// The nominal run in the summary.
@@ -349,8 +353,10 @@ pub fn summarise(
                 .map(|r| r.propellant_used_kg),
         ),
     );
+    // Over the landed cases: one crash hundreds of km away must not set the ellipse.
     let footprint: Vec<(f64, f64)> = touched
         .iter()
+        .filter(|(r, _)| r.outcome == "landed")
         .map(|(_, d)| (d.downrange_error_m, d.crossrange_error_m))
         .filter(|(x, y)| x.is_finite() && y.is_finite())
         .collect();
@@ -410,6 +416,7 @@ pub fn summarise(
         failure_count: failures.len() as u64,
         failures: failures.into_iter().take(200).collect(),
         missing,
+        drivers: super::drivers::rank(spec, results, nominal),
     }
 }
 
