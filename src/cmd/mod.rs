@@ -1,5 +1,6 @@
 //! Subcommands of the `oils` binary.
 
+pub mod excitation;
 pub mod hifi;
 pub mod mc;
 pub mod plot;
