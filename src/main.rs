@@ -36,6 +36,8 @@ enum Cmd {
     /// Write the training excitation as a thrust-command profile, to run through your
     /// own propulsion model (then `oils train --data`).
     Excitation(cmd::excitation::ExcitationArgs),
+    /// Pack a surrogate model file (or hifi) as an FMI 3.0 / 2.0 co-simulation FMU.
+    ExportFmu(cmd::export_fmu::ExportFmuArgs),
     /// Train the propulsion surrogate (seed paper): excitation, data, Lasso, CV, model file.
     Train(cmd::train::TrainArgs),
     /// Validate the surrogate against the hifi model (paper's cases, bounds, plots, uncertainty).
@@ -121,6 +123,7 @@ fn real_main() -> anyhow::Result<()> {
         Cmd::Plot(a) => cmd::plot::run(&a.log, &a.out),
         Cmd::Hifi(a) => cmd::hifi::run(&a),
         Cmd::Excitation(a) => cmd::excitation::run(&a),
+        Cmd::ExportFmu(a) => cmd::export_fmu::run(&a),
         Cmd::Train(a) => cmd::train::run(&a),
         Cmd::Validate(a) => cmd::validate::run(&a),
         Cmd::Mc(c) => cmd::mc::run(&c),

@@ -529,7 +529,7 @@ mod tests {
     fn file(n: usize, step_s: f64) -> String {
         let mut s = format!("{HEADER}\n");
         for k in 0..n {
-            let on = u8::from(k % 3 != 0);
+            let on = u8::from(!k.is_multiple_of(3));
             s.push_str(&format!(
                 "{},{c},{c},{c},{c},{on},1,1,1,{k},{k},{k},{k},2e7,{m},{m}\n",
                 k as f64 * step_s,

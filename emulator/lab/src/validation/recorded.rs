@@ -145,7 +145,7 @@ mod tests {
         };
         let cmd = |k: usize| EngineCommand {
             thrust_cmd_n: [400.0 + k as f64; 4],
-            on: [true, k % 7 != 0, true, true],
+            on: [true, !k.is_multiple_of(7), true, true],
         };
         csv.push_str(&line(0.0, &cmd(1), &m.output()));
         for k in 1..300 {
