@@ -32,6 +32,11 @@ enum Cmd {
     Plot(PlotArgs),
     /// Drive the high-fidelity propulsion model open loop with a profile, or draw its figures.
     Hifi(cmd::hifi::HifiArgs),
+    /// Write the training excitation as a thrust-command profile, to run through your
+    /// own propulsion model (then `oils train --data`).
+    Excitation(cmd::excitation::ExcitationArgs),
+    /// Pack a surrogate model file (or hifi) as an FMI 3.0 / 2.0 co-simulation FMU.
+    ExportFmu(cmd::export_fmu::ExportFmuArgs),
     /// Train the propulsion surrogate (seed paper): excitation, data, Lasso, CV, model file.
     Train(cmd::train::TrainArgs),
     /// Validate the surrogate against the hifi model (paper's cases, bounds, plots, uncertainty).
@@ -86,16 +91,17 @@ fn main() {
 /// core names the configuration field; only the command line knows its flags).
 fn flag_hint(e: &anyhow::Error) -> String {
     use oils_emulator::run_config::RunConfigError;
-    let field = e.chain().find_map(|c| match c.downcast_ref::<RunConfigError>() {
-        Some(RunConfigError::Invalid { field, .. }) => Some(*field),
-        _ => match c.downcast_ref::<oils_emulator::session::SessionError>() {
-            Some(oils_emulator::session::SessionError::Config(RunConfigError::Invalid {
-                field,
-                ..
-            })) => Some(*field),
-            _ => None,
-        },
-    });
+    let field =
+        e.chain()
+            .find_map(|c| match c.downcast_ref::<RunConfigError>() {
+                Some(RunConfigError::Invalid { field, .. }) => Some(*field),
+                _ => match c.downcast_ref::<oils_emulator::session::SessionError>() {
+                    Some(oils_emulator::session::SessionError::Config(
+                        RunConfigError::Invalid { field, .. },
+                    )) => Some(*field),
+                    _ => None,
+                },
+            });
     match field {
         Some(f) => format!(" [flag {}]", cmd::run::flag_of(f)),
         None => String::new(),
@@ -115,6 +121,8 @@ fn real_main() -> anyhow::Result<()> {
         Cmd::Export(a) => export(&a),
         Cmd::Plot(a) => cmd::plot::run(&a.log, &a.out),
         Cmd::Hifi(a) => cmd::hifi::run(&a),
+        Cmd::Excitation(a) => cmd::excitation::run(&a),
+        Cmd::ExportFmu(a) => cmd::export_fmu::run(&a),
         Cmd::Train(a) => cmd::train::run(&a),
         Cmd::Validate(a) => cmd::validate::run(&a),
         Cmd::Mc(c) => cmd::mc::run(&c),

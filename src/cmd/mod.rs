@@ -1,5 +1,7 @@
 //! Subcommands of the `oils` binary.
 
+pub mod excitation;
+pub mod export_fmu;
 pub mod hifi;
 pub mod mc;
 pub mod plot;

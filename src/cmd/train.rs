@@ -1,9 +1,9 @@
 //! `oils train`: the system-identification pipeline of the seed paper, end to end.
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use oils_lab::training::fit::Variant;
-use oils_lab::training::{report, train_configured, Progress, TrainConfig};
+use oils_lab::training::{recorded, report, train_configured, user, Progress, TrainConfig};
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::time::Instant;
@@ -39,6 +39,44 @@ pub struct TrainArgs {
     /// Skip the held-out free-run checks against the reference model.
     #[arg(long)]
     pub no_holdout: bool,
+    /// Train on recorded time series instead of a reference model (CSV, the layout of
+    /// docs/recorded-data.md, e.g. what `oils hifi --out` writes; several files are
+    /// joined in order). Default configuration: emulator/config/train-user.toml.
+    #[arg(long, value_name = "CSV", num_args = 1.., conflicts_with = "truth")]
+    pub data: Vec<PathBuf>,
+    /// The reference model to train on: `hifi` (the configuration's, by default) or
+    /// `fmu:PATH` (the user's FMU, or its variable-mapping TOML; docs/fmu.md). Default
+    /// configuration for an FMU: emulator/config/train-user.toml.
+    #[arg(long, value_name = "MODEL")]
+    pub truth: Option<String>,
+}
+
+/// Where the training data come from.
+enum Source {
+    /// The configuration's reference model (hifi).
+    Configured,
+    /// Recorded files.
+    Data(Vec<PathBuf>),
+}
+
+impl Source {
+    fn of(args: &TrainArgs) -> Result<Self> {
+        if !args.data.is_empty() {
+            return Ok(Source::Data(args.data.clone()));
+        }
+        match args.truth.as_deref() {
+            None | Some("hifi") => Ok(Source::Configured),
+            Some(other) => bail!("--truth {other}: expected hifi or fmu:PATH"),
+        }
+    }
+
+    /// The configuration used when `--config` is not given.
+    fn default_config(&self) -> &'static str {
+        match self {
+            Source::Configured => COMMITTED_CONFIG,
+            Source::Data(_) => oils_lab::training::user::USER_CONFIG,
+        }
+    }
 }
 
 /// Progress bars on stderr (hidden when stderr is not a terminal).
@@ -80,10 +118,11 @@ impl Progress for Bars {
 
 /// Runs `oils train`.
 pub fn run(args: &TrainArgs) -> Result<()> {
+    let source = Source::of(args)?;
     let text = match &args.config {
         Some(p) => std::fs::read_to_string(p)
             .with_context(|| format!("reading training configuration {}", p.display()))?,
-        None => COMMITTED_CONFIG.to_string(),
+        None => source.default_config().to_string(),
     };
     let cfg = TrainConfig::from_toml(&text).context("training configuration")?;
     let bars = Bars {
@@ -91,7 +130,34 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         bar: Mutex::new(None),
     };
     let t0 = Instant::now();
-    let outcome = train_configured(&cfg, &bars).context("training")?;
+    let outcome = match &source {
+        Source::Configured => train_configured(&cfg, &bars).context("training")?,
+        Source::Data(paths) => {
+            let mut runs = Vec::new();
+            for p in paths {
+                let run = recorded::load(p, cfg.sample_time_ns).context("reading recorded data")?;
+                println!(
+                    "data: {}: {} rows every {} s, {} samples of {} s{}",
+                    p.display(),
+                    run.rows,
+                    run.file_step_ns as f64 / 1e9,
+                    run.dataset.len(),
+                    cfg.sample_time_ns as f64 / 1e9,
+                    if run.dropped_rows > 0 {
+                        format!(
+                            " ({} rows after the last whole sample not used)",
+                            run.dropped_rows
+                        )
+                    } else {
+                        String::new()
+                    }
+                );
+                runs.push(run);
+            }
+            let info = user::data_info(paths).context("hashing the recorded data")?;
+            user::train_on_data(&cfg, &runs, &info, &bars).context("training on recorded data")?
+        }
+    };
     let train_s = t0.elapsed().as_secs_f64();
     // What was derived from the reference rather than read from the configuration.
     if let Some(stroke) = outcome.valve.and_then(|v| v.stroke) {
@@ -150,7 +216,9 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         .context("drawing the figures")?;
     let mut summary = report::summary(&outcome, cfg.top_terms);
     let mut holdout_pngs = Vec::new();
-    if !args.no_holdout {
+    if matches!(source, Source::Data(_)) && !args.no_holdout {
+        summary.push_str("\n(held-out free runs skipped: recorded data have no model to run them on; judge the model with `oils validate --model M --data FILE`)\n");
+    } else if !args.no_holdout {
         let (text, pngs) = holdout(&cfg, &outcome, args)?;
         summary.push_str(&text);
         holdout_pngs = pngs;

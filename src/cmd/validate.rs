@@ -14,7 +14,7 @@ use oils_emulator::propulsion::{
 use oils_lab::validation::cases::{self, CaseKind};
 use oils_lab::validation::report::{Bounds, ValidationReport};
 use oils_lab::validation::uncertainty::ModelUncertainty;
-use oils_lab::validation::{plots, run_cases};
+use oils_lab::validation::{plots, recorded, run_cases};
 use oils_shared::profile::ThrustProfile;
 use std::path::{Path, PathBuf};
 
@@ -58,6 +58,11 @@ pub struct ValidateArgs {
     /// Exit non-zero when a case breaks the paper's bounds.
     #[arg(long)]
     pub check: bool,
+    /// Judge the model on these recorded runs instead (CSV, the layout of
+    /// docs/recorded-data.md): the recording is the truth, the surrogate runs free on
+    /// its commands, each run is judged as a whole against the descent bounds.
+    #[arg(long, value_name = "CSV", num_args = 1.., conflicts_with_all = ["profile", "only", "descent"])]
+    pub data: Vec<PathBuf>,
 }
 
 /// Runs `oils validate`.
@@ -87,6 +92,115 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
     build_surrogate(&spec).context("building the surrogate")?;
     build_hifi(&spec).context("building the hifi model")?;
 
+    let bounds = Bounds::PAPER;
+    let model =
+        || -> Result<Box<dyn Propulsion>, BuildError> { Ok(Box::new(build_surrogate(&spec)?)) };
+    let print = |r: &oils_lab::validation::report::CaseReport| {
+        eprintln!(
+            "  {:<12} thrust max|err| {:8.3} N  rms {:7.3} N  mass max|err| {:7.3} kg  {}",
+            r.name,
+            r.thrust_max_abs_error_n,
+            r.thrust_rms_error_n,
+            r.mass_max_abs_error_kg,
+            if r.pass {
+                "within the paper's bounds"
+            } else {
+                "OUTSIDE the paper's bounds"
+            }
+        )
+    };
+    let (reports, traces, truth_name) = if args.data.is_empty() {
+        let all = cases_of(args, &cfg)?;
+        let truth =
+            || -> Result<Box<dyn Propulsion>, BuildError> { Ok(Box::new(build_hifi(&spec)?)) };
+        let (r, t) = run_cases(
+            &all,
+            &truth,
+            &model,
+            dt_ns,
+            scenario.wet_mass_kg(),
+            &bounds,
+            print,
+        )?;
+        (r, t, "hifi")
+    } else {
+        let (mut reports, mut traces) = (Vec::new(), Vec::new());
+        for p in &args.data {
+            let run =
+                oils_lab::training::recorded::load(p, dt_ns).context("reading recorded data")?;
+            let case = recorded::case_of(&run)
+                .with_context(|| format!("{}: commands as a profile", p.display()))?;
+            let truth = || -> Result<Box<dyn Propulsion>, BuildError> {
+                Ok(Box::new(recorded::Playback::new(&run)))
+            };
+            let (r, t) = run_cases(
+                &[case],
+                &truth,
+                &model,
+                dt_ns,
+                scenario.wet_mass_kg(),
+                &bounds,
+                print,
+            )?;
+            reports.extend(r);
+            traces.extend(t);
+        }
+        (reports, traces, "data")
+    };
+    let mut report = ValidationReport::new(
+        model_name(args),
+        model_file.provenance.reference.clone(),
+        format!("{:?}", model_file.variant),
+        match truth_name {
+            "data" => format!("recorded data: {}", list(&args.data)),
+            _ => args
+                .hifi_params
+                .as_ref()
+                .map_or_else(|| "defaults".into(), |p| p.display().to_string()),
+        },
+        dt_ns as f64 * 1e-6,
+        bounds,
+        reports,
+    );
+    report.truth = truth_name.into();
+    print!("{}", report.table());
+
+    let json_path = args
+        .report
+        .clone()
+        .unwrap_or_else(|| args.out.join("validate.json"));
+    write_file(&json_path, &(report.to_json() + "\n"))?;
+    eprintln!("wrote {}", json_path.display());
+
+    let plot_dir = args.plots.clone().unwrap_or_else(|| args.out.join("plots"));
+    std::fs::create_dir_all(&plot_dir)
+        .with_context(|| format!("creating {}", plot_dir.display()))?;
+    for t in &traces {
+        let p = plots::write_case(&plot_dir, t, &bounds)
+            .with_context(|| format!("plotting case {}", t.case.name))?;
+        eprintln!("wrote {}", p.display());
+    }
+
+    let unc_path = match (&args.uncertainty, &args.model) {
+        (Some(p), _) => p.clone(),
+        (None, Some(m)) => ModelUncertainty::path_beside(m),
+        (None, None) => args.out.join("surrogate-default.uncertainty.json"),
+    };
+    ModelUncertainty::from_traces(&traces, &model_name(args), &model_bytes, truth_name, 10.0)
+        .save(&unc_path)?;
+    eprintln!("wrote {}", unc_path.display());
+
+    if args.check && !report.pass {
+        bail!("the surrogate breaks the paper's bounds (see the table above)");
+    }
+    Ok(())
+}
+
+/// The built-in cases, the descent and the user's profiles, as the flags select them.
+fn cases_of(
+    args: &ValidateArgs,
+    cfg: &oils_emulator::config::PropulsionConfig,
+) -> Result<Vec<cases::Case>> {
     let mut all = cases::builtin();
     let descent = match &args.descent {
         Some(p) => cases::from_path(p, CaseKind::Descent, cfg.max_thrust_n)?,
@@ -116,75 +230,7 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
     if all.is_empty() {
         bail!("no case selected (check --only)");
     }
-
-    let truth = || -> Result<Box<dyn Propulsion>, BuildError> { Ok(Box::new(build_hifi(&spec)?)) };
-    let model =
-        || -> Result<Box<dyn Propulsion>, BuildError> { Ok(Box::new(build_surrogate(&spec)?)) };
-    let bounds = Bounds::PAPER;
-    let (reports, traces) = run_cases(
-        &all,
-        &truth,
-        &model,
-        dt_ns,
-        scenario.wet_mass_kg(),
-        &bounds,
-        |r| {
-            eprintln!(
-                "  {:<12} thrust max|err| {:8.3} N  rms {:7.3} N  mass max|err| {:7.3} kg  {}",
-                r.name,
-                r.thrust_max_abs_error_n,
-                r.thrust_rms_error_n,
-                r.mass_max_abs_error_kg,
-                if r.pass {
-                    "within the paper's bounds"
-                } else {
-                    "OUTSIDE the paper's bounds"
-                }
-            )
-        },
-    )?;
-    let report = ValidationReport::new(
-        model_name(args),
-        model_file.provenance.reference.clone(),
-        format!("{:?}", model_file.variant),
-        args.hifi_params
-            .as_ref()
-            .map_or_else(|| "defaults".into(), |p| p.display().to_string()),
-        dt_ns as f64 * 1e-6,
-        bounds,
-        reports,
-    );
-    print!("{}", report.table());
-
-    let json_path = args
-        .report
-        .clone()
-        .unwrap_or_else(|| args.out.join("validate.json"));
-    write_file(&json_path, &(report.to_json() + "\n"))?;
-    eprintln!("wrote {}", json_path.display());
-
-    let plot_dir = args.plots.clone().unwrap_or_else(|| args.out.join("plots"));
-    std::fs::create_dir_all(&plot_dir)
-        .with_context(|| format!("creating {}", plot_dir.display()))?;
-    for t in &traces {
-        let p = plots::write_case(&plot_dir, t, &bounds)
-            .with_context(|| format!("plotting case {}", t.case.name))?;
-        eprintln!("wrote {}", p.display());
-    }
-
-    let unc_path = match (&args.uncertainty, &args.model) {
-        (Some(p), _) => p.clone(),
-        (None, Some(m)) => ModelUncertainty::path_beside(m),
-        (None, None) => args.out.join("surrogate-default.uncertainty.json"),
-    };
-    ModelUncertainty::from_traces(&traces, &model_name(args), &model_bytes, "hifi", 10.0)
-        .save(&unc_path)?;
-    eprintln!("wrote {}", unc_path.display());
-
-    if args.check && !report.pass {
-        bail!("the surrogate breaks the paper's bounds (see the table above)");
-    }
-    Ok(())
+    Ok(all)
 }
 
 fn model_name(args: &ValidateArgs) -> String {
@@ -198,4 +244,9 @@ fn write_file(path: &Path, text: &str) -> Result<()> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
+}
+
+fn list(paths: &[PathBuf]) -> String {
+    let names: Vec<String> = paths.iter().map(|p| p.display().to_string()).collect();
+    names.join(", ")
 }

@@ -7,6 +7,7 @@
 //! - [`campaign`]: Monte Carlo campaigns (local on all cores, or a Slurm job array).
 //! - [`mcap_log`]: MCAP logs (Foxglove), written in the loop through the core's
 //!   `RecordSink` and read back for export, plots and replay.
+//! - [`fmu`]: the user's propulsion model as an FMU (in) and bench models as FMUs (out).
 //! - [`onboard`]: the flight software a configuration names, flown in process.
 //! - [`plot`], [`run_plots`], [`timing_plots`], [`hifi_figures`]: figures.
 //! - [`report_page`]: the self-contained HTML page of a campaign or a run.
@@ -14,6 +15,7 @@
 #![forbid(unsafe_code)]
 
 pub mod campaign;
+pub mod fmu;
 pub mod hifi_figures;
 pub mod json_schema;
 pub mod log_json;

@@ -103,6 +103,8 @@ pub enum Segment {
     Burn,
     /// Cold starts of all engines.
     Starts,
+    /// Recorded data (`oils train --data`): whatever the recording's commands were.
+    Recorded,
 }
 
 /// The excitation sampled at the surrogate's sample time.

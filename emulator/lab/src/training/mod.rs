@@ -18,7 +18,9 @@ pub mod figures;
 pub mod fit;
 pub mod holdout;
 pub mod lasso;
+pub mod recorded;
 pub mod report;
+pub mod user;
 
 use cv::{cross_validate, fit_final, CvConfig, CvResult, NestedSums};
 use dataset::Dataset;
@@ -282,7 +284,8 @@ pub fn train_configured(
     );
     progress.finish();
     let (resolved, clock_fit) = resolved?;
-    let mut outcome = train_recorded(&resolved, excitation, recorded, &factory, &info, progress)?;
+    let initial = model_file::ReferenceOutput::of(&factory().output());
+    let mut outcome = train_recorded(&resolved, excitation, recorded, initial, &info, progress)?;
     outcome.clock_fit = clock_fit;
     Ok(outcome)
 }
@@ -347,21 +350,22 @@ pub fn train(
     progress.begin("data", excitation.inputs.len() as u64);
     let recorded = Dataset::record(model.as_mut(), &excitation, || progress.tick());
     progress.finish();
-    train_recorded(cfg, excitation, recorded, reference, info, progress)
+    let initial = model_file::ReferenceOutput::of(&reference().output());
+    train_recorded(cfg, excitation, recorded, initial, info, progress)
 }
 
-/// [`train`] from the data recorded from `reference` with `excitation` (its valve
-/// filter not yet tracked), with a resolved configuration.
-fn train_recorded(
+/// [`train`] from the data recorded with `excitation` (its valve filter not yet
+/// tracked) from a reference whose held outputs are `initial_output`, with a resolved
+/// configuration.
+pub(crate) fn train_recorded(
     cfg: &TrainConfig,
     excitation: Excitation,
     recorded: Dataset,
-    reference: &dyn Fn() -> Box<dyn Propulsion>,
+    initial_output: model_file::ReferenceOutput,
     info: &ReferenceInfo,
     progress: &dyn Progress,
 ) -> Result<TrainOutcome, TrainConfigError> {
     let dataset = recorded.with_valves(cfg.variants.engine_valve);
-    let initial_output = model_file::ReferenceOutput::of(&reference().output());
     let mut results = Vec::new();
     let mut models = Vec::new();
     for &variant in &cfg.train_variants {

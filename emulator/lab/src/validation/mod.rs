@@ -9,6 +9,7 @@
 pub mod cases;
 pub mod compare;
 pub mod plots;
+pub mod recorded;
 pub mod report;
 pub mod stats;
 pub mod uncertainty;
