@@ -294,9 +294,10 @@ pub fn run(args: &RunArgs) -> Result<()> {
     let result = match cfg.link {
         LinkKind::Inproc => fly_in_process(&cfg, run_id, &stop, fsw_library.as_ref(), args),
         LinkKind::Iceoryx2 => {
-            let outcome = oils_shared::domain::Domain::from_env()
-                .map(|d| d.root().join(format!("stub-{run_id:016x}.outcome.json")))
-                .context("the iceoryx2 domain")?;
+            // In the domain's private directory, which the session opens (and checks,
+            // and repairs, with a note for the report) before it spawns the stub.
+            let outcome = oils_shared::domain::Domain::default_root()
+                .join(format!("stub-{run_id:016x}.outcome.json"));
             let mut spawned: Option<SpawnedStub> = None;
             let mut launch = |launch: &StubLaunch| {
                 if cfg.fsw == FswSpec::External {
