@@ -5,11 +5,11 @@
 //! needed to build or to draw. One figure is a stack of panels sharing the width.
 //!
 //! ```no_run
-//! use oils_emulator::plot::{write_png, Panel, Series};
+//! use oils_lab::plot::{write_png, Panel, Series};
 //! let pts: Vec<(f64, f64)> = (0..100).map(|i| (i as f64, (i as f64 * 0.1).sin())).collect();
 //! let panel = Panel::new("sine", "t [s]", "y [-]", vec![Series { label: "sin", points: &pts }]);
 //! write_png(std::path::Path::new("sine.png"), "Example", &[panel])?;
-//! # Ok::<(), oils_emulator::plot::PlotError>(())
+//! # Ok::<(), oils_lab::plot::PlotError>(())
 //! ```
 
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
