@@ -136,6 +136,12 @@ fn s<'a>(label: &'a str, points: &'a Pts) -> Series<'a> {
     Series { label, points }
 }
 
+/// The timing of every step: a step without a command still has its wake error, and
+/// the misses are the tail a timing figure is for.
+fn steps_timing(recs: &[Record]) -> Vec<StepTiming> {
+    recs.iter().map(step_timing).collect()
+}
+
 /// A figure could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum RunPlotError {
@@ -440,9 +446,7 @@ pub fn write_all(
     let timing = match timing {
         Some(t) => t,
         None => {
-            // Every step: a step without a command still has its wake error, and the
-            // misses are the tail a timing figure is for.
-            own = recs.iter().map(step_timing).collect();
+            own = steps_timing(recs);
             &own
         }
     };
@@ -464,6 +468,21 @@ pub fn write_all(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_timing_keeps_the_steps_without_a_command() {
+        let mut recs = [Record::default(); 3];
+        for (k, r) in recs.iter_mut().enumerate() {
+            r.timing.wake_error_ns = Some(1000 * (k as i64 + 1));
+        }
+        recs[0].flags = oils_emulator::recorder::REC_COMMAND_RECEIVED;
+        recs[0].timing.round_trip_ns = Some(50_000);
+        recs[1].flags = REC_DEADLINE_MISS;
+        let t = steps_timing(&recs);
+        assert_eq!(t.len(), 3);
+        assert_eq!(t.iter().filter(|t| t.wake_error_ns.is_some()).count(), 3);
+        assert_eq!(t.iter().filter(|t| t.round_trip_ns.is_some()).count(), 1);
+    }
 
     #[test]
     fn thrust_axis_of_identity_is_z_and_tilt_follows_rotation() {
