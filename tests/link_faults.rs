@@ -230,6 +230,9 @@ fn foreign_stub(id: &str, make: impl Fn(&oils_shared::Telemetry) -> Command) {
     }
 }
 
+/// (Propulsion `ideal`: the sanitised pattern, engine 4 toggled every few steps beside
+/// engine 3 at its minimum, drives the committed surrogate out of its envelope until it
+/// predicts 285 kN on engines that are off; it now ends such a run aborted, issue #36.)
 #[test]
 fn garbage_commands_never_reach_the_plant_and_are_counted() {
     let dir = scratch("garbage");
@@ -241,6 +244,8 @@ fn garbage_commands_never_reach_the_plant_and_are_counted() {
             "--no-stub",
             "--run-id",
             &id,
+            "--propulsion",
+            "ideal",
             "--duration",
             "3",
             "--no-log",

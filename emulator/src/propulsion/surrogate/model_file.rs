@@ -462,4 +462,30 @@ mod tests {
         let guards = s.diagnostics().unwrap().surrogate_guards.unwrap();
         assert_eq!((guards.bounded_predictions, s.failure()), (0, None));
     }
+
+    /// Found by the bound (tests/link_faults.rs, garbage commands): engine 4 toggled
+    /// every few steps beside engine 3 at its minimum drives the committed model out of
+    /// its envelope until it predicts 285 kN on engines 1 and 2, which are off. The
+    /// run then ends with the model failed instead of flying on that.
+    #[test]
+    fn the_committed_model_run_away_out_of_its_envelope_is_bounded_and_fails() {
+        let cfg = PropulsionConfig::default();
+        let mut s = SurrogatePropulsion::default_model(&cfg, None).unwrap();
+        let mut failed_at = None;
+        for k in 0..300u64 {
+            let cmd = EngineCommand {
+                thrust_cmd_n: [0.0, 0.0, 0.0, if k % 2 == 0 { 800.0 } else { 500.0 }],
+                on: [false, false, true, k % 3 != 0],
+            };
+            let out = s.step(&cmd, 10_000_000);
+            assert!(out
+                .thrust_n
+                .iter()
+                .all(|&t| t <= MAX_THRUST_OVER_RATING * cfg.max_thrust_n));
+            if s.failure().is_some() {
+                failed_at.get_or_insert(k);
+            }
+        }
+        assert!(failed_at.is_some_and(|k| k < 100), "{failed_at:?}");
+    }
 }
