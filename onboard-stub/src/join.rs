@@ -17,7 +17,7 @@ pub struct StubOptions {
     pub run_id: String,
     /// Flight software to run.
     pub fsw: FswSpec,
-    /// Thrust-command profile CSV for `gnc` playback.
+    /// Thrust-command profile CSV for `playback`.
     pub profile: Option<PathBuf>,
     /// Engine rating the profile's commands are checked against, newtons.
     pub max_thrust_n: f64,

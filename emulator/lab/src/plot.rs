@@ -263,15 +263,38 @@ where
             });
     }
     if panel.series.iter().any(|s| !s.label.is_empty()) {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font((FONT_FAMILY, 15).into_font())
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight, 15)?;
     }
     Ok(())
+}
+
+/// Maps a plotters backend error to a [`PlotError`] naming the figure at `path`.
+pub fn backend_err(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> PlotError + '_ {
+    move |e| PlotError::Backend {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    }
+}
+
+/// The figures' font (the bundled DejaVu Sans) at `size` pixels.
+pub fn font(size: u32) -> TextStyle<'static> {
+    (FONT_FAMILY, size).into_font().into()
+}
+
+/// Draws `chart`'s legend at `position`: one look for every figure (white, bordered
+/// box, `size`-pixel labels).
+pub fn legend<'a, DB: DrawingBackend + 'a, CT: plotters::coord::CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+    size: u32,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font(font(size))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@
 //! a histogram's linear count axis would hide the tail a timing test is about.
 
 use crate::mcap_log::StepTiming;
-use crate::plot::{register_font, tick_label, PlotError, FONT_FAMILY};
+use crate::plot::{backend_err, font, legend, register_font, tick_label, PlotError};
 use plotters::element::PathElement;
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
@@ -99,17 +99,6 @@ fn percentile_label(x: &f64) -> String {
     }
     let p = 100.0 * (1.0 - 10f64.powf(-x.round()));
     format!("{}%", tick_label(p))
-}
-
-fn backend_err(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> PlotError + '_ {
-    move |e| PlotError::Backend {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    }
-}
-
-fn font(size: u32) -> TextStyle<'static> {
-    (FONT_FAMILY, size).into_font().into()
 }
 
 /// A timing figure's samples in microseconds: the positive ones, sorted, and how many
@@ -291,14 +280,7 @@ fn percentiles(
                     PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
                 });
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font(font(14))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| err(&e))?;
+        legend(&mut chart, SeriesLabelPosition::UpperLeft, 14).map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))
 }
@@ -433,14 +415,7 @@ fn timeline(
                     PathElement::new(vec![(x, y), (x + 20, y)], ORANGE.stroke_width(2))
                 });
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font(font(14))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| err(&e))?;
+        legend(&mut chart, SeriesLabelPosition::UpperRight, 14).map_err(|e| err(&e))?;
     }
 
     // Cumulative counts: when in the run they happened.
@@ -488,14 +463,7 @@ fn timeline(
             .label(format!("{label}: {}", times.len()))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font(font(14))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| err(&e))?;
+    legend(&mut chart, SeriesLabelPosition::UpperLeft, 14).map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))
 }
 

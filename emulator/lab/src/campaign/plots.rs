@@ -14,7 +14,7 @@ use super::compare::Comparison;
 use super::drivers::{self, Driver};
 use super::spec::CampaignSpec;
 use super::summary::{quantile, Ellipse, Merged};
-use crate::plot::{register_font, tick_label, PlotError, FONT_FAMILY};
+use crate::plot::{backend_err, font, legend, register_font, tick_label, PlotError};
 use plotters::element::{Cross, PathElement, Text};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
@@ -45,17 +45,6 @@ const ORANGE: RGBColor = RGBColor(255, 127, 14);
 const GREEN: RGBColor = RGBColor(44, 160, 44);
 const GREY: RGBColor = RGBColor(150, 150, 150);
 const GRID: RGBColor = RGBColor(235, 235, 235);
-
-fn backend_err(path: &Path) -> impl Fn(&dyn std::fmt::Display) -> PlotError + '_ {
-    move |e| PlotError::Backend {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    }
-}
-
-fn font(size: u32) -> TextStyle<'static> {
-    (FONT_FAMILY, size).into_font().into()
-}
 
 /// An integer count as a tick label (the count axis ticks on integers only).
 fn count_label(v: &u32) -> String {
@@ -489,14 +478,7 @@ fn footprint(
         .map_err(|e| err(&e))?
         .label("reference point: nominal case's touchdown")
         .legend(|(x, y)| Cross::new((x + 10, y), 5, BLACK.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(font(14))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| err(&e))?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight, 14).map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))
 }
 
@@ -592,14 +574,7 @@ fn histograms(merged: &Merged, path: &Path, title: &str, qs: &[Quantity]) -> Res
                 .map_err(|e| err(&e))?
                 .label(format!("{what} {} {}", tick_label(l), q.unit))
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .label_font(font(15))
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| err(&e))?;
+            legend(&mut chart, SeriesLabelPosition::UpperRight, 15).map_err(|e| err(&e))?;
         }
     }
     root.present().map_err(|e| err(&e))
@@ -715,14 +690,7 @@ fn cdfs(
         if limit.is_none() && sets.len() == 1 {
             continue;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .label_font(font(14))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| err(&e))?;
+        legend(&mut chart, SeriesLabelPosition::LowerRight, 14).map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))
 }
@@ -1020,14 +988,7 @@ fn outcome_scatter(merged: &Merged, path: &Path, title: &str) -> Result<(), Plot
         .map_err(|e| err(&e))?
         .label(format!("did not land ({})", pts.len() - n_landed))
         .legend(|(x, y)| Cross::new((x + 10, y), 5, RED.stroke_width(2)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(font(15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| err(&e))?;
+    legend(&mut chart, SeriesLabelPosition::UpperRight, 15).map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))
 }
 
@@ -1107,14 +1068,7 @@ fn traces(merged: &Merged, path: &Path, title: &str) -> Result<(), PlotError> {
         .map_err(|e| err(&e))?
         .label("nominal")
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE.stroke_width(3)));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font(font(15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| err(&e))?;
+    legend(&mut chart, SeriesLabelPosition::UpperLeft, 15).map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))
 }
 
