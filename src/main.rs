@@ -28,7 +28,7 @@ enum Cmd {
     Replay(cmd::run::ReplayArgs),
     /// Turn a run log into CSV, a thrust profile or MCAP (Foxglove).
     Export(ExportArgs),
-    /// Draw a run's figures (PNG) from its log (OILSLOG3 or MCAP).
+    /// Draw a run's figures (PNG) from its log (OILSLOG4 or MCAP).
     Plot(PlotArgs),
     /// Drive the high-fidelity propulsion model open loop with a profile, or draw its figures.
     Hifi(cmd::hifi::HifiArgs),
@@ -132,6 +132,9 @@ fn real_main() -> anyhow::Result<()> {
 
 fn export(a: &ExportArgs) -> anyhow::Result<()> {
     let log = oils_lab::mcap_log::read_any(&a.log)?;
+    for w in &log.warnings {
+        eprintln!("oils export: {}: {w}", a.log.display());
+    }
     if !log.damaged_records.is_empty() {
         // One record per step from step 0, so a record's position is its step.
         let shown: Vec<String> = log

@@ -196,19 +196,45 @@ fn contract_record_equals_replay() {
     assert!(out.status.success(), "{}", text(&out));
     assert_eq!(report(&rep)["digest"], report(&replayed)["digest"]);
 
-    // A log whose configuration no longer matches its records does not replay.
+    // An edited header (the run's configuration) is refused by its CRC; one whose CRC
+    // was recomputed no longer matches its records and does not replay.
     let bytes = std::fs::read(&log).unwrap();
+    assert_eq!(&bytes[..8], b"OILSLOG4");
     let header_len = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
     let mut header: serde_json::Value =
-        serde_json::from_slice(&bytes[12..12 + header_len]).unwrap();
+        serde_json::from_slice(&bytes[16..16 + header_len]).unwrap();
     header["config"]["seed"] = 1.into();
     let header = header.to_string();
-    let mut forged = bytes[..8].to_vec();
-    forged.extend_from_slice(&(header.len() as u32).to_le_bytes());
-    forged.extend_from_slice(header.as_bytes());
-    forged.extend_from_slice(&bytes[12 + header_len..]);
+    let forge = |crc: u32| {
+        let mut forged = bytes[..8].to_vec();
+        forged.extend_from_slice(&(header.len() as u32).to_le_bytes());
+        forged.extend_from_slice(&crc.to_le_bytes());
+        forged.extend_from_slice(header.as_bytes());
+        forged.extend_from_slice(&bytes[16 + header_len..]);
+        forged
+    };
     let forged_log = dir.join("forged.oilslog");
-    std::fs::write(&forged_log, forged).unwrap();
+    let stale_crc = u32::from_le_bytes(bytes[12..16].try_into().unwrap());
+    std::fs::write(&forged_log, forge(stale_crc)).unwrap();
+    let out = run_oils(&["replay", forged_log.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("header's CRC does not match"),
+        "{}",
+        text(&out)
+    );
+    let mut h = 0xffff_ffffu32;
+    for b in header.as_bytes() {
+        h ^= u32::from(*b);
+        for _ in 0..8 {
+            h = if h & 1 != 0 {
+                (h >> 1) ^ 0xedb8_8320
+            } else {
+                h >> 1
+            };
+        }
+    }
+    std::fs::write(&forged_log, forge(!h)).unwrap();
     let out = run_oils(&["replay", forged_log.to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(
@@ -295,7 +321,7 @@ fn contract_the_log_holds_the_truth_and_checks_itself() {
     let mut bytes = std::fs::read(&log).unwrap();
     let header_len = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
     let record_size = oils_emulator::recorder::RECORD_SIZE;
-    let at = 12 + header_len + 1234 * record_size + 100;
+    let at = 16 + header_len + 1234 * record_size + 100;
     bytes[at] ^= 0x40;
     let damaged = dir.join("damaged.oilslog");
     std::fs::write(&damaged, bytes).unwrap();
@@ -308,4 +334,24 @@ fn contract_the_log_holds_the_truth_and_checks_itself() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("damaged") && err.contains("1234"), "{err}");
+}
+
+/// Multi-rate (#32): plant at 5 ms, the surrogate sampled every 10 ms and held, the
+/// flight software every 20 ms: the same configuration gives the same digest in process
+/// and across processes, over the exchanges of a 20 ms cycle.
+#[test]
+fn contract_multi_rate_in_process_equals_across_processes() {
+    let mut cfg = inproc_config(PropulsionKind::Surrogate);
+    cfg.dt_ms = 5;
+    cfg.fsw_period_ms = Some(20);
+    cfg.duration_s = 60.0;
+    let inproc = digest_in_process(&cfg);
+    let r = report_across_processes("contract-multi-rate", &cfg);
+    assert_eq!(r["digest"].as_str().unwrap(), inproc);
+    assert_eq!(r["outcome"], "completed");
+    assert_eq!(r["steps"], 3000);
+    assert_eq!(r["plant_steps"], 12_000);
+    // Another period, another run: the schedule is in what the digest covers.
+    cfg.fsw_period_ms = Some(10);
+    assert_ne!(digest_in_process(&cfg), inproc);
 }

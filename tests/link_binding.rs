@@ -1,5 +1,6 @@
-//! A run is bound to the flight-software process that joined it, and a stub does not
-//! outlive its emulator by more than a bounded wall time. Real processes, real iceoryx2.
+//! A run is bound to the flight-software process that joined it, and a stub notices its
+//! emulator's death (it watches the process) rather than waiting out its timeout. Real
+//! processes, real iceoryx2.
 
 mod common;
 use common::*;
@@ -162,15 +163,13 @@ fn a_stub_gives_up_on_a_dead_emulator_promptly_even_at_a_crawl() {
     std::thread::sleep(Duration::from_millis(2000)); // joined, answered step 0, waiting
     emulator.kill().unwrap(); // SIGKILL: no end-of-run telemetry
     emulator.wait().unwrap();
-    let killed = Instant::now();
-    let status = wait_with_deadline(&mut stub, 30);
-    let took = killed.elapsed();
+    // A hang guard only (its 155 s timeout is longer): the proof that the stub noticed
+    // the death rather than waiting out its timeout is the message, which names the
+    // emulator's exit; a timeout says "emulator silent".
+    let status = wait_with_deadline(&mut stub, 60);
     let err = stderr_of(&mut stub);
     assert!(!status.success(), "{err}");
-    assert!(
-        took < Duration::from_secs(3),
-        "gave up after {took:?}: {err}"
-    );
+    assert!(!err.contains("silent"), "{err}");
     assert!(
         err.contains(&format!("the emulator (pid {})", emulator.id()))
             && err.contains("exited without ending the run"),

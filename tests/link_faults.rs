@@ -72,13 +72,9 @@ fn killed_stub_is_noticed_log_is_intact_and_the_next_run_starts_clean() {
     std::thread::sleep(Duration::from_millis(1500));
     stub.kill().unwrap(); // SIGKILL: no cleanup of any kind
     stub.wait().unwrap();
-    let killed_at = Instant::now();
-    let status = wait_with_deadline(&mut emulator, 15);
-    assert!(
-        killed_at.elapsed() < Duration::from_secs(5),
-        "noticed too late: {:?}",
-        killed_at.elapsed()
-    );
+    // A hang guard only (no timing asserted): the proof that the death was noticed,
+    // not waited out, is the message below, which the link timeout never gives.
+    let status = wait_with_deadline(&mut emulator, 60);
     let mut err = String::new();
     std::io::Read::read_to_string(emulator.stderr.as_mut().unwrap(), &mut err).unwrap();
     assert!(!status.success());
@@ -189,19 +185,16 @@ fn sighup_at_a_slow_speed_ends_the_run_promptly_with_its_report() {
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_millis(1500));
-    let sent = std::time::Instant::now();
     // SAFETY: plain kill(2) on our own child.
     unsafe { libc::kill(emulator.id() as i32, libc::SIGHUP) };
-    let status = wait_with_deadline(&mut emulator, 10);
-    // The wait sleeps in 20 ms slices: a period of 10 s is not waited out.
-    assert!(
-        sent.elapsed() < Duration::from_secs(3),
-        "{:?}",
-        sent.elapsed()
-    );
+    // A hang guard only: that the wait sleeps in slices and sees a stop between them is
+    // checked on a simulated time source (`clock.rs`), not by timing this process.
+    let status = wait_with_deadline(&mut emulator, 60);
     assert!(!status.success());
     let r = report(&rep);
     assert_eq!(r["outcome"], "aborted");
+    // Stopped while waiting for step 0's start (one 10 s period after the start).
+    assert_eq!(r["steps"], 0);
     assert!(r["error"].as_str().unwrap().contains("signal"));
 }
 
@@ -350,5 +343,77 @@ fn a_stub_refuses_an_emulator_announcing_another_protocol() {
     assert!(
         err.contains("v1") && err.contains("v99") && err.contains("0x0000000000000bad"),
         "{err}"
+    );
+}
+
+/// `oils run --fault 'stub-pause@t=100,for=600' --link-timeout-ms 100 --duration 800`
+/// with a report; returns the report.
+fn paused_run(dir: &std::path::Path, name: &str, link: &str) -> serde_json::Value {
+    let rep = dir.join(format!("{name}.json"));
+    let out = run_oils(&[
+        "run",
+        "--fault",
+        "stub-pause@t=100,for=600",
+        "--link-timeout-ms",
+        "100",
+        "--duration",
+        "800",
+        "--link",
+        link,
+        "--no-log",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    let r = report(&rep);
+    // The 600 s pause is simulated time: the run flies on to its physical end (the
+    // paused flight software lets it fall), never aborted as a silent stub.
+    assert_ne!(r["outcome"], "aborted", "{}", text(&out));
+    assert!(!text(&out).contains("silent"), "{}", text(&out));
+    assert_eq!(r["faults"][0]["step"], 10_000);
+    r
+}
+
+/// In lockstep nothing simulated depends on the wall clock (#31): a stub pause 6000
+/// times the link timeout completes, with one digest on a quiet machine, on one loaded
+/// by busy threads, and in process.
+#[test]
+fn a_simulated_stub_pause_gives_one_digest_on_a_quiet_and_a_loaded_machine() {
+    let dir = scratch("stub-pause-load");
+    let quiet = paused_run(&dir, "quiet", "iceoryx2");
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let load: Vec<_> = (0..4)
+        .map(|_| {
+            let stop = stop.clone();
+            std::thread::spawn(move || {
+                // Nice 19: the threads take every idle cycle and slow each step down,
+                // without starving the two processes past the 100 ms link timeout
+                // (that guard is for a flight software that hangs, and is wall time).
+                // SAFETY: setpriority(2) on this thread's own id.
+                unsafe { libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, 19) };
+                let mut x = 0u64;
+                while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                    x = std::hint::black_box(x.wrapping_mul(6364136223846793005).wrapping_add(1));
+                }
+            })
+        })
+        .collect();
+    let loaded = paused_run(&dir, "loaded", "iceoryx2");
+    stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    for t in load {
+        t.join().unwrap();
+    }
+    let inproc = paused_run(&dir, "inproc", "inproc");
+    assert_eq!(quiet["digest"], loaded["digest"]);
+    assert_eq!(quiet["digest"], inproc["digest"]);
+    assert_eq!(quiet["steps"], loaded["steps"]);
+    // Every withheld step (from step 10 000 on: the paused GNC lets the lander fall
+    // before the pause ends) is a deadline miss, counted the same everywhere.
+    assert_eq!(
+        quiet["timing"]["deadline_misses"].as_u64().unwrap(),
+        quiet["steps"].as_u64().unwrap() - 10_000
+    );
+    assert_eq!(
+        quiet["timing"]["deadline_misses"],
+        loaded["timing"]["deadline_misses"]
     );
 }

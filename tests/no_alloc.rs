@@ -82,6 +82,8 @@ fn allocations_over<L: Link + ?Sized>(
     run_id: u64,
     from: u64,
     counter: &'static AtomicU64,
+    faults: &mut FaultPlan,
+    (dt_ns, fsw_period_ns): (u64, u64),
 ) -> (u64, u64, u64, Outcome) {
     let scenario = scenario();
     let mut plant = Plant::new(
@@ -98,7 +100,8 @@ fn allocations_over<L: Link + ?Sized>(
     let log = std::env::temp_dir().join(format!("oils-noalloc-{run_id:x}.oilslog"));
     let recorder = Recorder::create(&log, "{}").unwrap();
     let cfg = SchedulerConfig {
-        dt_ns: 10_000_000,
+        dt_ns,
+        fsw_period_ns,
         max_duration_ns: 2_000_000_000_000,
         run_id,
         miss_policy: MissPolicy::Hold,
@@ -120,7 +123,7 @@ fn allocations_over<L: Link + ?Sized>(
         &mut plant,
         link,
         &mut LockstepClock::new(10_000),
-        &mut FaultPlan::new(&[], 0),
+        faults,
         Some(&recorder),
         &stop,
         Some(&mut observe),
@@ -152,7 +155,14 @@ fn allocations_through_descent(
     // As a session runs it: bound to the stub that joined (checked on every command).
     let mut link = BoundLink::new(link, joined, false);
     STEPPING.with(|s| s.set(true));
-    let out = allocations_over(&mut link, run_id, from, &STEPPING_ALLOCATIONS);
+    let out = allocations_over(
+        &mut link,
+        run_id,
+        from,
+        &STEPPING_ALLOCATIONS,
+        &mut FaultPlan::none(),
+        (10_000_000, 10_000_000),
+    );
     STEPPING.with(|s| s.set(false));
     stub.join().unwrap();
     out
@@ -232,8 +242,14 @@ fn step_paths_do_not_allocate() {
     // thread, which runs the emulator and the flight software.
     let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()));
     STEPPING.with(|s| s.set(true));
-    let (at_from, at_last, last, outcome) =
-        allocations_over(&mut link, base + 7, FROM, &STEPPING_ALLOCATIONS);
+    let (at_from, at_last, last, outcome) = allocations_over(
+        &mut link,
+        base + 7,
+        FROM,
+        &STEPPING_ALLOCATIONS,
+        &mut FaultPlan::none(),
+        (10_000_000, 10_000_000),
+    );
     STEPPING.with(|s| s.set(false));
     assert_eq!(outcome, Outcome::Landed);
     assert!(last > 50_000, "{last} steps");
@@ -241,5 +257,63 @@ fn step_paths_do_not_allocate() {
         at_last - at_from,
         0,
         "in-process steps {FROM}..{last} allocated"
+    );
+    // The compiled faults on the step path: sensor, link (the `FaultyLink` wrapper:
+    // delay line, duplicate, corruption, withheld telemetry) and plant faults fire and
+    // clear after step FROM without an allocation.
+    let specs: Vec<oils_emulator::faults::FaultSpec> = [
+        "sensor-noise:altitude_m,sigma=0.5@t=20,for=5",
+        "sensor-frozen:rate_rad_s@t=22,for=1",
+        "sensor-dropout:velocity_m_s@t=24,for=1",
+        "command-delay,steps=3@t=30,for=2",
+        "command-duplicate@t=34,for=1",
+        "command-corrupt,bits=2@t=36,for=1",
+        "telemetry-drop@t=40,for=0.5",
+        "stub-pause@t=42,for=0.5",
+        "command-drop@t=44,for=0.2",
+        "thrust-degraded:3,factor=0.9@t=46,for=2",
+    ]
+    .iter()
+    .map(|f| f.parse().unwrap())
+    .collect();
+    let mut faults = FaultPlan::compile(&specs, 5).unwrap();
+    let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()));
+    STEPPING.with(|s| s.set(true));
+    let (at_from, at_last, last, _) = allocations_over(
+        &mut link,
+        base + 8,
+        FROM,
+        &STEPPING_ALLOCATIONS,
+        &mut faults,
+        (10_000_000, 10_000_000),
+    );
+    STEPPING.with(|s| s.set(false));
+    assert!(last > 5_000, "{last} steps");
+    assert_eq!(faults.report().len(), specs.len(), "every fault fired");
+    assert_eq!(
+        at_last - at_from,
+        0,
+        "in-process steps {FROM}..{last} with faults allocated"
+    );
+    // Multi-rate: the plant at 5 ms, the flight software every 20 ms (four plant steps
+    // a cycle, the command held over them) allocates nothing either. The observer counts
+    // plant steps.
+    let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()));
+    STEPPING.with(|s| s.set(true));
+    let (at_from, at_last, last, _) = allocations_over(
+        &mut link,
+        base + 9,
+        4 * FROM,
+        &STEPPING_ALLOCATIONS,
+        &mut FaultPlan::none(),
+        (5_000_000, 20_000_000),
+    );
+    STEPPING.with(|s| s.set(false));
+    assert!(last > 8 * FROM, "{last} plant steps");
+    assert_eq!(
+        at_last - at_from,
+        0,
+        "multi-rate plant steps {}..{last} allocated",
+        4 * FROM
     );
 }

@@ -25,6 +25,7 @@ fixed_len! {
     com_offset: [f64; 3] => "lander.com_offset_body_m",
     engine_thrust_scale: [f64; 4] => "lander.engine_thrust_scale",
     engine_misalignment: [[f64; 2]; 4] => "lander.engine_misalignment_deg",
+    footpad_positions: [[f64; 3]; 4] => "lander.footpad_positions_body_m",
     attitude_error: [f64; 3] => "initial.attitude_error_deg",
     body_rate: [f64; 3] => "initial.body_rate_rad_s",
     bias: [f64; 4] => "model_error.bias_n",
@@ -75,14 +76,18 @@ fn positive_at_most(
     check(value > 0.0 && value <= hi, field, value, why)
 }
 
-/// The Moon as a spherical central body.
+/// The Moon: a central gravity field and a reference sphere turning about its north
+/// pole (Moon-centred inertial `+Z`) at the sidereal rate.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MoonConfig {
     /// Gravitational parameter, m^3/s^2 (sourced).
     pub mu_m3_s2: f64,
-    /// Mean radius, metres (sourced).
+    /// Mean radius, metres (sourced): the reference sphere terrain heights refer to.
     pub radius_m: f64,
+    /// Rotation rate about the pole, rad/s (sourced: 2 pi / 27.321661 days); 0 keeps
+    /// the surface fixed in the inertial frame.
+    pub rotation_rate_rad_s: f64,
 }
 
 impl Default for MoonConfig {
@@ -90,7 +95,72 @@ impl Default for MoonConfig {
         Self {
             mu_m3_s2: 4.9028e12,
             radius_m: 1_737_400.0,
+            rotation_rate_rad_s: 2.6617e-6,
         }
+    }
+}
+
+impl MoonConfig {
+    fn validate(&self) -> Result<(), ConfigError> {
+        positive_at_most("moon.mu_m3_s2", self.mu_m3_s2, 1e18, "in (0, 1e18] m^3/s^2")?;
+        positive_at_most("moon.radius_m", self.radius_m, 1e8, "in (0, 1e8] m")?;
+        check(
+            self.rotation_rate_rad_s.abs() <= 1e-3,
+            "moon.rotation_rate_rad_s",
+            self.rotation_rate_rad_s,
+            "within 1e-3 rad/s",
+        )
+    }
+}
+
+/// The landing site the scenario is expressed on: where the descent is aimed, and the
+/// origin of the site frame (East-North-Up, Moon-fixed) the log and report use.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct SiteConfig {
+    /// Selenographic latitude, degrees, north positive (sourced: Chandrayaan-3,
+    /// 69.373 S).
+    pub latitude_deg: f64,
+    /// Longitude, degrees, east positive (sourced: Chandrayaan-3, 32.319 E).
+    pub longitude_deg: f64,
+    /// Direction of travel over the site, degrees clockwise from north (assumed: 180,
+    /// a southbound polar approach).
+    pub approach_azimuth_deg: f64,
+}
+
+impl Default for SiteConfig {
+    fn default() -> Self {
+        Self {
+            latitude_deg: -69.373,
+            longitude_deg: 32.319,
+            approach_azimuth_deg: 180.0,
+        }
+    }
+}
+
+impl SiteConfig {
+    fn validate(&self) -> Result<(), ConfigError> {
+        // The poles themselves have no east or north: keep a hair away from them.
+        check(
+            self.latitude_deg.abs() < 89.999,
+            "site.latitude_deg",
+            self.latitude_deg,
+            "within (-89.999, 89.999) deg",
+        )?;
+        within(
+            "site.longitude_deg",
+            self.longitude_deg,
+            -360.0,
+            360.0,
+            "in [-360, 360] deg",
+        )?;
+        within(
+            "site.approach_azimuth_deg",
+            self.approach_azimuth_deg,
+            -360.0,
+            360.0,
+            "in [-360, 360] deg",
+        )
     }
 }
 
@@ -207,8 +277,18 @@ pub struct LanderConfig {
     pub rcs_moment_arm_m: [f64; 3],
     /// Attitude thruster specific impulse, seconds (assumed).
     pub rcs_isp_s: f64,
-    /// Height of the centre of mass above the footpads, metres (assumed).
-    pub leg_height_m: f64,
+    /// Footpad centres relative to the centre of mass, body axes, metres (assumed: a
+    /// 3.6 m square footprint, 1.2 m below the centre of mass). Their mean height
+    /// below the centre of mass is the altitude reference ([`Self::leg_height_m`]).
+    #[serde(deserialize_with = "footpad_positions")]
+    pub footpad_positions_body_m: [[f64; 3]; 4],
+    /// Axial stiffness of one leg's shock absorber, N/m (assumed).
+    pub leg_stiffness_n_m: f64,
+    /// Axial damping of one leg, N s/m (assumed: about 0.5 of critical for a quarter
+    /// of the landed mass).
+    pub leg_damping_n_s_m: f64,
+    /// Coulomb friction coefficient of a footpad on regolith (assumed).
+    pub footpad_friction: f64,
     /// Offset of the true centre of mass from the design one, body axes, metres (a
     /// dispersion; the flight software does not know it). Engine moment arms are
     /// measured from the true centre.
@@ -239,7 +319,15 @@ impl Default for LanderConfig {
             rcs_thrust_n: 58.0,
             rcs_moment_arm_m: [1.0, 1.0, 1.0],
             rcs_isp_s: 220.0,
-            leg_height_m: 1.2,
+            footpad_positions_body_m: [
+                [1.8, 0.0, -1.2],
+                [0.0, 1.8, -1.2],
+                [-1.8, 0.0, -1.2],
+                [0.0, -1.8, -1.2],
+            ],
+            leg_stiffness_n_m: 2.0e5,
+            leg_damping_n_s_m: 6.0e3,
+            footpad_friction: 0.6,
             com_offset_body_m: [0.0; 3],
             engine_thrust_scale: [1.0; 4],
             engine_misalignment_deg: [[0.0; 2]; 4],
@@ -252,6 +340,17 @@ impl LanderConfig {
     pub fn rcs_max_torque_nm(&self) -> [f64; 3] {
         self.rcs_moment_arm_m
             .map(|arm| 2.0 * self.rcs_thrust_n * arm)
+    }
+
+    /// Height of the centre of mass above the footpads (their mean), metres: the
+    /// altitude telemetry reports is the footpads' height above the ground below.
+    pub fn leg_height_m(&self) -> f64 {
+        -self
+            .footpad_positions_body_m
+            .iter()
+            .map(|p| p[2])
+            .sum::<f64>()
+            / 4.0
     }
 
     fn validate(&self) -> Result<(), ConfigError> {
@@ -298,12 +397,42 @@ impl LanderConfig {
             "in [0, 1e5] N",
         )?;
         positive_at_most("lander.rcs_isp_s", self.rcs_isp_s, 1e4, "in (0, 1e4] s")?;
+        for p in &self.footpad_positions_body_m {
+            for c in p {
+                within(
+                    "lander.footpad_positions_body_m",
+                    *c,
+                    -100.0,
+                    100.0,
+                    "in [-100, 100] m",
+                )?;
+            }
+            check(
+                p[2] < 0.0,
+                "lander.footpad_positions_body_m",
+                p[2],
+                "each footpad below the centre of mass (z < 0)",
+            )?;
+        }
+        positive_at_most(
+            "lander.leg_stiffness_n_m",
+            self.leg_stiffness_n_m,
+            1e9,
+            "in (0, 1e9] N/m",
+        )?;
         within(
-            "lander.leg_height_m",
-            self.leg_height_m,
+            "lander.leg_damping_n_s_m",
+            self.leg_damping_n_s_m,
             0.0,
-            100.0,
-            "in [0, 100] m",
+            1e8,
+            "in [0, 1e8] N s/m",
+        )?;
+        within(
+            "lander.footpad_friction",
+            self.footpad_friction,
+            0.0,
+            5.0,
+            "in [0, 5]",
         )?;
         for c in self.com_offset_body_m {
             check(c.abs() <= 1.0, "lander.com_offset_body_m", c, "within 1 m")?;
@@ -332,11 +461,15 @@ impl LanderConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct InitialStateConfig {
-    /// Altitude of the footpads above the surface, metres (sourced: ~30 km).
+    /// Surface arc from the start, back along the approach track, to the site, metres
+    /// (assumed: where the reference descent's nominal touchdown falls on the site).
+    pub range_to_site_m: f64,
+    /// Altitude of the footpads above the reference sphere, metres (sourced: ~30 km).
     pub altitude_m: f64,
-    /// Horizontal speed, m/s (sourced: ~1.68 km/s).
+    /// Horizontal speed relative to the surface, along the track, m/s (sourced:
+    /// ~1.68 km/s).
     pub horizontal_speed_m_s: f64,
-    /// Vertical speed, m/s, positive up.
+    /// Vertical speed relative to the surface, m/s, positive up.
     pub vertical_speed_m_s: f64,
     /// Pitch of the thrust axis above the retrograde horizontal, degrees (0: thrust
     /// exactly against the horizontal velocity).
@@ -360,6 +493,7 @@ pub struct InitialStateConfig {
 impl Default for InitialStateConfig {
     fn default() -> Self {
         Self {
+            range_to_site_m: DEFAULT_RANGE_TO_SITE_M,
             altitude_m: 30_000.0,
             horizontal_speed_m_s: 1680.0,
             vertical_speed_m_s: 0.0,
@@ -373,8 +507,20 @@ impl Default for InitialStateConfig {
     }
 }
 
+/// Where the default start sits before the site: the surface arc the reference descent
+/// covers from its start to its nominal touchdown (measured on the default scenario,
+/// `emulator/tests/plant_physics.rs` checks the landing falls near the site).
+pub const DEFAULT_RANGE_TO_SITE_M: f64 = 704_550.0;
+
 impl InitialStateConfig {
     fn validate(&self) -> Result<(), ConfigError> {
+        within(
+            "initial.range_to_site_m",
+            self.range_to_site_m,
+            0.0,
+            5e6,
+            "in [0, 5000] km",
+        )?;
         positive_at_most("initial.altitude_m", self.altitude_m, 1e7, "in (0, 1e7] m")?;
         within(
             "initial.horizontal_speed_m_s",
@@ -516,8 +662,17 @@ pub struct TouchdownLimits {
     pub vertical_speed_mps: f64,
     /// Largest horizontal speed, m/s.
     pub horizontal_speed_mps: f64,
-    /// Largest tilt of the body Z axis from the local vertical, degrees.
+    /// Largest tilt of the body Z axis from the local vertical once at rest, degrees.
     pub tilt_deg: f64,
+    /// Largest terrain slope under the footprint, degrees (sourced design limit).
+    pub slope_deg: f64,
+    /// At rest: every footpad's speed over the ground below this, m/s (assumed).
+    pub rest_speed_m_s: f64,
+    /// ... held this long, seconds (assumed).
+    pub rest_hold_s: f64,
+    /// The run ends this long after first contact even if the vehicle is still
+    /// moving; it is then judged as it is, seconds (assumed).
+    pub settle_timeout_s: f64,
 }
 
 impl Default for TouchdownLimits {
@@ -526,6 +681,10 @@ impl Default for TouchdownLimits {
             vertical_speed_mps: 2.0,
             horizontal_speed_mps: 0.5,
             tilt_deg: 10.0,
+            slope_deg: 12.0,
+            rest_speed_m_s: 0.01,
+            rest_hold_s: 0.5,
+            settle_timeout_s: 20.0,
         }
     }
 }
@@ -547,6 +706,31 @@ impl TouchdownLimits {
             "in (0, 100] m/s",
         )?;
         positive_at_most("touchdown.tilt_deg", self.tilt_deg, 90.0, "in (0, 90] deg")?;
+        positive_at_most(
+            "touchdown.slope_deg",
+            self.slope_deg,
+            90.0,
+            "in (0, 90] deg",
+        )?;
+        positive_at_most(
+            "touchdown.rest_speed_m_s",
+            self.rest_speed_m_s,
+            10.0,
+            "in (0, 10] m/s",
+        )?;
+        within(
+            "touchdown.rest_hold_s",
+            self.rest_hold_s,
+            0.0,
+            100.0,
+            "in [0, 100] s",
+        )?;
+        positive_at_most(
+            "touchdown.settle_timeout_s",
+            self.settle_timeout_s,
+            3600.0,
+            "in (0, 3600] s",
+        )?;
         Ok(())
     }
 }
@@ -557,6 +741,10 @@ impl TouchdownLimits {
 pub struct ScenarioConfig {
     /// Central body.
     pub moon: MoonConfig,
+    /// Landing site: the scenario's origin.
+    pub site: SiteConfig,
+    /// Terrain about the site (default: the bare sphere).
+    pub terrain: crate::world::terrain::TerrainSpec,
     /// Vehicle.
     pub lander: LanderConfig,
     /// Main propulsion.
@@ -659,13 +847,15 @@ impl ModelErrorConfig {
 impl ScenarioConfig {
     /// Checks every field; run before tick 0.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        positive_at_most(
-            "moon.mu_m3_s2",
-            self.moon.mu_m3_s2,
-            1e18,
-            "in (0, 1e18] m^3/s^2",
-        )?;
-        positive_at_most("moon.radius_m", self.moon.radius_m, 1e8, "in (0, 1e8] m")?;
+        self.moon.validate()?;
+        self.site.validate()?;
+        if let Err(e) = self.terrain.validate() {
+            return Err(ConfigError {
+                field: "terrain",
+                value: e.to_string(),
+                why: "see docs/terrain.md",
+            });
+        }
         self.lander.validate()?;
         self.propulsion.validate()?;
         self.initial.validate()?;

@@ -6,10 +6,12 @@
 //! (scenario numbers), [`plant`] (rigid body, gravity, contact), [`propulsion`] (models
 //! behind one trait, the learned surrogate's runtime among them), [`sanitize`] (the
 //! link's guard), [`link`] (the exchange: iceoryx2, in-process, replay), [`clock`]
-//! (lockstep, realtime, replay pacing), [`faults`], [`scheduler`] (the one step loop),
+//! (lockstep, realtime, replay pacing), [`faults`], [`schedule`] (rate groups on one
+//! base tick), [`scheduler`] (the one step loop),
 //! [`timing`], [`digest`], [`recorder`], [`report`], [`session`] (one run, with the
 //! flight software handed in as a value), and [`exact_json`] (what the bench writes,
-//! read back bit for bit), and [`fixed_len`] (arrays read at exactly their length).
+//! read back bit for bit), [`fixed_len`] (arrays read at exactly their length), and
+//! [`world`] (the terrain about the landing site).
 //!
 //! The lab (`oils-lab`: training, validation, campaigns, plots, MCAP) builds on this
 //! crate; nothing here depends on it, on a command line or on plotting.
@@ -30,6 +32,8 @@ pub mod recorder;
 pub mod report;
 pub mod run_config;
 pub mod sanitize;
+pub mod schedule;
 pub mod scheduler;
 pub mod session;
 pub mod timing;
+pub mod world;

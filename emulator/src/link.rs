@@ -13,7 +13,7 @@
 use crate::recorder::{Log, REC_COMMAND_RECEIVED, REC_END_OF_RUN};
 use oils_shared::fsw::{answer, FlightSoftware, FswFailure};
 use oils_shared::link::{EmulatorLink, LinkError, PeerPort};
-use oils_shared::{AsBytes, Command, Telemetry};
+use oils_shared::{AsBytes, Command, Telemetry, TLM_FLAG_END_OF_RUN};
 use std::sync::atomic::AtomicBool;
 
 /// What can stop an exchange.
@@ -245,6 +245,11 @@ pub struct ReplayLink {
     log: Log,
     next: usize,
     pending: Option<Command>,
+    /// The recorded run was aborted at this step after its telemetry had gone out: the
+    /// replay ends its step there too (the end record says so).
+    abort_at: Option<u64>,
+    abort_now: bool,
+    diverged: Option<u64>,
 }
 
 impl ReplayLink {
@@ -254,13 +259,29 @@ impl ReplayLink {
             log,
             next: 0,
             pending: None,
+            abort_at: None,
+            abort_now: false,
+            diverged: None,
         }
+    }
+
+    /// Ends the replay's step `step` as the recorded run ended it: aborted once its
+    /// telemetry is out (an end record with `REC_ENDED_AFTER_PUBLISH`).
+    pub fn aborting_at(mut self, step: Option<u64>) -> Self {
+        self.abort_at = step;
+        self
     }
 
     /// Records replayed so far (up to the last step published; a step whose telemetry
     /// a fault withheld is not published, but counts).
     pub fn replayed(&self) -> usize {
         self.next
+    }
+
+    /// The first step whose telemetry differed from the log's, the end's included (the
+    /// scheduler does not stop on the end's: it is the last publish anyway).
+    pub fn diverged(&self) -> Option<u64> {
+        self.diverged
     }
 }
 
@@ -275,16 +296,28 @@ impl Link for ReplayLink {
     fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {
         // One record per step from step 0: the step is the record's position.
         let step = tlm.header.step;
-        let Some(rec) = usize::try_from(step)
+        let end = tlm.header.flags & TLM_FLAG_END_OF_RUN != 0;
+        let rec = usize::try_from(step)
             .ok()
-            .and_then(|i| self.log.records.get(i))
-        else {
-            return Err(ExchangeError::ReplayDiverged { step });
+            .and_then(|i| self.log.records.get(i));
+        let same = match rec {
+            // The recorded run aborted this step after its telemetry went out; the log
+            // holds only the end telemetry published after it (a second draw of the
+            // navigation noise), which the end's publish is compared with.
+            Some(_) if !end && self.abort_at == Some(step) => true,
+            Some(rec) => same_telemetry(&rec.telemetry, tlm),
+            // The end of a log cut short (no end record): the replay's own last step.
+            None => end && step as usize == self.log.records.len() && !self.log.complete,
         };
-        if !same_telemetry(&rec.telemetry, tlm) {
+        if !same {
+            self.diverged.get_or_insert(step);
             return Err(ExchangeError::ReplayDiverged { step });
         }
+        let Some(rec) = rec else {
+            return Ok(());
+        };
         self.next = step as usize + 1;
+        self.abort_now = !end && self.abort_at == Some(step);
         self.pending = (rec.flags & REC_COMMAND_RECEIVED != 0 && rec.flags & REC_END_OF_RUN == 0)
             .then_some(rec.command);
         Ok(())
@@ -295,6 +328,9 @@ impl Link for ReplayLink {
         _deadline_ns: u64,
         _stop: &AtomicBool,
     ) -> Result<Option<Command>, ExchangeError> {
+        if std::mem::take(&mut self.abort_now) {
+            return Err(LinkError::Interrupted.into());
+        }
         Ok(self.pending.take())
     }
 

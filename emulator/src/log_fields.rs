@@ -12,9 +12,11 @@
 //! Adding a field is adding a row: the binary record (if it has a slot), the CSV, the
 //! MCAP message and its schema follow.
 
+use crate::config::ScenarioConfig;
+use crate::plant::frames::{MoonRotation, SiteFrame};
 use crate::plant::TruthState;
 use crate::recorder::{Record, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_REJECTED_VALUES};
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 
 /// The per-step message a field belongs to: the MCAP topic `/oils/<name>` and the CSV
 /// column prefix `<name>.`.
@@ -228,37 +230,64 @@ pub struct Sample<'a> {
     pub derived: &'a Derived,
 }
 
-/// The local frame fixed at a run's first record: origin on the surface below the
-/// vehicle, axes east, north, up (`site` in the MCAP's frames).
+/// The run's landing site: the Moon-fixed East-North-Up frame at the scenario's site
+/// (`site` in the MCAP's frames), and the Moon's rotation that carries it.
 #[derive(Debug, Clone, Copy)]
 pub struct Site {
-    /// Origin, MCI, metres.
-    pub origin_mci_m: Vector3<f64>,
-    /// Rotation from site axes to MCI.
-    pub q_mci_from_site: UnitQuaternion<f64>,
+    /// The site frame, Moon-fixed.
+    pub frame: SiteFrame,
+    /// The Moon's rotation.
+    pub rotation: MoonRotation,
 }
 
 impl Site {
-    /// The site below the vehicle's true position.
-    pub fn below(truth: &TruthState) -> Self {
-        let r = Vector3::from(truth.pos_mci_m);
-        let up = r.try_normalize(1e-9).unwrap_or(Vector3::z());
-        let east = Vector3::z()
-            .cross(&up)
-            .try_normalize(1e-9)
-            .unwrap_or(Vector3::x());
-        let north = up.cross(&east);
-        let rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[east, north, up]));
-        let surface = (r.norm() - truth.altitude_m).max(0.0);
+    /// The site of a scenario.
+    pub fn of_scenario(cfg: &ScenarioConfig) -> Self {
         Self {
-            origin_mci_m: up * surface,
-            q_mci_from_site: UnitQuaternion::from_rotation_matrix(&rot),
+            frame: SiteFrame::from_deg(
+                cfg.site.latitude_deg,
+                cfg.site.longitude_deg,
+                cfg.moon.radius_m,
+            ),
+            rotation: MoonRotation {
+                rate_rad_s: cfg.moon.rotation_rate_rad_s,
+            },
         }
     }
 
-    /// An MCI position in site coordinates (east, north, up), metres.
-    pub fn site_of(&self, p_mci: &Vector3<f64>) -> Vector3<f64> {
-        self.q_mci_from_site.inverse() * (p_mci - self.origin_mci_m)
+    /// The site of the run whose log header is `header_json`; the default scenario's
+    /// when the header cannot be read.
+    pub fn of_log_header(header_json: &str) -> Self {
+        match crate::session::read_log_header(header_json) {
+            Ok((cfg, _)) => Self::of_scenario(&cfg.scenario),
+            Err(_) => Self::of_scenario(&ScenarioConfig::default()),
+        }
+    }
+
+    /// An MCI position at `t_s` in site coordinates (east, north, up), metres.
+    pub fn site_of(&self, p_mci: &Vector3<f64>, t_s: f64) -> Vector3<f64> {
+        self.frame
+            .site_from_mcmf(&(self.rotation.mcmf_from_mci(t_s) * p_mci))
+    }
+
+    /// An MCI vector at `t_s` in site axes.
+    pub fn site_axes(&self, v_mci: &Vector3<f64>, t_s: f64) -> Vector3<f64> {
+        self.frame
+            .site_dir_from_mcmf(&(self.rotation.mcmf_from_mci(t_s) * v_mci))
+    }
+
+    /// The rotation from site axes to MCI at `t_s` (for the MCAP frame transforms).
+    pub fn q_mci_from_site(&self, t_s: f64) -> UnitQuaternion<f64> {
+        let mcmf_from_site =
+            nalgebra::Rotation3::from_matrix_unchecked(self.frame.rot_site_from_mcmf().transpose());
+        UnitQuaternion::from_rotation_matrix(
+            &(self.rotation.mcmf_from_mci(t_s).inverse() * mcmf_from_site),
+        )
+    }
+
+    /// The site frame's origin at `t_s`, MCI, metres.
+    pub fn origin_mci_m(&self, t_s: f64) -> Vector3<f64> {
+        self.rotation.mcmf_from_mci(t_s).inverse() * self.frame.origin_mcmf()
     }
 }
 
@@ -266,21 +295,26 @@ impl Site {
 /// vertical, the position in the site frame).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Derived {
-    /// Radial velocity, m/s (negative: descending).
+    /// Radial velocity relative to the surface, m/s (negative: descending).
     pub vertical_speed_m_s: f64,
-    /// Velocity across the local vertical, m/s.
+    /// Velocity relative to the surface across the local vertical, m/s.
     pub horizontal_speed_m_s: f64,
     /// Angle between the thrust axis (body +Z) and the local vertical, degrees.
     pub tilt_deg: f64,
     /// Position in the site frame (east, north, up), metres.
     pub pos_site_m: [f64; 3],
+    /// Velocity relative to the surface, site axes, m/s.
+    pub vel_site_m_s: [f64; 3],
 }
 
 impl Derived {
-    /// What `truth` gives, with the run's `site`.
-    pub fn of(truth: &TruthState, site: &Site) -> Self {
+    /// What `truth` at `t_s` gives, with the run's `site`. Speeds are relative to the
+    /// turning surface.
+    pub fn of(truth: &TruthState, t_s: f64, site: &Site) -> Self {
         let r = Vector3::from(truth.pos_mci_m);
-        let v = Vector3::from(truth.vel_mci_m_s);
+        let v = site
+            .rotation
+            .surface_relative_mci(&r, &Vector3::from(truth.vel_mci_m_s));
         let up = r.try_normalize(1e-9).unwrap_or(Vector3::z());
         let vertical = v.dot(&up);
         let horizontal = (v - up * vertical).norm();
@@ -288,12 +322,14 @@ impl Derived {
         let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
         let axis = q * Vector3::z();
         let tilt = axis.dot(&up).clamp(-1.0, 1.0).acos().to_degrees();
-        let p = site.site_of(&r);
+        let p = site.site_of(&r, t_s);
+        let vs = site.site_axes(&v, t_s);
         Self {
             vertical_speed_m_s: vertical,
             horizontal_speed_m_s: horizontal,
             tilt_deg: tilt,
             pos_site_m: [p.x, p.y, p.z],
+            vel_site_m_s: [vs.x, vs.y, vs.z],
         }
     }
 }
@@ -682,6 +718,7 @@ pub static FIELDS: &[Field] = &[
         .rate_body_rad_s[i]
         .to_degrees()),
     derived!(Truth, "pos_site_m", F64, 3, |_r, d, i| d.pos_site_m[i]),
+    derived!(Truth, "vel_site_m_s", F64, 3, |_r, d, i| d.vel_site_m_s[i]),
     Field {
         since: 2,
         ..slot!(Truth, "faults_active", U64, 57, |r| r.faults_active)

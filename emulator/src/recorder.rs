@@ -4,23 +4,32 @@
 //!
 //! File layout (little-endian):
 //! ```text
-//! magic      8 bytes  "OILSLOG3"
+//! magic      8 bytes  "OILSLOG4"
 //! header_len u32      length of the JSON header that follows
+//! header_crc u32      CRC-32 of the header bytes (an edited header is refused)
 //! header     JSON     the run's whole configuration (RunConfig), run id, protocol version
-//! records    RECORD_SIZE bytes each, until the end of the file:
+//! records    RECORD_SIZE bytes each:
 //!            flags u32 | crc32 u32 | Telemetry (304 bytes) | Command (120 bytes)
 //!            | applied command, true state, active faults and the step's timing:
 //!              TRUTH_VALUES f64s, the slots of `log_fields::FIELDS` (a timing figure
 //!              the step has not is NaN)
+//! trailer    TRAILER_SIZE bytes, written when the log is closed:
+//!            "OILSEND4" | records u64 | crc32 u32 (of the 16 bytes before it)
 //! ```
 //! The CRC-32 covers the flags and everything after the CRC, so a damaged record is
-//! found and named by its position, never read as data.
+//! found and named by its position, never read as data. A log without its trailer (or
+//! whose trailer counts other records than it holds) is read, with a warning: the run
+//! was interrupted (kill -9, a full disk) or the file was cut. OILSLOG3 logs (no header
+//! CRC, no trailer) are still read.
+//!
+//! The file is created 0600 and locked (`flock`, exclusive) for the whole run: a second
+//! run given the same `--log` fails at once, before it touches the file.
 //!
 //! The stepping thread hands each record to a bounded crossbeam channel (a copy, no
-//! allocation). The writer thread drains it, and flushes to the OS whenever the channel
-//! runs dry, so a crash of either process loses at most the records still in flight.
-//! [`Recorder::finish`] (or dropping the recorder, on any error path) closes the channel,
-//! writes the rest, flushes and `fsync`s.
+//! allocation). The writer thread drains it, and hands every batch to the OS whenever the
+//! channel runs dry, so a crash of either process loses at most the records still in
+//! flight. [`Recorder::finish`] (or dropping the recorder, on any error path) closes the
+//! channel, writes the rest and the trailer, and `fsync`s.
 
 use crate::log_fields::{self, Access, Derived, Sample, Site, Value};
 use crate::plant::{ActuatorCommand, TruthState};
@@ -28,13 +37,19 @@ use crossbeam::channel::{bounded, Receiver, Sender, TrySendError};
 use oils_shared::{AsBytes, Command, Telemetry};
 use serde::{Deserialize, Serialize};
 use std::fs::File;
-use std::io::{BufWriter, Read, Write};
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
 use thiserror::Error;
 
 /// File magic of this format.
-pub const MAGIC: &[u8; 8] = b"OILSLOG3";
+pub const MAGIC: &[u8; 8] = b"OILSLOG4";
+/// Magic of the format before the header CRC and the trailer: still read.
+const MAGIC_V3: &[u8; 8] = b"OILSLOG3";
+/// Magic of the trailer that closes a log.
+const TRAILER_MAGIC: &[u8; 8] = b"OILSEND4";
+/// Bytes of the trailer.
+pub const TRAILER_SIZE: usize = 20;
 /// Magic of the format before per-step timing, refused with a clear message.
 const MAGIC_V2: &[u8; 8] = b"OILSLOG2";
 /// Magic of the first format (wire packets only), refused with a clear message.
@@ -57,6 +72,10 @@ pub const REC_END_OF_RUN: u32 = 1 << 3;
 pub const REC_FAULT_FIRED: u32 = 1 << 4;
 /// Record flag: a fault cleared at this step.
 pub const REC_FAULT_CLEARED: u32 = 1 << 5;
+/// Record flag, on the end record: this step's telemetry had gone to the flight software
+/// before the run ended (it was aborted while waiting for, or checking, the command), so
+/// a replay publishes it twice too.
+pub const REC_ENDED_AFTER_PUBLISH: u32 = 1 << 6;
 
 /// Records in flight between the stepping thread and the writer.
 const CHANNEL_CAPACITY: usize = 8192;
@@ -184,6 +203,24 @@ pub enum RecorderError {
         /// The OS error.
         source: std::io::Error,
     },
+    /// Writing a record failed (a full disk: "No space left on device").
+    #[error("log {path}: writing the record of step {step} failed; the log holds the {written} records before it")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Step of the first record not written.
+        step: u64,
+        /// Whole records written to the file before it.
+        written: u64,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// Another process holds the log file's lock (a second run given the same `--log`).
+    #[error("log {path} is being written by another run (it holds the file's lock); give this run another --log")]
+    Locked {
+        /// The file.
+        path: PathBuf,
+    },
     /// The writer thread is gone (it failed earlier; see its error).
     #[error("log writer stopped: {0}")]
     WriterGone(String),
@@ -278,20 +315,64 @@ pub struct Recorder {
     path: PathBuf,
 }
 
+/// Opens `path` for a run's log: created 0600 (a log holds the run's whole
+/// configuration; share it on purpose), locked exclusively for as long as the file stays
+/// open (a second run on the same path fails here, before it truncates anything), then
+/// emptied. Also the MCAP writer's way to open its file.
+pub fn create_locked(path: &Path) -> Result<File, RecorderError> {
+    use std::os::unix::fs::OpenOptionsExt;
+    let io = |source| RecorderError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .mode(0o600)
+        .open(path)
+        .map_err(io)?;
+    match file.try_lock() {
+        Ok(()) => {}
+        Err(std::fs::TryLockError::WouldBlock) => {
+            return Err(RecorderError::Locked {
+                path: path.to_path_buf(),
+            })
+        }
+        Err(std::fs::TryLockError::Error(e)) => return Err(io(e)),
+    }
+    // Not a regular file (`/dev/full`, a pipe): nothing to empty.
+    if file.metadata().is_ok_and(|m| m.is_file()) {
+        file.set_len(0).map_err(io)?;
+    }
+    Ok(file)
+}
+
 impl Recorder {
-    /// Creates the log file, writes the header and starts the writer thread.
+    /// Creates the log file (see [`create_locked`]), writes the header and starts the
+    /// writer thread.
     pub fn create(path: &Path, header_json: &str) -> Result<Self, RecorderError> {
+        let file = create_locked(path)?;
+        Self::over(path, Box::new(file), header_json)
+    }
+
+    /// A recorder writing OILSLOG4 to `out` (a file; in tests, a writer that fails);
+    /// `path` names it in errors.
+    pub fn over(
+        path: &Path,
+        mut out: Box<dyn Sink>,
+        header_json: &str,
+    ) -> Result<Self, RecorderError> {
         let io = |source| RecorderError::Io {
             path: path.to_path_buf(),
             source,
         };
-        let file = File::create(path).map_err(io)?;
-        let mut out = BufWriter::with_capacity(1 << 20, file);
-        out.write_all(MAGIC).map_err(io)?;
-        out.write_all(&(header_json.len() as u32).to_le_bytes())
-            .map_err(io)?;
-        out.write_all(header_json.as_bytes()).map_err(io)?;
-        out.flush().map_err(io)?;
+        let mut head = Vec::with_capacity(16 + header_json.len());
+        head.extend_from_slice(MAGIC);
+        head.extend_from_slice(&(header_json.len() as u32).to_le_bytes());
+        head.extend_from_slice(&crc32fast::hash(header_json.as_bytes()).to_le_bytes());
+        head.extend_from_slice(header_json.as_bytes());
+        out.write_all(&head).map_err(io)?;
         let (tx, rx) = bounded(CHANNEL_CAPACITY);
         let thread_path = path.to_path_buf();
         let writer = std::thread::Builder::new()
@@ -388,36 +469,100 @@ impl Drop for Recorder {
     }
 }
 
+/// Where the OILSLOG4 writer puts its bytes: a file (synced at the end), or a test's
+/// writer.
+pub trait Sink: Write + Send {
+    /// Makes what was written durable (`fsync` for a file).
+    fn sync(&mut self) -> std::io::Result<()>;
+}
+
+impl Sink for File {
+    fn sync(&mut self) -> std::io::Result<()> {
+        self.sync_all()
+    }
+}
+
+/// Bytes handed to the OS at once (at most; less when the channel runs dry).
+const BATCH_BYTES: usize = 1 << 20;
+
 fn write_records(
     rx: Receiver<Record>,
-    mut out: BufWriter<File>,
+    mut out: Box<dyn Sink>,
     path: PathBuf,
 ) -> Result<u64, RecorderError> {
+    let mut buf = [0u8; RECORD_SIZE];
+    let mut batch: Vec<u8> = Vec::with_capacity(BATCH_BYTES + RECORD_SIZE);
+    // Steps of the records in `batch` (for the error of a failed write).
+    let mut first_step = 0u64;
+    let mut written = 0u64;
+    // Hands `batch` to the OS; on failure, counts the whole records that got there.
+    fn put(
+        out: &mut dyn Sink,
+        path: &Path,
+        batch: &mut Vec<u8>,
+        first_step: u64,
+        written: &mut u64,
+    ) -> Result<(), RecorderError> {
+        let mut done = 0;
+        while done < batch.len() {
+            let e = match out.write(&batch[done..]) {
+                Ok(0) => std::io::Error::new(
+                    std::io::ErrorKind::WriteZero,
+                    "the file took no more bytes",
+                ),
+                Ok(n) => {
+                    done += n;
+                    continue;
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => e,
+            };
+            let whole = (done / RECORD_SIZE) as u64;
+            *written += whole;
+            return Err(RecorderError::Write {
+                path: path.to_path_buf(),
+                step: first_step + whole,
+                written: *written,
+                source: e,
+            });
+        }
+        *written += (batch.len() / RECORD_SIZE) as u64;
+        batch.clear();
+        Ok(())
+    }
+    // Block for the next record; then drain without blocking; write when dry or full.
+    while let Ok(rec) = rx.recv() {
+        let mut next = Some(rec);
+        while let Some(rec) = next {
+            if batch.is_empty() {
+                first_step = rec.telemetry.header.step;
+            }
+            rec.encode(&mut buf);
+            batch.extend_from_slice(&buf);
+            if batch.len() >= BATCH_BYTES {
+                put(out.as_mut(), &path, &mut batch, first_step, &mut written)?;
+            }
+            next = rx.try_recv().ok();
+        }
+        put(out.as_mut(), &path, &mut batch, first_step, &mut written)?;
+    }
     let io = |source| RecorderError::Io {
         path: path.clone(),
         source,
     };
-    let mut buf = [0u8; RECORD_SIZE];
-    let mut written = 0u64;
-    // Block for the next record; then drain without blocking; flush when dry.
-    while let Ok(rec) = rx.recv() {
-        rec.encode(&mut buf);
-        out.write_all(&buf).map_err(io)?;
-        written += 1;
-        while let Ok(rec) = rx.try_recv() {
-            rec.encode(&mut buf);
-            out.write_all(&buf).map_err(io)?;
-            written += 1;
-        }
-        out.flush().map_err(io)?;
-    }
+    let mut trailer = [0u8; TRAILER_SIZE];
+    trailer[..8].copy_from_slice(TRAILER_MAGIC);
+    trailer[8..16].copy_from_slice(&written.to_le_bytes());
+    let crc = crc32fast::hash(&trailer[..16]);
+    trailer[16..].copy_from_slice(&crc.to_le_bytes());
+    out.write_all(&trailer).map_err(io)?;
     out.flush().map_err(io)?;
-    out.get_ref().sync_all().map_err(io)?;
+    out.sync().map_err(io)?;
     Ok(written)
 }
 
 /// A log file read back.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct Log {
     /// The JSON header.
     pub header_json: String,
@@ -427,6 +572,58 @@ pub struct Log {
     pub damaged_records: Vec<u64>,
     /// Bytes after the last whole record (a crash mid-write leaves some).
     pub trailing_bytes: usize,
+    /// Whether the log holds its run's end: the end-of-run record, and (OILSLOG4) the
+    /// trailer counting every record. `false`: the run was interrupted (kill -9, a full
+    /// disk) or the file cut; every record before is still read.
+    pub complete: bool,
+    /// What a reader should tell its user (a log without its end, ...).
+    pub warnings: Vec<String>,
+}
+
+impl Log {
+    /// Sets [`Log::complete`] from the last record (and `trailer_ok`), with the warning
+    /// a log without its end gets.
+    pub fn check_end(&mut self, trailer_ok: bool) {
+        let end_record = self
+            .records
+            .last()
+            .is_some_and(|r| r.flags & REC_END_OF_RUN != 0);
+        self.complete = end_record && trailer_ok && self.damaged_records.is_empty();
+        if !end_record || !trailer_ok {
+            let n = self.records.len() + self.damaged_records.len();
+            self.warnings.push(format!(
+                "log ends without its end record: run interrupted after {n} records"
+            ));
+        }
+    }
+
+    /// Refuses records of more than one run (two runs writing one file) and records of
+    /// another run than the header's.
+    fn check_one_run(&self, path: &Path) -> Result<(), RecorderError> {
+        let header_id = serde_json::from_str::<serde_json::Value>(&self.header_json)
+            .ok()
+            .and_then(|h| h["run_id"].as_str().map(str::to_string))
+            .and_then(|s| u64::from_str_radix(&s, 16).ok());
+        let Some(first) = header_id.or(self.records.first().map(|r| r.telemetry.header.run_id))
+        else {
+            return Ok(());
+        };
+        if let Some((i, r)) = self
+            .records
+            .iter()
+            .enumerate()
+            .find(|(_, r)| r.telemetry.header.run_id != first)
+        {
+            return Err(RecorderError::NotALog {
+                path: path.to_path_buf(),
+                why: format!(
+                    "it mixes runs: record {i} is of run {:016x}, the log's run is {first:016x} (two runs wrote one file?)",
+                    r.telemetry.header.run_id
+                ),
+            });
+        }
+        Ok(())
+    }
 }
 
 /// Reads a whole log file.
@@ -443,6 +640,20 @@ pub fn read_log(path: &Path) -> Result<Log, RecorderError> {
     parse_log(path, &bytes)
 }
 
+/// The record count of a valid trailer at the end of `body`, if there is one.
+fn trailer_count(body: &[u8]) -> Option<u64> {
+    let at = body.len().checked_sub(TRAILER_SIZE)?;
+    let t = &body[at..];
+    if &t[..8] != TRAILER_MAGIC || at % RECORD_SIZE != 0 {
+        return None;
+    }
+    let crc = u32::from_le_bytes(t[16..20].try_into().ok()?);
+    if crc != crc32fast::hash(&t[..16]) {
+        return None;
+    }
+    Some(u64::from_le_bytes(t[8..16].try_into().ok()?))
+}
+
 /// Parses a whole log file's bytes (`path` names it in errors). Never panics: any bytes
 /// give a log or an error (fuzzed, see `fuzz/`).
 pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
@@ -452,39 +663,63 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
     };
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V1 {
         return Err(not_log(
-            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG3 log",
+            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG4 log",
         ));
     }
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V2 {
         return Err(not_log(
-            "an OILSLOG2 log, the format before per-step timing was recorded; run again (`oils run --config-from` its report) to get an OILSLOG3 log",
+            "an OILSLOG2 log, the format before per-step timing was recorded; run again (`oils run --config-from` its report) to get an OILSLOG4 log",
         ));
     }
-    if bytes.len() < 12 || &bytes[..8] != MAGIC {
-        return Err(not_log("missing OILSLOG3 magic"));
+    let v3 = bytes.len() >= 8 && &bytes[..8] == MAGIC_V3;
+    if bytes.len() < 12 || (&bytes[..8] != MAGIC && !v3) {
+        return Err(not_log(
+            "missing OILSLOG4 magic (this program reads OILSLOG4 and OILSLOG3)",
+        ));
     }
     let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
-    let body_start = 12usize
+    let header_start: usize = if v3 { 12 } else { 16 };
+    let body_start = header_start
         .checked_add(header_len)
         .filter(|e| *e <= bytes.len())
         .ok_or_else(|| not_log("truncated header"))?;
-    let header_json = String::from_utf8(bytes[12..body_start].to_vec())
-        .map_err(|_| not_log("header is not UTF-8"))?;
-    let body = &bytes[body_start..];
-    let mut records = Vec::with_capacity(body.len() / RECORD_SIZE);
-    let mut damaged_records = Vec::new();
-    for (i, chunk) in body.chunks_exact(RECORD_SIZE).enumerate() {
-        match Record::decode(chunk) {
-            Some(r) => records.push(r),
-            None => damaged_records.push(i as u64),
+    let header = &bytes[header_start..body_start];
+    if !v3 {
+        let stored = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]);
+        if stored != crc32fast::hash(header) {
+            return Err(not_log(
+                "its header's CRC does not match: the header (the run's configuration) was edited or damaged",
+            ));
         }
     }
-    Ok(Log {
+    let header_json =
+        String::from_utf8(header.to_vec()).map_err(|_| not_log("header is not UTF-8"))?;
+    let mut body = &bytes[body_start..];
+    let trailer = if v3 { None } else { trailer_count(body) };
+    if trailer.is_some() {
+        body = &body[..body.len() - TRAILER_SIZE];
+    }
+    let mut log = Log {
         header_json,
-        records,
-        damaged_records,
+        records: Vec::with_capacity(body.len() / RECORD_SIZE),
         trailing_bytes: body.len() % RECORD_SIZE,
-    })
+        ..Log::default()
+    };
+    for (i, chunk) in body.chunks_exact(RECORD_SIZE).enumerate() {
+        match Record::decode(chunk) {
+            Some(r) => log.records.push(r),
+            None => log.damaged_records.push(i as u64),
+        }
+    }
+    log.check_one_run(path)?;
+    let held = (body.len() / RECORD_SIZE) as u64;
+    log.check_end(v3 || trailer == Some(held));
+    if let Some(n) = trailer.filter(|n| *n != held) {
+        log.warnings.push(format!(
+            "its trailer counts {n} records, the file holds {held}"
+        ));
+    }
+    Ok(log)
 }
 
 /// Writes a log's records as CSV: one row per record, one column per value of every
@@ -493,10 +728,10 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
 /// number: flags 1/0, ids in decimal, an absent figure `NaN`.
 pub fn export_csv(log: &Log, out: &mut impl Write) -> std::io::Result<()> {
     writeln!(out, "{}", log_fields::csv_columns().join(","))?;
-    let site = log.records.first().map(|r| Site::below(&r.truth));
+    let site = Site::of_log_header(&log.header_json);
     let mut line = String::new();
     for r in &log.records {
-        let derived = site.map_or_else(Derived::default, |s| Derived::of(&r.truth, &s));
+        let derived = Derived::of(&r.truth, r.telemetry.header.t_ns as f64 * 1e-9, &site);
         let sample = Sample {
             record: r,
             derived: &derived,
@@ -691,6 +926,144 @@ pub(crate) mod tests {
         std::fs::remove_file(&path).ok();
     }
 
+    /// A log of `n` records of run `run_id`, closed (end record, trailer), as bytes.
+    fn closed_log(name: &str, n: u64, run_id: u64) -> Vec<u8> {
+        let path = temp(name);
+        let rec = Recorder::create(&path, &format!(r#"{{"run_id":"{run_id:016x}"}}"#)).unwrap();
+        for k in 0..n {
+            let mut r = Record::default();
+            r.telemetry.header = oils_shared::PacketHeader::new(run_id, k, k as i64 * 10);
+            if k + 1 == n {
+                r.flags = REC_END_OF_RUN;
+            }
+            rec.record(&r).unwrap();
+        }
+        assert_eq!(rec.finish().unwrap(), n);
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::remove_file(&path).ok();
+        bytes
+    }
+
+    /// A log cut at a record boundary read as whole; now it is read with a warning that
+    /// names how many records it holds.
+    #[test]
+    fn a_log_cut_at_a_record_boundary_says_so() {
+        let bytes = closed_log("cut.oilslog", 10, 7);
+        let whole = parse_log(Path::new("x"), &bytes).unwrap();
+        assert!(whole.complete, "{:?}", whole.warnings);
+        assert!(whole.warnings.is_empty());
+        // Cut after 6 records: no end record, no trailer.
+        let cut = bytes.len() - TRAILER_SIZE - 4 * RECORD_SIZE;
+        let log = parse_log(Path::new("x"), &bytes[..cut]).unwrap();
+        assert_eq!(log.records.len(), 6);
+        assert!(!log.complete);
+        assert_eq!(
+            log.warnings,
+            ["log ends without its end record: run interrupted after 6 records"]
+        );
+        // Only the trailer lost (killed while closing): still not complete.
+        let log = parse_log(Path::new("x"), &bytes[..bytes.len() - TRAILER_SIZE]).unwrap();
+        assert_eq!(log.records.len(), 10);
+        assert!(!log.complete);
+    }
+
+    /// An edited header went unnoticed; its CRC now refuses it.
+    #[test]
+    fn an_edited_header_is_refused() {
+        let mut bytes = closed_log("hdr.oilslog", 3, 7);
+        let at = 16 + 3;
+        bytes[at] ^= 0x01;
+        let e = parse_log(Path::new("x"), &bytes).unwrap_err().to_string();
+        assert!(e.contains("header's CRC does not match"), "{e}");
+    }
+
+    /// Two runs writing one file: records of two run ids were read without complaint.
+    #[test]
+    fn a_log_mixing_runs_is_refused() {
+        let a = closed_log("mix-a.oilslog", 4, 0xaaaa);
+        let b = closed_log("mix-b.oilslog", 4, 0xbbbb);
+        let head = a.len() - TRAILER_SIZE - 4 * RECORD_SIZE;
+        let mut mixed = a[..head + 2 * RECORD_SIZE].to_vec();
+        mixed.extend_from_slice(&b[head + 2 * RECORD_SIZE..]);
+        let e = parse_log(Path::new("x"), &mixed).unwrap_err().to_string();
+        assert!(e.contains("mixes runs") && e.contains("record 2"), "{e}");
+    }
+
+    /// A second recorder on a file a run is writing fails at once, before it empties it.
+    #[test]
+    fn a_second_recorder_on_one_file_is_refused() {
+        let path = temp("locked.oilslog");
+        let first = Recorder::create(&path, "{}").unwrap();
+        first.record(&Record::default()).unwrap();
+        let e = Recorder::create(&path, "{}").err().unwrap();
+        assert!(matches!(e, RecorderError::Locked { .. }), "{e}");
+        assert_eq!(first.finish().unwrap(), 1);
+        assert_eq!(read_log(&path).unwrap().records.len(), 1);
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&path).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o600, "{mode:o}");
+        std::fs::remove_file(&path).ok();
+    }
+
+    /// A disk that fills after `room` bytes.
+    struct FillsUp {
+        room: usize,
+        bytes: std::sync::Arc<std::sync::Mutex<Vec<u8>>>,
+    }
+
+    impl Write for FillsUp {
+        fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+            let mut bytes = self.bytes.lock().unwrap();
+            let n = buf.len().min(self.room - bytes.len());
+            if n == 0 {
+                return Err(std::io::Error::from_raw_os_error(28)); // ENOSPC
+            }
+            bytes.extend_from_slice(&buf[..n]);
+            Ok(n)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Sink for FillsUp {
+        fn sync(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    /// On a full disk the summary counted no records and named the step the loop saw the
+    /// failure at. The writer's error now names the first record not written and counts
+    /// the whole records the file holds, which read back.
+    #[test]
+    fn a_full_disk_names_the_failing_record_and_counts_the_written_ones() {
+        let bytes = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let header = "{}";
+        let room = 16 + header.len() + 37 * RECORD_SIZE + 100;
+        let sink = FillsUp {
+            room,
+            bytes: bytes.clone(),
+        };
+        let rec = Recorder::over(Path::new("full.oilslog"), Box::new(sink), header).unwrap();
+        for k in 0..100u64 {
+            let mut r = Record::default();
+            r.telemetry.header.step = k;
+            if rec.record(&r).is_err() {
+                break;
+            }
+        }
+        match rec.finish() {
+            Err(RecorderError::Write { step, written, .. }) => {
+                assert_eq!((step, written), (37, 37));
+            }
+            other => panic!("{other:?}"),
+        }
+        let log = parse_log(Path::new("full.oilslog"), &bytes.lock().unwrap()).unwrap();
+        assert_eq!(log.records.len(), 37);
+        assert_eq!(log.trailing_bytes, 100);
+        assert!(!log.complete);
+    }
+
     #[test]
     fn rejects_files_that_are_not_logs() {
         let path = temp("bad.oilslog");
@@ -764,8 +1137,7 @@ mod profile_tests {
         let log = Log {
             header_json: "{}".into(),
             records,
-            damaged_records: Vec::new(),
-            trailing_bytes: 0,
+            ..Log::default()
         };
         let p = commands_as_profile(&log, 5, 800.0).unwrap();
         assert_eq!(p.rows().len(), 2);

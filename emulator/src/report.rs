@@ -103,10 +103,12 @@ impl RunReport {
         let summary = RunSummary {
             digest: String::new(),
             steps,
+            plant_steps: steps * (cfg.fsw_period_ns() / cfg.dt_ns().max(1)),
+            overruns: Vec::new(),
             outcome: Outcome::Aborted,
             error: Some(error),
             touchdown: None,
-            sim_time_s: steps as f64 * cfg.dt_ms as f64 * 1e-3,
+            sim_time_s: steps as f64 * cfg.fsw_period_ns() as f64 * 1e-9,
             propellant_used_kg: 0.0,
             rejected_commands: 0,
             rejected_values: 0,
@@ -143,10 +145,14 @@ impl RunReport {
         let outcome = format!("{:?}", s.outcome).to_uppercase();
         match &s.touchdown {
             Some(td) => {
+                let why = match td.reason {
+                    Some(r) => format!(" ({})", r.as_str()),
+                    None => String::new(),
+                };
                 let _ = writeln!(
                     out,
-                    "outcome     {outcome} at t = {:.1} s: vertical {:.2} m/s, horizontal {:.2} m/s, tilt {:.2} deg, propellant used {:.1} kg",
-                    td.t_s, td.vertical_speed_mps, td.horizontal_speed_mps, td.tilt_deg, td.propellant_used_kg
+                    "outcome     {outcome}{why}: contact at t = {:.1} s, vertical {:.2} m/s, horizontal {:.2} m/s, slope {:.1} deg; ended t = {:.1} s, tilt {:.2} deg, propellant used {:.1} kg",
+                    td.t_s, td.vertical_speed_mps, td.horizontal_speed_mps, td.slope_deg, td.end_t_s, td.tilt_deg, td.propellant_used_kg
                 );
             }
             None => {
@@ -166,6 +172,26 @@ impl RunReport {
             "steps       {}  wall {:.3} s  realtime factor {:.1}x",
             s.steps, t.wall_s, t.realtime_factor
         );
+        if s.plant_steps != s.steps {
+            let _ = writeln!(
+                out,
+                "rates       {} flight-software cycles, {} plant steps",
+                s.steps, s.plant_steps
+            );
+        }
+        if s.overruns.iter().any(|o| o.count > 0) {
+            let _ = write!(out, "overruns   ");
+            for o in &s.overruns {
+                let _ = write!(
+                    out,
+                    " {} {} ({} ms)",
+                    o.group,
+                    o.count,
+                    o.period_ns as f64 * 1e-6
+                );
+            }
+            let _ = writeln!(out);
+        }
         let _ = writeln!(
             out,
             "timing (us)        p50       p99     p99.9       max     count"
@@ -312,6 +338,43 @@ pub enum RunFailed {
     Verdict(String),
 }
 
+/// Writes `bytes` to `path`, a new file created 0600 (a report holds the run's whole
+/// configuration: share it on purpose).
+pub fn write_private(path: &std::path::Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    use std::os::unix::fs::OpenOptionsExt;
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create(true)
+        .truncate(true)
+        .mode(0o600)
+        .open(path)?;
+    f.write_all(bytes)
+}
+
+/// Checks, before a run starts, that a file can be written in `dir` (created if
+/// missing): a read-only or unusable directory for `--report` or `--plots` then fails at
+/// once, not after the whole run.
+pub fn check_writable_dir(dir: &std::path::Path) -> Result<(), RunFailed> {
+    let fail = |source| RunFailed::ReportFile {
+        path: dir.display().to_string(),
+        source,
+    };
+    let dir = if dir.as_os_str().is_empty() {
+        std::path::Path::new(".")
+    } else {
+        dir
+    };
+    std::fs::create_dir_all(dir).map_err(fail)?;
+    let probe = dir.join(format!(".oils-write-check-{}", std::process::id()));
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)
+        .map_err(fail)?;
+    std::fs::remove_file(&probe).map_err(fail)
+}
+
 /// Prints the table, writes the JSON report if asked, and turns a bad run (aborted,
 /// crashed, or a broken timing threshold) into an error, so the process exits non-zero.
 pub fn finish_run(
@@ -326,9 +389,11 @@ pub fn finish_run(
                 source,
             })?;
         }
-        std::fs::write(path, report.to_json() + "\n").map_err(|source| RunFailed::ReportFile {
-            path: path.display().to_string(),
-            source,
+        write_private(path, (report.to_json() + "\n").as_bytes()).map_err(|source| {
+            RunFailed::ReportFile {
+                path: path.display().to_string(),
+                source,
+            }
         })?;
     }
     let s = &report.summary;

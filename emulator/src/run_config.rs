@@ -132,7 +132,7 @@ pub struct LogConfig {
     /// The log file; default `oils-out/<run id>.oilslog` (`.mcap` for MCAP).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub path: Option<PathBuf>,
-    /// The log's format: `oilslog` (OILSLOG3, the default) or `mcap`.
+    /// The log's format: `oilslog` (OILSLOG4, the default) or `mcap`.
     #[serde(skip_serializing_if = "crate::recorder::LogFormat::is_default")]
     pub format: crate::recorder::LogFormat,
 }
@@ -157,8 +157,15 @@ pub struct RunConfig {
     pub mode: Mode,
     /// Realtime speed factor (2 = twice real time).
     pub speed: f64,
-    /// Step, milliseconds (1-100).
+    /// Step, milliseconds (1-100): the plant's integration period, the schedule's base
+    /// tick.
     pub dt_ms: u64,
+    /// The flight-software cycle, milliseconds: one telemetry/command exchange per
+    /// cycle, the command held over it, the plant stepping `fsw_period_ms / dt_ms` times.
+    /// A whole multiple of `dt_ms`. Unset: the smallest multiple of `dt_ms` of at least
+    /// 10 ms (10 ms for the default 10 ms step and for 1, 2 or 5 ms).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fsw_period_ms: Option<u64>,
     /// Longest simulated time, seconds; the run ends `completed` if still flying.
     pub duration_s: f64,
     /// Seed of every random stream.
@@ -218,6 +225,7 @@ impl Default for RunConfig {
             mode: Mode::Lockstep,
             speed: 1.0,
             dt_ms: 10,
+            fsw_period_ms: None,
             duration_s: 2000.0,
             seed: 0,
             propulsion: PropulsionKind::Surrogate,
@@ -305,7 +313,19 @@ impl RunConfig {
                 "in (0, 1e6] seconds",
             ));
         }
-        let period_s = self.dt_ms as f64 * 1e-3 / self.speed;
+        if let Some(ms) = self.fsw_period_ms {
+            if !(1..=1000).contains(&ms) {
+                return Err(invalid("fsw_period_ms", ms, "1-1000"));
+            }
+        }
+        self.schedule().map_err(|e| {
+            invalid(
+                "fsw_period_ms",
+                self.fsw_period_ns() / 1_000_000,
+                e.to_string(),
+            )
+        })?;
+        let period_s = self.fsw_period_ns() as f64 * 1e-9 / self.speed;
         if !(self.speed.is_finite()
             && self.speed > 0.0
             && self.speed <= 1e6
@@ -314,7 +334,7 @@ impl RunConfig {
             return Err(invalid(
                 "speed",
                 self.speed,
-                format!("in (0, 1e6] with dt_ms / speed at most {MAX_REALTIME_PERIOD_S} s a step"),
+                format!("in (0, 1e6] with the flight-software period / speed at most {MAX_REALTIME_PERIOD_S} s a cycle"),
             ));
         }
         if !(self.deadline_frac.is_finite()
@@ -395,6 +415,7 @@ impl RunConfig {
         }
         for f in &self.faults {
             f.validate()
+                .and_then(|()| f.check_can_fire(self.duration_s, self.dt_ns()))
                 .map_err(|why| invalid("faults", f.to_string(), why))?;
         }
         self.scenario.validate()?;
@@ -403,6 +424,19 @@ impl RunConfig {
                 .map_err(|e| RunConfigError::Hifi(e.to_string()))?;
         }
         Ok(())
+    }
+
+    /// The flight-software cycle, nanoseconds (see `fsw_period_ms`).
+    pub fn fsw_period_ns(&self) -> u64 {
+        match self.fsw_period_ms {
+            Some(ms) => ms * 1_000_000,
+            None => self.dt_ns() * 10_000_000u64.div_ceil(self.dt_ns().max(1)),
+        }
+    }
+
+    /// The run's rate groups: the plant on the base tick, the flight software's cycle.
+    pub fn schedule(&self) -> Result<crate::schedule::Schedule, crate::schedule::ScheduleError> {
+        crate::schedule::Schedule::new(self.dt_ns()).with_group("fsw", self.fsw_period_ns())
     }
 
     /// Step, nanoseconds.

@@ -15,12 +15,12 @@
 
 use crate::clock::StepClock;
 use crate::digest::RunDigest;
-use crate::faults::{FaultPlan, FaultReport, PlantFault};
+use crate::faults::{FaultPlan, FaultReport, FaultyLink};
 use crate::link::{ExchangeError, Link};
 use crate::plant::{ActuatorCommand, Plant, PlantStatus, TouchdownState};
 use crate::recorder::{
-    Record, Recorder, StepTimes, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN,
-    REC_FAULT_CLEARED, REC_FAULT_FIRED, REC_REJECTED_VALUES,
+    Record, Recorder, StepTimes, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_ENDED_AFTER_PUBLISH,
+    REC_END_OF_RUN, REC_FAULT_CLEARED, REC_FAULT_FIRED, REC_REJECTED_VALUES,
 };
 use crate::sanitize::sanitize;
 use crate::timing::{TimingMonitor, TimingThresholds};
@@ -124,8 +124,11 @@ pub enum Outcome {
 /// Loop settings (everything but the physics and the pacing, which is the clock's).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SchedulerConfig {
-    /// Step, nanoseconds.
+    /// Plant integration period (the base tick), nanoseconds.
     pub dt_ns: u64,
+    /// Flight-software cycle, nanoseconds: one exchange per cycle, a whole multiple of
+    /// `dt_ns` (checked before tick 0 by the run configuration's schedule).
+    pub fsw_period_ns: u64,
     /// Longest simulated time before the run ends as `completed`, nanoseconds.
     pub max_duration_ns: i64,
     /// Run id stamped on every packet.
@@ -145,8 +148,16 @@ pub struct SchedulerConfig {
 pub struct RunSummary {
     /// Digest over every packet, hex.
     pub digest: String,
-    /// Steps integrated.
+    /// Flight-software cycles run (one telemetry/command exchange each; with the default
+    /// periods one plant step each).
     pub steps: u64,
+    /// Plant steps integrated (`steps` times the plant steps per cycle, but for a cycle
+    /// cut short by touchdown or an abort).
+    pub plant_steps: u64,
+    /// Per rate group, in realtime, the cycles that overran: `fsw`, a command that
+    /// missed its deadline; `plant`, a cycle whose integration ended after the next
+    /// cycle's start. Zero in lockstep.
+    pub overruns: Vec<RateGroupOverruns>,
     /// How it ended.
     pub outcome: Outcome,
     /// Why it was aborted, if it was.
@@ -172,6 +183,17 @@ pub struct RunSummary {
     /// What the propulsion model reported at the end (surrogate envelope exits, shadow
     /// divergence); `None` for models with nothing to report.
     pub propulsion_diagnostics: Option<crate::propulsion::PropulsionDiagnostics>,
+}
+
+/// Overruns of one rate group.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RateGroupOverruns {
+    /// The group.
+    pub group: &'static str,
+    /// Its period, nanoseconds.
+    pub period_ns: u64,
+    /// Periods that overran.
+    pub count: u64,
 }
 
 /// Errors that stop a run before it starts.
@@ -252,18 +274,28 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     let mut timing = TimingMonitor::new();
     let mut digest = RunDigest::new();
     let with_transport = link.has_transport();
+    let mut plant_faults = [None; crate::faults::MAX_FAULTS];
+    for (i, slot) in plant_faults.iter_mut().enumerate().take(faults.len()) {
+        *slot = faults.plant_fault(i);
+    }
     let mut applied = ActuatorCommand::default();
     let mut status = PlantStatus::Flying;
     let mut rejected_commands = 0u64;
     let mut rejected_values = 0u64;
     let mut abort: Option<Abort> = None;
     let mut steps = 0u64;
+    let mut plant_steps = 0u64;
+    let mut plant_overruns = 0u64;
+    let plant_steps_per_cycle = (cfg.fsw_period_ns / cfg.dt_ns.max(1)).max(1);
     // A failed log (a full disk, ...) ends the run like any abort: the flight software
     // is told, the summary is made, and the session names the writer's error.
     let mut recorder = recorder;
     clock.start();
     let mut last_command_ns = monotonic_ns();
     let mut k: u64 = 0;
+    // The last step whose telemetry went out mid-step (a replay must know whether the
+    // end came before or after it: the end record says).
+    let mut published: Option<u64> = None;
 
     loop {
         let mut step_times = StepTimes::default();
@@ -278,12 +310,10 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         let (fired, cleared) = faults.advance(k, t_ns, plant.altitude_m());
         let mut fault_flags = 0u32;
         if fired | cleared != 0 {
-            for i in 0..faults.len() {
+            for (i, f) in plant_faults.iter().enumerate().take(faults.len()) {
                 let bit = 1u64 << i;
-                if (fired | cleared) & bit != 0 {
-                    if let Some(f) = PlantFault::of(faults.spec(i)) {
-                        plant.set_fault(&f, fired & bit != 0);
-                    }
+                if let (true, Some(f)) = ((fired | cleared) & bit != 0, f) {
+                    plant.set_fault(f, fired & bit != 0);
                 }
             }
             if fired != 0 {
@@ -294,20 +324,27 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             }
         }
         let faults_active = faults.active_mask();
+        let (sensor_faults, link_faults) = faults.stages();
+        let mut link = FaultyLink::new(&mut *link, link_faults);
         let mut tlm = plant.telemetry(PacketHeader::new(cfg.run_id, k, t_ns));
-        faults.apply_sensors(&mut tlm, fired);
+        sensor_faults.apply(&mut tlm, fired);
         let finished = abort.is_some()
             || matches!(status, PlantStatus::Touchdown(_))
             || t_ns >= cfg.max_duration_ns;
         if finished {
             tlm.header.flags |= TLM_FLAG_END_OF_RUN;
             // Best effort: the flight software may be gone already.
-            let _ = link.publish(&tlm);
+            let _ = link.publish_end_of_run(&tlm);
             digest.add_telemetry(&tlm);
             if let Some(r) = recorder {
                 // Best effort too: a failed writer already ended the run.
+                let after_publish = if published == Some(k) {
+                    REC_ENDED_AFTER_PUBLISH
+                } else {
+                    0
+                };
                 let _ = r.record(&Record {
-                    flags: REC_END_OF_RUN | fault_flags,
+                    flags: REC_END_OF_RUN | after_publish | fault_flags,
                     telemetry: tlm,
                     command: Command::default(),
                     applied: ActuatorCommand::default(),
@@ -321,11 +358,15 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
 
         // A link fault may keep Telemetry(k) from the flight software: then nothing is
         // published, nothing can answer, and the step is a miss.
-        let withheld = faults.telemetry_withheld();
+        let withheld = link.withheld();
         let published_ns = monotonic_ns();
-        if !withheld {
-            link.publish(&tlm)?;
+        if link.publish(&tlm)? {
             digest.add_telemetry(&tlm);
+            published = Some(k);
+        } else {
+            // The flight software is excused while it sees nothing: its silence is
+            // counted from the first telemetry it could have answered again.
+            last_command_ns = published_ns;
         }
 
         let deadline_ns = clock.command_deadline_ns(k, published_ns);
@@ -358,7 +399,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             continue;
         }
         // A duplicated command from the previous step arrives stale, and is discarded.
-        if faults.take_duplicate().is_some() {
+        if link.take_stale_duplicate() {
             timing.record_late_command();
         }
 
@@ -403,7 +444,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             None => {}
         }
         // Link faults act between the wire and the sanitiser.
-        match faults.on_command(wire_cmd) {
+        match link.deliver(wire_cmd) {
             Some(cmd) => {
                 let (safe, rejected) = sanitize(&cmd, cfg.max_thrust_n);
                 if rejected > 0 {
@@ -416,8 +457,11 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             None => {
                 timing.record_deadline_miss();
                 flags |= REC_DEADLINE_MISS;
+                // Only a realtime run can miss a deadline on a live link: in lockstep
+                // a miss comes from a fault alone (simulated), and a dead peer is
+                // what `receive_until` waiting out the link timeout finds.
                 let silent_ms = (received_ns - last_command_ns) / 1_000_000;
-                if silent_ms >= cfg.link_timeout_ms {
+                if clock.misses_allowed() && silent_ms >= cfg.link_timeout_ms {
                     abort = Some(Abort::StubSilent {
                         step: k,
                         waited_ms: silent_ms,
@@ -452,14 +496,25 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                 continue;
             }
         }
-        status = plant.step(&applied, cfg.dt_ns);
-        if let Some(what) = plant.first_non_finite() {
-            abort = Some(Abort::NotFinite { step: k, what });
-        } else if let Some(why) = plant.propulsion_failure() {
-            abort = Some(Abort::PropulsionFailed { step: k, why });
+        // Command(k) is held over the flight-software cycle: the plant steps on the
+        // base tick until the next exchange (once, with the default periods).
+        for _ in 0..plant_steps_per_cycle {
+            status = plant.step(&applied, cfg.dt_ns);
+            if let Some(what) = plant.first_non_finite() {
+                abort = Some(Abort::NotFinite { step: k, what });
+            } else if let Some(why) = plant.propulsion_failure() {
+                abort = Some(Abort::PropulsionFailed { step: k, why });
+            }
+            if let Some(observe) = observer.as_mut() {
+                observe(plant_steps, plant);
+            }
+            plant_steps += 1;
+            if abort.is_some() || matches!(status, PlantStatus::Touchdown(_)) {
+                break;
+            }
         }
-        if let Some(observe) = observer.as_mut() {
-            observe(k, plant);
+        if clock.cycle_overran(k) {
+            plant_overruns += 1;
         }
         steps += 1;
         k += 1;
@@ -483,6 +538,23 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     Ok(RunSummary {
         digest: digest.hex(),
         steps,
+        plant_steps,
+        overruns: vec![
+            RateGroupOverruns {
+                group: "plant",
+                period_ns: cfg.dt_ns,
+                count: plant_overruns,
+            },
+            RateGroupOverruns {
+                group: "fsw",
+                period_ns: cfg.fsw_period_ns,
+                count: if clock.misses_allowed() && !clock.is_replay() {
+                    timing.deadline_misses
+                } else {
+                    0
+                },
+            },
+        ],
         outcome,
         error: abort.as_ref().map(Abort::message),
         touchdown,

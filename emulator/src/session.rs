@@ -13,7 +13,9 @@ use crate::faults::{FaultPlan, PlantFault};
 use crate::link::{BoundLink, InProcLink, Link, ReplayLink};
 use crate::plant::Plant;
 use crate::propulsion;
-use crate::recorder::{Log, LogFormat, Recorder, RecorderError, SinkOpener};
+use crate::recorder::{
+    Log, LogFormat, Recorder, RecorderError, SinkOpener, REC_ENDED_AFTER_PUBLISH, REC_END_OF_RUN,
+};
 use crate::report::RunReport;
 use crate::run_config::{LinkKind, RunConfig, RunConfigError};
 use crate::scheduler::{self, Mode, SchedulerConfig, SchedulerError};
@@ -146,12 +148,20 @@ pub fn fault_plan(cfg: &RunConfig, plant: &Plant) -> Result<FaultPlan, SessionEr
             }
         }
     }
-    Ok(FaultPlan::new(&cfg.faults, cfg.seed))
+    FaultPlan::compile(&cfg.faults, cfg.seed).map_err(|e| {
+        RunConfigError::Invalid {
+            field: "faults",
+            value: e.spec.clone(),
+            why: e.why,
+        }
+        .into()
+    })
 }
 
 fn scheduler_config(cfg: &RunConfig, run_id: u64) -> SchedulerConfig {
     SchedulerConfig {
         dt_ns: cfg.dt_ns(),
+        fsw_period_ns: cfg.fsw_period_ns(),
         max_duration_ns: (cfg.duration_s * 1e9) as i64,
         run_id,
         miss_policy: cfg.miss_policy,
@@ -164,8 +174,9 @@ fn scheduler_config(cfg: &RunConfig, run_id: u64) -> SchedulerConfig {
 fn step_clock(cfg: &RunConfig) -> Box<dyn StepClock> {
     match cfg.mode {
         Mode::Lockstep => Box::new(LockstepClock::new(cfg.link_timeout_ms)),
+        // Paced per flight-software cycle: the unit of exchange.
         Mode::Realtime => Box::new(RealtimeClock::new(
-            cfg.dt_ns(),
+            cfg.fsw_period_ns(),
             cfg.speed,
             cfg.deadline_frac,
             cfg.wake_spin_us * 1000,
@@ -380,9 +391,18 @@ fn run_and_close<L: Link + ?Sized>(
                 summary.outcome = scheduler::Outcome::Aborted;
                 summary.touchdown = None;
                 let why = error_chain(&e);
-                summary.error = Some(match summary.error.take() {
-                    Some(first) => format!("{first}: {why}"),
-                    None => why,
+                summary.error = Some(match (&e, summary.error.take()) {
+                    // The writer knows which record failed and how many reached the
+                    // file; the loop only saw it later, at `steps`.
+                    (RecorderError::Write { step, written, .. }, _) => {
+                        summary.log_records = *written;
+                        format!(
+                            "{why}; the log writer failed at step {step}, the run stopped at step {}",
+                            summary.steps
+                        )
+                    }
+                    (_, Some(first)) => format!("{first}: {why}"),
+                    (_, None) => why,
                 });
             }
         }
@@ -411,13 +431,21 @@ pub struct Replay {
     pub report: RunReport,
     /// Records replayed.
     pub records: usize,
+    /// How the recorded run ended early, when it did (a signal, an abort, a log cut
+    /// short): the replay stopped there too, and says so.
+    pub note: Option<String>,
 }
 
 /// Replays a recorded log through the same plant and loop: each recorded command is
 /// fed back in, and each telemetry the emulator publishes must equal the recorded one
 /// (else the replay stops with the first step that differs). The digest comes out the
 /// recorded run's: record == replay. `log` is the file at `log_path`, read by whichever
-/// reader its format needs ([`crate::recorder::read_log`] for OILSLOG3).
+/// reader its format needs ([`crate::recorder::read_log`] for OILSLOG4).
+///
+/// The replay ends where the log does: at the step its end record names, as the
+/// recorded run ended it (before or after that step's telemetry went out, the end record
+/// says which), or, for a log without its end (kill -9, a full disk), after its last
+/// record. `stop` interrupts the replay itself.
 pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, SessionError> {
     let bad = |why: String| SessionError::Replay {
         path: log_path.to_path_buf(),
@@ -432,13 +460,34 @@ pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, Se
     }
     let (config, run_id) = read_log_header(&log.header_json).map_err(bad)?;
     config.validate()?;
+    let Some(last) = log.records.last().copied() else {
+        return Err(bad("the log holds no records".into()));
+    };
     let mut plant = build_plant(&config)?;
     let mut faults = fault_plan(&config, &plant)?;
-    let sched = scheduler_config(&config, run_id);
+    let mut sched = scheduler_config(&config, run_id);
     let recorded = log.records.len();
-    let mut link = ReplayLink::new(log);
+    let last_step = last.telemetry.header.step;
+    let ended = last.flags & REC_END_OF_RUN != 0;
+    let after_publish = ended && last.flags & REC_ENDED_AFTER_PUBLISH != 0;
+    // Where the recorded run's last step was: the replay's duration ends it there (the
+    // scheduler's end of a run is the same whatever ended it), unless that step ended
+    // after its telemetry went out: then the link ends it the same way.
+    let end_t_ns = if ended {
+        last.telemetry.header.t_ns
+    } else {
+        last.telemetry
+            .header
+            .t_ns
+            .saturating_add(i64::try_from(sched.dt_ns).unwrap_or(i64::MAX))
+    };
+    let configured_end_ns = sched.max_duration_ns;
+    if !after_publish {
+        sched.max_duration_ns = sched.max_duration_ns.min(end_t_ns);
+    }
+    let mut link = ReplayLink::new(log).aborting_at(after_publish.then_some(last_step));
     let mut clock = ReplayClock::default();
-    let summary = scheduler::run(
+    let mut summary = scheduler::run(
         &sched,
         &mut plant,
         &mut link,
@@ -447,21 +496,57 @@ pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, Se
         None,
         stop,
     )?;
+    if stop.load(std::sync::atomic::Ordering::Relaxed) {
+        return Err(bad("the replay was interrupted".into()));
+    }
+    if let Some(step) = link.diverged() {
+        return Err(bad(format!(
+            "replay diverged at step {step}: the emulator's telemetry differs from the log's"
+        )));
+    }
     let records = link.replayed();
     if records != recorded {
         return Err(bad(format!(
             "replayed {records} of {recorded} records: the run ended differently"
         )));
     }
+    let stopped_early =
+        summary.outcome == scheduler::Outcome::Completed && end_t_ns < configured_end_ns;
+    let note = if !ended {
+        Some(format!(
+            "log ends without its end record: run interrupted after {recorded} records; replayed every one"
+        ))
+    } else if after_publish {
+        Some(format!(
+            "the recorded run was aborted at step {last_step}, after its telemetry went out; replayed up to there"
+        ))
+    } else if stopped_early {
+        Some(format!(
+            "the recorded run was stopped before step {last_step} (a signal); replayed up to there"
+        ))
+    } else {
+        None
+    };
+    // An abort the replay reproduced by itself (the physics broke down at the same
+    // step) holds too: every record was replayed, identical.
+    let note = note.or_else(|| {
+        summary
+            .error
+            .as_ref()
+            .map(|e| format!("the replayed run aborted where the recorded one did: {e}"))
+    });
+    if let Some(note) = &note {
+        summary.outcome = scheduler::Outcome::Aborted;
+        summary.touchdown = None;
+        summary.error = Some(note.clone());
+    }
     let mut replay_cfg = config.clone();
     replay_cfg.log.enabled = false;
     let report = RunReport::new(&replay_cfg, run_id, None, None, summary);
-    if let Some(e) = &report.summary.error {
-        return Err(bad(e.clone()));
-    }
     Ok(Replay {
         config,
         report,
         records,
+        note,
     })
 }

@@ -279,7 +279,7 @@ fn faults_a_model_cannot_represent_are_refused_naming_it() {
         );
     }
     assert!("valve-slow:2,factor=0.2@t=1".parse::<FaultSpec>().is_ok());
-    let _ = FaultPlan::new(&[], 0);
+    let _ = FaultPlan::none();
 }
 
 /// Engine 1 (in the pair the GNC flies from hover on) or engine 2 (not in it) fails
@@ -318,6 +318,7 @@ fn the_reference_gnc_detects_the_failed_engine_from_telemetry() {
     let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()));
     let sched = SchedulerConfig {
         dt_ns: cfg.dt_ns(),
+        fsw_period_ns: cfg.fsw_period_ns(),
         max_duration_ns: 320_000_000_000,
         run_id: 1,
         miss_policy: MissPolicy::Hold,
@@ -337,4 +338,22 @@ fn the_reference_gnc_detects_the_failed_engine_from_telemetry() {
     .unwrap();
     assert_eq!(link.fsw().failed_engine(), Some(0));
     assert_eq!(link.fsw().engine_set(), EngineSet::OtherPair);
+}
+
+/// Issue #36.9: a trigger beyond the run, or below the ground, is refused before the run
+/// with the fault and its trigger named (never a run where the fault silently stays off).
+#[test]
+fn a_fault_that_can_never_fire_is_refused_before_the_run() {
+    for (spec, needle) in [
+        ("engine-off:1@t=1e9", "t=1000000000"),
+        ("engine-off:1@alt=-5", "alt=-5"),
+        ("sensor-bias:altitude_m,value=5@step=1000", "step=1000"),
+    ] {
+        let cfg = config(PropulsionKind::Ideal, &[spec], 10.0);
+        let e = try_fly(&cfg).unwrap_err().to_string();
+        assert!(
+            e.contains("faults") && e.contains(needle) && e.contains("never fire"),
+            "{spec}: {e}"
+        );
+    }
 }

@@ -12,6 +12,7 @@ PROTOCOL_VERSION = 1
 ENGINE_COUNT = 4
 TLM_FLAG_END_OF_RUN = 1 << 0  # last telemetry of the run: answer nothing
 TLM_FLAG_NAV_NOISE = 1 << 1  # navigation values carry seeded noise
+TLM_FLAG_FOOTPAD_CONTACT = 1 << 2  # a footpad touches the ground: engines off
 
 #: The layout as text; its FNV-1a 64 hash travels in every packet header.
 SCHEMA = (

@@ -23,6 +23,7 @@ extern "C" {
 #define OILS_ENGINE_COUNT 4
 #define OILS_TLM_FLAG_END_OF_RUN 1u /* last telemetry: answer nothing */
 #define OILS_TLM_FLAG_NAV_NOISE 2u  /* nav values carry seeded noise */
+#define OILS_TLM_FLAG_FOOTPAD_CONTACT 4u  /* a footpad touches the ground: engines off */
 #define OILS_FSW_STATUS_OK 0 /* any other value from oils_fsw_step stops the run */
 
 /* The schema string whose FNV-1a 64 hash is OILS_SCHEMA_HASH. */

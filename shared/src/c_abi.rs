@@ -17,7 +17,7 @@
 //! `_Static_assert`s every size and offset where a C compiler reads it.
 
 use crate::{ENGINE_COUNT, PROTOCOL_VERSION, SCHEMA, SCHEMA_HASH};
-use crate::{TLM_FLAG_END_OF_RUN, TLM_FLAG_NAV_NOISE};
+use crate::{TLM_FLAG_END_OF_RUN, TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_NAV_NOISE};
 use core::ffi::c_char;
 use std::fmt::Write;
 
@@ -163,6 +163,7 @@ pub fn c_header() -> String {
          #define OILS_ENGINE_COUNT {ENGINE_COUNT}\n\
          #define OILS_TLM_FLAG_END_OF_RUN {TLM_FLAG_END_OF_RUN}u /* last telemetry: answer nothing */\n\
          #define OILS_TLM_FLAG_NAV_NOISE {TLM_FLAG_NAV_NOISE}u  /* nav values carry seeded noise */\n\
+         #define OILS_TLM_FLAG_FOOTPAD_CONTACT {TLM_FLAG_FOOTPAD_CONTACT}u  /* a footpad touches the ground: engines off */\n\
          #define OILS_FSW_STATUS_OK {FSW_STATUS_OK} /* any other value from oils_fsw_step stops the run */\n"
     );
     let _ = writeln!(

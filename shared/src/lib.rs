@@ -36,6 +36,9 @@ pub const ENGINE_COUNT: usize = 4;
 pub const TLM_FLAG_END_OF_RUN: u32 = 1 << 0;
 /// Telemetry flag: navigation values carry seeded sensor noise.
 pub const TLM_FLAG_NAV_NOISE: u32 = 1 << 1;
+/// Telemetry flag: at least one footpad touches the ground (the legs' touchdown
+/// switches); flight software shuts the engines down on it.
+pub const TLM_FLAG_FOOTPAD_CONTACT: u32 = 1 << 2;
 
 /// Human-readable schema: one entry per struct, `Struct{field:type@offset,...}=size|`. Its hash,
 /// [`SCHEMA_HASH`], travels in every header so two peers compiled from different

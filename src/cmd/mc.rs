@@ -338,6 +338,8 @@ fn mc_run(a: &McRunArgs, stop: &AtomicBool) -> Result<()> {
         Some(s) => format!("oils mc shard {}/{}", s.index, s.count),
         None => "oils mc".to_string(),
     };
+    // Held to the end: a second `oils mc run` on this campaign (or shard) fails at once.
+    let _lock = store.lock(shard.map(|s| (s.index, s.count)))?;
     let report = run_with_progress(&spec, &store, options, stop, &label)?;
     if shard.is_some() {
         eprintln!(
@@ -349,7 +351,21 @@ fn mc_run(a: &McRunArgs, stop: &AtomicBool) -> Result<()> {
     write_timing(&store, &report, jobs_of(a.jobs))?;
     let merged = campaign::merge(&spec, &store, false, !a.no_plots, stop)?;
     print_summary(&merged, &a.out);
-    write_page(&spec, &merged, &a.out)
+    write_page(&spec, &merged, &a.out)?;
+    none_all_invalid(&merged)
+}
+
+/// A campaign whose every case is `invalid` flew nothing: an error, not a result.
+fn none_all_invalid(merged: &Merged) -> Result<()> {
+    let r = &merged.results;
+    if !r.is_empty() && r.iter().all(|c| c.outcome == "invalid") {
+        bail!(
+            "every one of the {} cases is invalid: nothing flew (first: {}); check the spec's dispersions",
+            r.len(),
+            r[0].error.as_deref().unwrap_or("no reason recorded")
+        );
+    }
+    Ok(())
 }
 
 /// `DIR/report.html` with the figures `DIR/plots/` holds.
@@ -382,7 +398,8 @@ fn mc_merge(a: &McMergeArgs, stop: &AtomicBool) -> Result<()> {
         .with_context(|| format!("{} holds no campaign (no campaign.toml)", a.dir.display()))?;
     let merged = campaign::merge(&spec, &store, a.partial, !a.no_plots, stop)?;
     print_summary(&merged, &a.dir);
-    write_page(&spec, &merged, &a.dir)
+    write_page(&spec, &merged, &a.dir)?;
+    none_all_invalid(&merged)
 }
 
 fn fmt_stat(merged: &Merged, name: &str, unit: &str) -> String {

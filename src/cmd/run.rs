@@ -44,9 +44,15 @@ pub struct RunArgs {
     /// Realtime speed factor (2 = twice real time). [default: 1]
     #[arg(long)]
     pub speed: Option<f64>,
-    /// Step in milliseconds (1-100). [default: 10]
+    /// Plant integration period in milliseconds (1-100), the schedule's base tick.
+    /// [default: 10]
     #[arg(long)]
     pub dt_ms: Option<u64>,
+    /// Flight-software cycle in milliseconds (a whole multiple of --dt-ms): one
+    /// telemetry/command exchange per cycle. [default: the smallest multiple of --dt-ms
+    /// of at least 10 ms]
+    #[arg(long, value_name = "MS")]
+    pub fsw_period_ms: Option<u64>,
     /// Longest simulated time, seconds; the run ends `completed` if still flying.
     /// [default: 2000]
     #[arg(long, value_name = "SECONDS")]
@@ -176,6 +182,9 @@ impl RunArgs {
              miss_policy => miss_policy, deadline_frac => deadline_frac,
              wake_spin_us => wake_spin_us, link_timeout_ms => link_timeout_ms,
              startup_timeout_ms => startup_timeout_ms);
+        if let Some(p) = self.fsw_period_ms {
+            cfg.fsw_period_ms = Some(p);
+        }
         if let Some(p) = &self.model {
             cfg.model = Some(p.clone());
         }
@@ -262,11 +271,31 @@ pub fn flag_of(field: &str) -> String {
 pub fn run(args: &RunArgs) -> Result<()> {
     let cfg = args.to_config()?;
     if args.print_config {
-        print!("{}", cfg.to_toml());
+        // The schedule as it will run: the flight-software period resolved, and every
+        // period (the propulsion model's too) in a table of its own.
+        let mut shown = cfg.clone();
+        shown.fsw_period_ms = Some(cfg.fsw_period_ns() / 1_000_000);
+        print!("{}", shown.to_toml());
+        let propulsion_ns = oils_emulator::propulsion::model_period_ns(&cfg.propulsion_spec())
+            .context("reading the propulsion model's period")?;
+        println!("\n# The schedule (derived; integer nanoseconds, base tick = plant period):");
+        println!("# [schedule]");
+        println!("# base_tick_period_ns = {}", cfg.dt_ns());
+        println!("# plant_period_ns = {}", cfg.dt_ns());
+        println!("# propulsion_period_ns = {propulsion_ns}");
+        println!("# fsw_period_ns = {}", cfg.fsw_period_ns());
         return Ok(());
     }
     if args.plots.is_some() && !cfg.log.enabled {
         bail!("--plots draws from the run's log: the configuration disables it (log.enabled)");
+    }
+    // Before tick 0: a report or figures that cannot be written fail the run now.
+    if let Some(path) = &args.report {
+        let dir = path.parent().unwrap_or(std::path::Path::new("."));
+        oils_emulator::report::check_writable_dir(dir).context("--report")?;
+    }
+    if let Some(dir) = &args.plots {
+        oils_emulator::report::check_writable_dir(dir).context("--plots")?;
     }
     let fsw_library = match &cfg.fsw {
         FswSpec::CLibrary(path) => Some(FswLibrary {
@@ -609,12 +638,26 @@ pub struct ReplayArgs {
 pub fn replay(args: &ReplayArgs) -> Result<()> {
     let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
     let log = oils_lab::mcap_log::read_any(&args.log)?;
+    for w in &log.warnings {
+        eprintln!("oils replay: {}: {w}", args.log.display());
+    }
     let r = session::replay(&args.log, log, &stop)?;
     println!(
         "oils replay: {} records of {} replayed, every telemetry identical",
         r.records,
         args.log.display()
     );
-    oils_emulator::report::finish_run(&r.report, args.report.as_deref())?;
-    Ok(())
+    if let Some(note) = &r.note {
+        println!("oils replay: {note}");
+    }
+    // The replay held: a verdict on the recorded run (aborted, crashed) is in the table
+    // and the report, not the replay's exit status; a report that cannot be written is.
+    match oils_emulator::report::finish_run(&r.report, args.report.as_deref()) {
+        Err(e @ oils_emulator::report::RunFailed::ReportFile { .. }) => Err(e.into()),
+        Err(oils_emulator::report::RunFailed::Verdict(v)) => {
+            println!("oils replay: the recorded run: {v}");
+            Ok(())
+        }
+        Ok(()) => Ok(()),
+    }
 }

@@ -12,14 +12,15 @@
 //! | `/oils/truth` | `oils.TrueState` | the true state at t_k, with derived speeds and tilt |
 //! | `/oils/propulsion` | `oils.Propulsion` | the propulsion model's outputs and internals |
 //! | `/oils/timing` | `oils.StepTiming` | per-step timing (see [`step_timing`]) |
-//! | `/tf` | `foxglove.FrameTransforms` | `moon` -> `site` (fixed) and `moon` -> `lander` |
+//! | `/tf` | `foxglove.FrameTransforms` | `moon` -> `site` (turning with the Moon) and `moon` -> `lander` |
 //! | `/oils/pose` | `foxglove.PoseInFrame` | the lander in the `site` frame (3D trail, ground track) |
 //! | `/oils/events` | `foxglove.Log` | only when something happens: start, deadline miss, rejected values, touchdown, end of run (fault events: [`Event`]) |
 //! | `/oils/scene` | `foxglove.SceneUpdate` | once, at the first record: the Moon and a lander model |
 //!
-//! Frames: `moon` is the plant's `mci` (the Moon does not rotate in the plant, so it is
-//! Moon-fixed); `site` is a local east-north-up frame on the surface below the first
-//! record's position; `lander` is the body frame (+Z the thrust axis).
+//! Frames: `moon` is the plant's `mci` (Moon-centred inertial); `site` is the
+//! scenario's landing site, an east-north-up frame fixed on the turning Moon (its
+//! transform from `moon` changes with time); `lander` is the body frame (+Z the thrust
+//! axis).
 //!
 //! Why JSON and not protobuf: Foxglove reads both; JSON needs no code generation and no
 //! protobuf crate, every message is readable as text in Foxglove's raw-message panel and
@@ -48,7 +49,7 @@ use oils_emulator::recorder::{
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufWriter, Seek, Write};
+use std::io::{Seek, Write};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -113,6 +114,9 @@ pub enum McapLogError {
         /// What the library said.
         source: mcap::McapError,
     },
+    /// The file could not be opened for a run's log (locked by another run, ...).
+    #[error(transparent)]
+    Open(#[from] RecorderError),
     /// The file is MCAP but not an oils run (a channel or the header is missing or bad).
     #[error("{path} is not an oils MCAP log ({why})")]
     NotOils {
@@ -137,6 +141,7 @@ impl From<McapLogError> for RecorderError {
                 why: format!("damaged MCAP: {source}"),
             },
             McapLogError::NotOils { path, why } => RecorderError::NotALog { path, why },
+            McapLogError::Open(e) => e,
         }
     }
 }
@@ -470,7 +475,9 @@ fn channels() -> Vec<(&'static str, &'static str, String)> {
 struct Encoder {
     ids: Vec<u16>,
     seq: Vec<u32>,
-    site: Option<Site>,
+    site: Site,
+    /// The first record was written (the scene and the start event with it).
+    started: bool,
     contact: bool,
     buf: Vec<u8>,
     written: u64,
@@ -499,7 +506,8 @@ impl Encoder {
         Ok(Self {
             ids,
             seq: vec![0; n],
-            site: None,
+            site: Site::of_log_header(header_json),
+            started: false,
             contact: false,
             buf: Vec::with_capacity(4096),
             written: 0,
@@ -548,8 +556,10 @@ impl Encoder {
         let t_ns = tlm.header.t_ns.max(0) as u64;
         let step = tlm.header.step;
         let truth = &r.truth;
-        let first = self.site.is_none();
-        let site = *self.site.get_or_insert_with(|| Site::below(truth));
+        let first = !self.started;
+        self.started = true;
+        let site = self.site;
+        let t_s = tlm.header.t_ns as f64 * 1e-9;
         if first {
             self.scene(w, t_ns)?;
             let e = Event {
@@ -564,7 +574,7 @@ impl Encoder {
             self.event(w, t_ns, &e)?;
         }
 
-        let derived = Derived::of(truth, &site);
+        let derived = Derived::of(truth, t_s, &site);
         let sample = Sample {
             record: r,
             derived: &derived,
@@ -580,21 +590,22 @@ impl Encoder {
             derived.tilt_deg,
         );
 
-        let q_site_from_body = site.q_mci_from_site.inverse()
+        let q_mci_from_site = site.q_mci_from_site(t_s);
+        let q_site_from_body = q_mci_from_site.inverse()
             * UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
                 truth.q_mci_from_body[0],
                 truth.q_mci_from_body[1],
                 truth.q_mci_from_body[2],
                 truth.q_mci_from_body[3],
             ));
-        let qs = site.q_mci_from_site.quaternion();
+        let qs = q_mci_from_site.quaternion();
         let tf = FrameTransforms {
             transforms: [
                 FrameTransform {
                     timestamp: Time::of(t_ns),
                     parent_frame_id: "moon",
                     child_frame_id: "site",
-                    translation: vec3(&site.origin_mci_m),
+                    translation: vec3(&site.origin_mci_m(t_s)),
                     rotation: quat(&[qs.w, qs.i, qs.j, qs.k]),
                 },
                 FrameTransform {
@@ -754,6 +765,11 @@ fn write_options() -> WriteOptions {
         // Compress on the writer thread itself: no extra threads on a shared machine,
         // and one deterministic compressor.
         .compression_threads(0)
+        // Each chunk built whole in memory and handed to the file in one go (no seeking
+        // back to patch a header), straight to the OS (no buffer in between): after a
+        // kill -9 or a full disk the file holds every finished chunk, whole, and a
+        // reader recovers them (`read_mcap`).
+        .disable_seeking(true)
         .profile("")
 }
 
@@ -787,7 +803,7 @@ pub fn export_mcap(log: &Log, path: &Path) -> Result<McapStats, McapLogError> {
 
 /// The MCAP log as the recorder's writer: `oils run --log-format mcap`.
 pub struct McapSink {
-    writer: Option<Writer<BufWriter<File>>>,
+    writer: Option<Writer<File>>,
     enc: Encoder,
     path: PathBuf,
 }
@@ -795,17 +811,12 @@ pub struct McapSink {
 impl McapSink {
     /// Creates the file and writes the header (metadata, schemas, channels).
     pub fn create(path: &Path, header_json: &str) -> Result<Self, McapLogError> {
-        let file = File::create(path).map_err(|source| McapLogError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let file = oils_emulator::recorder::create_locked(path)?;
         let mcap_err = |source| McapLogError::Mcap {
             path: path.to_path_buf(),
             source,
         };
-        let mut writer = write_options()
-            .create(BufWriter::with_capacity(1 << 20, file))
-            .map_err(mcap_err)?;
+        let mut writer = write_options().create(file).map_err(mcap_err)?;
         let enc = Encoder::new(&mut writer, header_json).map_err(mcap_err)?;
         Ok(Self {
             writer: Some(writer),
@@ -844,7 +855,7 @@ impl McapSink {
         };
         let mut out = w.into_inner();
         out.flush().map_err(io)?;
-        out.get_ref().sync_all().map_err(io)
+        out.sync_all().map_err(io)
     }
 
     /// A recorder (writer thread, bounded channel) writing MCAP to `path`.
@@ -880,9 +891,10 @@ impl RecordSink for McapSink {
         Ok(self.write_record(rec)?)
     }
 
-    /// Nothing: a chunk is written when it is full, so chunk boundaries (and the file's
-    /// bytes) do not depend on how fast the writer kept up. A crash loses at most the
-    /// chunk being filled (1 MiB of JSON, about 3 s of simulated time at 10 ms).
+    /// Nothing: a chunk is written, whole and straight to the OS, when it is full, so
+    /// chunk boundaries (and the file's bytes) do not depend on how fast the writer kept
+    /// up. A crash loses at most the chunk being filled (1 MiB of JSON, about 3 s of
+    /// simulated time at 10 ms).
     fn caught_up(&mut self) -> Result<(), RecorderError> {
         Ok(())
     }
@@ -930,6 +942,9 @@ struct McapReader<'a> {
     rest: &'a [u8],
     reader: mcap::sans_io::LinearReader,
     topics: BTreeMap<u16, std::sync::Arc<str>>,
+    /// The file ended inside a record (a run killed, a full disk): iteration stopped
+    /// after the last whole record.
+    truncated: bool,
 }
 
 impl<'a> McapReader<'a> {
@@ -952,6 +967,7 @@ impl<'a> McapReader<'a> {
             rest: bytes,
             reader: mcap::sans_io::LinearReader::new_with_options(options),
             topics: BTreeMap::new(),
+            truncated: false,
         }
     }
 }
@@ -964,6 +980,10 @@ impl Iterator for McapReader<'_> {
         use mcap::sans_io::LinearReadEvent as E;
         while let Some(event) = self.reader.next_event() {
             let (opcode, data) = match event {
+                Ok(E::ReadRequest(_)) if self.rest.is_empty() => {
+                    self.truncated = true;
+                    return None;
+                }
                 Ok(E::ReadRequest(need)) => {
                     let n = need.min(self.rest.len());
                     self.reader.insert(n).copy_from_slice(&self.rest[..n]);
@@ -1005,6 +1025,7 @@ impl Iterator for McapReader<'_> {
 }
 
 /// The messages of an MCAP file (see [`McapReader`]).
+#[cfg(test)]
 fn mcap_messages(bytes: &[u8]) -> impl Iterator<Item = Result<McapMessage, mcap::McapError>> + '_ {
     McapReader::messages(bytes).filter_map(|item| match item {
         Ok(McapItem::Message(m)) => Some(Ok(m)),
@@ -1067,6 +1088,8 @@ pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
         )));
     }
     let mut records: Vec<Record> = Vec::new();
+    // Per record, the per-step messages read (a record cut off by a truncation lacks some).
+    let mut parts: Vec<usize> = Vec::new();
     let mut index: BTreeMap<u64, usize> = BTreeMap::new();
     // Every per-step channel has one message per record: its sequence number is the
     // record's position.
@@ -1076,7 +1099,13 @@ pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
             records.len() - 1
         })
     };
-    for msg in mcap_messages(bytes) {
+    let mut reader = McapReader::messages(bytes);
+    let messages = reader.by_ref().filter_map(|item| match item {
+        Ok(McapItem::Message(m)) => Some(Ok(m)),
+        Ok(McapItem::Metadata(_)) => None,
+        Err(e) => Some(Err(e)),
+    });
+    for msg in messages {
         let msg = msg.map_err(mcap_err)?;
         let Some(&(t, _)) = PER_STEP_TOPICS
             .iter()
@@ -1085,15 +1114,32 @@ pub fn parse_mcap(path: &Path, bytes: &[u8]) -> Result<Log, McapLogError> {
             continue;
         };
         let i = slot(u64::from(msg.sequence), &mut records);
+        parts.resize(records.len(), 0);
+        parts[i] += 1;
         log_json::read_message(t, &msg.data, format, &mut records[i])
             .map_err(|e| not(format!("{} at t = {} ns: {e}", msg.topic, msg.log_time)))?;
     }
-    Ok(Log {
+    let truncated = reader.truncated;
+    let mut warnings = Vec::new();
+    if truncated {
+        // Only whole records: every per-step message of a record read.
+        let whole = parts
+            .iter()
+            .position(|n| *n < PER_STEP_TOPICS.len())
+            .unwrap_or(records.len());
+        records.truncate(whole);
+        warnings.push(format!(
+            "the MCAP file ends inside a record (the run was killed, or the disk filled): {whole} whole records recovered from its complete chunks"
+        ));
+    }
+    let mut log = Log {
         header_json,
         records,
-        damaged_records: Vec::new(),
-        trailing_bytes: 0,
-    })
+        warnings,
+        ..Log::default()
+    };
+    log.check_end(!truncated);
+    Ok(log)
 }
 
 /// Per-step timing from an MCAP log's `/oils/timing` channel (in record order).
@@ -1101,7 +1147,7 @@ pub fn read_mcap_timing(path: &Path) -> Result<Vec<StepTiming>, McapLogError> {
     Ok(read_mcap(path)?.records.iter().map(step_timing).collect())
 }
 
-/// Reads a run log in either format: OILSLOG3 or MCAP (by the file's magic).
+/// Reads a run log in either format: OILSLOG4 or MCAP (by the file's magic).
 pub fn read_any(path: &Path) -> Result<Log, RecorderError> {
     if is_mcap(path) {
         Ok(read_mcap(path)?)
@@ -1113,7 +1159,6 @@ pub fn read_any(path: &Path) -> Result<Log, RecorderError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use oils_emulator::plant::TruthState;
     use oils_emulator::propulsion::PropulsionInternals;
     use oils_shared::PacketHeader;
 
@@ -1149,8 +1194,7 @@ mod tests {
         let log = Log {
             header_json: r#"{"run_id":"deadbeef01234567"}"#.into(),
             records,
-            damaged_records: Vec::new(),
-            trailing_bytes: 0,
+            ..Log::default()
         };
         let stats = export_mcap(&log, &path).unwrap();
         assert_eq!(stats.records, 500);
@@ -1174,21 +1218,25 @@ mod tests {
     }
 
     #[test]
-    fn site_frame_is_east_north_up_below_the_vehicle() {
-        let mut t = TruthState {
-            pos_mci_m: [1_750_000.0, 0.0, 0.0],
-            altitude_m: 12_600.0,
-            ..Default::default()
-        };
-        let site = Site::below(&t);
-        assert!((site.origin_mci_m - Vector3::new(1_737_400.0, 0.0, 0.0)).norm() < 1e-6);
+    fn site_frame_is_east_north_up_at_the_scenario_site() {
+        let mut cfg = oils_emulator::config::ScenarioConfig::default();
+        cfg.site.latitude_deg = 0.0;
+        cfg.site.longitude_deg = 0.0;
+        cfg.moon.rotation_rate_rad_s = 0.0;
+        let site = Site::of_scenario(&cfg);
+        assert!((site.origin_mci_m(0.0) - Vector3::new(1_737_400.0, 0.0, 0.0)).norm() < 1e-6);
         // 1 km north (mci +Z here) and 100 m up of the site.
-        t.pos_mci_m = [1_737_500.0, 0.0, 1000.0];
-        let p = site.site_of(&Vector3::from(t.pos_mci_m));
+        let p = site.site_of(&Vector3::new(1_737_500.0, 0.0, 1000.0), 0.0);
         assert!((p - Vector3::new(0.0, 1000.0, 100.0)).norm() < 1e-6, "{p}");
         // East is mci +Y at this point.
-        let e = site.site_of(&Vector3::new(1_737_400.0, 50.0, 0.0));
+        let e = site.site_of(&Vector3::new(1_737_400.0, 50.0, 0.0), 0.0);
         assert!((e - Vector3::new(50.0, 0.0, 0.0)).norm() < 1e-6, "{e}");
+        // On a turning Moon the site moves east in mci: a point fixed in mci drifts
+        // west in the site frame, omega R t after t seconds.
+        cfg.moon.rotation_rate_rad_s = 2.6617e-6;
+        let site = Site::of_scenario(&cfg);
+        let w = site.site_of(&Vector3::new(1_737_400.0, 0.0, 0.0), 100.0);
+        assert!((w.x + 2.6617e-6 * 1_737_400.0 * 100.0).abs() < 1e-3, "{w}");
     }
 
     /// The records of an MCAP byte range: (position, opcode, body range).
@@ -1267,14 +1315,62 @@ mod tests {
 
     /// A record the readers do not use is skipped unparsed: mcap 0.26's parser panicked
     /// on an attachment shorter than its fixed fields (found by the `mcap` fuzz target).
+    /// A truncated MCAP file (kill -9, a full disk: the file is a prefix of what it
+    /// would have been) was refused whole. Every cut now gives the records of its whole
+    /// chunks, in order, and says the file ends early.
+    #[test]
+    fn a_truncated_mcap_file_keeps_its_whole_chunks() {
+        let path = temp("cut.mcap");
+        let mut records: Vec<Record> = (0..6000).map(record).collect();
+        records[5999].flags = REC_END_OF_RUN;
+        let log = Log {
+            header_json: r#"{"run_id":"deadbeef01234567"}"#.into(),
+            records,
+            ..Log::default()
+        };
+        export_mcap(&log, &path).unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        let whole = parse_mcap(&path, &bytes).unwrap();
+        assert!(
+            whole.complete && whole.warnings.is_empty(),
+            "{:?}",
+            whole.warnings
+        );
+        assert_eq!(whole.records.len(), 6000);
+        let mut recovered_some = false;
+        for cut in [
+            bytes.len() / 4,
+            bytes.len() / 2,
+            bytes.len() * 3 / 4,
+            bytes.len() - 100,
+        ] {
+            let part = parse_mcap(&path, &bytes[..cut]).unwrap();
+            assert!(!part.complete);
+            assert!(part.records.len() <= 6000);
+            // (The truth's NaN internals compare unequal to themselves: the packets.)
+            for (a, b) in part.records.iter().zip(&whole.records) {
+                assert_eq!((a.telemetry, a.command), (b.telemetry, b.command));
+            }
+            assert!(
+                part.warnings
+                    .iter()
+                    .any(|w| w.contains("whole records recovered")),
+                "{:?}",
+                part.warnings
+            );
+            recovered_some |= !part.records.is_empty();
+        }
+        assert!(recovered_some);
+        std::fs::remove_file(&path).ok();
+    }
+
     #[test]
     fn a_short_attachment_record_is_skipped() {
         let path = temp("attachment.mcap");
         let log = Log {
             header_json: r#"{"run_id":"deadbeef01234567"}"#.into(),
             records: (0..3).map(record).collect(),
-            damaged_records: Vec::new(),
-            trailing_bytes: 0,
+            ..Log::default()
         };
         export_mcap(&log, &path).unwrap();
         let good = std::fs::read(&path).unwrap();

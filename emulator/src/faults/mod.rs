@@ -1,21 +1,28 @@
-//! Fault injection: what a run configuration declares ([`spec`]) and what the scheduler
-//! does with it ([`FaultPlan`]): fire each fault at its trigger, clear it after its
-//! duration, and act on the propulsion model (physically where the model can), on the
-//! telemetry the flight software sees (never on the truth), and on the link.
+//! Fault injection: what a run configuration declares ([`spec`]), compiled before tick 0
+//! into a [`FaultPlan`]: a schedule of triggers, and per fault a typed action
+//! ([`action`]). The scheduler fires and clears faults by simulated time, step or true
+//! altitude, and hands each kind to where it acts: the propulsion model or engine command
+//! (physically where the model can), the telemetry the flight software sees (never the
+//! truth; [`sensors`]), and the link, as a wrapper around it ([`link::FaultyLink`]).
 //!
 //! Everything random (random triggers, sensor noise, corrupted bits) comes from one
 //! seeded stream per fault, derived from the run's seed and the fault's position in the
-//! list only: same configuration and seed, same faults, same digest.
+//! list only: same configuration and seed, same faults, same digest. Nothing here reads
+//! the wall clock.
 
+pub mod action;
+pub mod link;
+pub mod sensors;
 pub mod spec;
 
+pub use action::{FaultAction, LinkAction, SensorAction, TlmField};
+pub use link::{FaultyLink, LinkFaults};
+pub use sensors::SensorFaults;
 pub use spec::{FaultKind, FaultSpec, Trigger};
 
 use crate::propulsion::PropulsionFault;
-use oils_shared::{Command, Telemetry};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::StandardNormal;
 use serde::Serialize;
 
 /// ChaCha stream ids of faults start here (fault i uses `FAULT_STREAM + i`).
@@ -37,35 +44,10 @@ pub enum PlantFault {
 impl PlantFault {
     /// The plant-side fault of a spec, if it acts on the plant.
     pub fn of(spec: &FaultSpec) -> Option<Self> {
-        let e = spec.engine();
-        Some(match spec.kind {
-            FaultKind::EngineOff => PlantFault::EngineOff(e),
-            FaultKind::EngineStuck => PlantFault::EngineStuck(e),
-            FaultKind::ThrustDegraded => PlantFault::Propulsion(PropulsionFault::ThrustDegraded {
-                engine: e,
-                factor: spec.param("factor"),
-            }),
-            FaultKind::ValveStuck => {
-                PlantFault::Propulsion(PropulsionFault::ValveStuck { engine: e })
-            }
-            FaultKind::ValveSlow => PlantFault::Propulsion(PropulsionFault::ValveSlow {
-                engine: e,
-                factor: spec.param("factor"),
-            }),
-            FaultKind::RegulatorOpen => PlantFault::Propulsion(PropulsionFault::RegulatorOpen),
-            FaultKind::RegulatorClosed => PlantFault::Propulsion(PropulsionFault::RegulatorClosed),
-            FaultKind::RegulatorDrift => PlantFault::Propulsion(PropulsionFault::RegulatorDrift {
-                rate_pa_s: spec.param("rate_pa_s"),
-            }),
-            FaultKind::PressurantLeak => PlantFault::Propulsion(PropulsionFault::PressurantLeak {
-                area_m2: spec.param("area_mm2") * 1e-6,
-            }),
-            FaultKind::PropellantLeak => PlantFault::Propulsion(PropulsionFault::PropellantLeak {
-                side: usize::from(spec.target.as_deref() == Some("ox")),
-                kg_s: spec.param("kg_s"),
-            }),
-            _ => return None,
-        })
+        match FaultAction::of(spec)? {
+            FaultAction::Plant(f) => Some(f),
+            _ => None,
+        }
     }
 }
 
@@ -86,6 +68,16 @@ pub struct FaultReport {
     pub cleared_t_s: Option<f64>,
 }
 
+/// A spec the plan cannot compile (one [`FaultSpec::validate`] would refuse).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("fault `{spec}` cannot be compiled: {why}")]
+pub struct FaultCompileError {
+    /// The spec, as text.
+    pub spec: String,
+    /// What is wrong.
+    pub why: String,
+}
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum State {
     Pending,
@@ -93,24 +85,7 @@ enum State {
     Done,
 }
 
-/// One declared fault, armed for a run.
-#[derive(Debug, Clone)]
-struct Armed {
-    spec: FaultSpec,
-    /// Resolved start: a time (ns), a step, or an altitude; never for a random fault
-    /// that drew "no".
-    start: Start,
-    duration_ns: Option<i64>,
-    state: State,
-    rng: ChaCha8Rng,
-    /// Telemetry held by dropout / frozen sensor faults.
-    held: Telemetry,
-    /// Delay line of a command-delay fault.
-    delayed: std::collections::VecDeque<Command>,
-    fired_at: Option<(i64, u64)>,
-    cleared_at_ns: Option<i64>,
-}
-
+/// When a fault starts, resolved before tick 0 (a random trigger drawn).
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Start {
     Time(i64),
@@ -119,91 +94,110 @@ enum Start {
     Never,
 }
 
-/// The faults of one run, ready before tick 0. Nothing in [`FaultPlan::advance`] or the
-/// per-step calls allocates: delay lines and holds are sized here.
+/// One fault's place in the schedule.
+#[derive(Debug, Clone)]
+struct Timing {
+    start: Start,
+    duration_ns: Option<i64>,
+    state: State,
+    fired_at: Option<(i64, u64)>,
+    cleared_at_ns: Option<i64>,
+}
+
+/// The faults of one run, compiled before tick 0: triggers, typed actions, and the
+/// sensor and link stages with their state (delay lines and holds sized here). Nothing
+/// on the step path allocates or looks anything up by name.
 #[derive(Debug, Clone)]
 pub struct FaultPlan {
-    armed: Vec<Armed>,
-    /// The telemetry of the previous step, as the flight software saw it.
-    last_tlm: Option<Telemetry>,
-    /// A duplicated command waiting to arrive (stale) at the next step.
-    duplicate: Option<Command>,
-    /// Any sensor fault declared: without one, the telemetry is never touched or kept.
-    has_sensor_faults: bool,
+    /// The declared specs, for the report only.
+    specs: Vec<FaultSpec>,
+    timings: Vec<Timing>,
+    actions: Vec<FaultAction>,
+    active: u64,
+    sensors: SensorFaults,
+    link: LinkFaults,
 }
 
 impl FaultPlan {
-    /// Arms `specs` for a run with `seed`. Specs must be valid ([`FaultSpec::validate`]).
-    pub fn new(specs: &[FaultSpec], seed: u64) -> Self {
-        let armed = specs
-            .iter()
-            .enumerate()
-            .map(|(i, spec)| {
-                let mut rng = ChaCha8Rng::seed_from_u64(seed);
-                rng.set_stream(FAULT_STREAM + i as u64);
-                let start = match spec.trigger {
-                    Trigger::Time(t) => Start::Time((t * 1e9).round() as i64),
-                    Trigger::Step(k) => Start::Step(k),
-                    Trigger::AltitudeBelow(a) => Start::AltitudeBelow(a),
-                    Trigger::Random {
-                        probability,
-                        from_s,
-                        to_s,
-                    } => {
-                        // Two draws, always both, so the stream's later use is fixed.
-                        let happens = rng.gen::<f64>() < probability;
-                        let at_s = from_s + (to_s - from_s) * rng.gen::<f64>();
-                        if happens {
-                            Start::Time((at_s * 1e9).round() as i64)
-                        } else {
-                            Start::Never
-                        }
-                    }
-                };
-                let steps = if spec.kind == FaultKind::CommandDelay {
-                    spec.param("steps") as usize + 1
-                } else {
-                    0
-                };
-                Armed {
-                    spec: spec.clone(),
-                    start,
-                    duration_ns: spec.duration_s.map(|d| (d * 1e9).round() as i64),
-                    state: State::Pending,
-                    rng,
-                    held: Telemetry::default(),
-                    delayed: std::collections::VecDeque::with_capacity(steps),
-                    fired_at: None,
-                    cleared_at_ns: None,
-                }
-            })
-            .collect();
+    /// No faults at all.
+    pub fn none() -> Self {
         Self {
-            has_sensor_faults: specs.iter().any(|f| {
-                matches!(
-                    f.kind,
-                    FaultKind::SensorBias
-                        | FaultKind::SensorNoise
-                        | FaultKind::SensorDropout
-                        | FaultKind::SensorFrozen
-                )
-            }),
-            armed,
-            last_tlm: None,
-            duplicate: None,
+            specs: Vec::new(),
+            timings: Vec::new(),
+            actions: Vec::new(),
+            active: 0,
+            sensors: SensorFaults::default(),
+            link: LinkFaults::default(),
         }
+    }
+
+    /// Compiles `specs` for a run with `seed`. Specs are validated ([`FaultSpec::validate`],
+    /// and the horizon check of the run configuration) before this.
+    pub fn compile(specs: &[FaultSpec], seed: u64) -> Result<Self, FaultCompileError> {
+        if specs.len() > MAX_FAULTS {
+            return Err(FaultCompileError {
+                spec: specs[MAX_FAULTS].to_string(),
+                why: format!("at most {MAX_FAULTS} faults"),
+            });
+        }
+        let mut plan = Self::none();
+        for (i, spec) in specs.iter().enumerate() {
+            let action = FaultAction::of(spec).ok_or_else(|| FaultCompileError {
+                spec: spec.to_string(),
+                why: spec
+                    .validate()
+                    .err()
+                    .unwrap_or_else(|| "its parameters do not fit its kind".into()),
+            })?;
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(FAULT_STREAM + i as u64);
+            let start = match spec.trigger {
+                Trigger::Time(t) => Start::Time((t * 1e9).round() as i64),
+                Trigger::Step(k) => Start::Step(k),
+                Trigger::AltitudeBelow(a) => Start::AltitudeBelow(a),
+                Trigger::Random {
+                    probability,
+                    from_s,
+                    to_s,
+                } => {
+                    // Two draws, always both, so the stream's later use is fixed.
+                    let happens = rng.gen::<f64>() < probability;
+                    let at_s = from_s + (to_s - from_s) * rng.gen::<f64>();
+                    if happens {
+                        Start::Time((at_s * 1e9).round() as i64)
+                    } else {
+                        Start::Never
+                    }
+                }
+            };
+            plan.timings.push(Timing {
+                start,
+                duration_ns: spec.duration_s.map(|d| (d * 1e9).round() as i64),
+                state: State::Pending,
+                fired_at: None,
+                cleared_at_ns: None,
+            });
+            match action {
+                FaultAction::Plant(_) => {}
+                FaultAction::Sensor(a, field) => plan.sensors.add(i, a, field, rng),
+                FaultAction::Link(a) => plan.link.add(i, a, rng),
+            }
+            plan.actions.push(action);
+            plan.specs.push(spec.clone());
+        }
+        Ok(plan)
     }
 
     /// No faults at all.
     pub fn is_empty(&self) -> bool {
-        self.armed.is_empty()
+        self.actions.is_empty()
     }
 
     /// Fires and clears faults for step `k` at `t_ns` with the true altitude. Returns
     /// the faults that fired (bit i) and those that cleared, as masks.
     pub fn advance(&mut self, k: u64, t_ns: i64, altitude_m: f64) -> (u64, u64) {
         let (mut fired, mut cleared) = (0u64, 0u64);
-        for (i, a) in self.armed.iter_mut().enumerate() {
+        for (i, a) in self.timings.iter_mut().enumerate() {
             match a.state {
                 State::Pending => {
                     let due = match a.start {
@@ -215,7 +209,6 @@ impl FaultPlan {
                     if due {
                         a.state = State::Active { since_ns: t_ns };
                         a.fired_at = Some((t_ns, k));
-                        a.delayed.clear();
                         fired |= 1 << i;
                     }
                 }
@@ -229,196 +222,62 @@ impl FaultPlan {
                 State::Done => {}
             }
         }
+        self.active = (self.active | fired) & !cleared;
+        self.sensors.set_active(self.active);
+        self.link.set_active(self.active, fired);
         (fired, cleared)
     }
 
     /// Mask of the faults active now.
     pub fn active_mask(&self) -> u64 {
-        self.armed
-            .iter()
-            .enumerate()
-            .filter(|(_, a)| matches!(a.state, State::Active { .. }))
-            .fold(0, |m, (i, _)| m | 1 << i)
+        self.active
     }
 
-    fn active(&self, kind: FaultKind) -> bool {
-        self.armed
-            .iter()
-            .any(|a| a.spec.kind == kind && matches!(a.state, State::Active { .. }))
+    /// The plant-side effect of fault `i`, if it has one.
+    pub fn plant_fault(&self, i: usize) -> Option<PlantFault> {
+        match self.actions.get(i)? {
+            FaultAction::Plant(f) => Some(*f),
+            _ => None,
+        }
+    }
+
+    /// The compiled action of fault `i`.
+    pub fn action(&self, i: usize) -> Option<&FaultAction> {
+        self.actions.get(i)
     }
 
     /// The spec of fault `i`.
     pub fn spec(&self, i: usize) -> &FaultSpec {
-        &self.armed[i].spec
+        &self.specs[i]
     }
 
     /// Number of faults declared.
     pub fn len(&self) -> usize {
-        self.armed.len()
+        self.actions.len()
     }
 
-    /// Sensor faults on the telemetry the flight software is about to see (the truth is
-    /// untouched). `fired` is the mask of faults that fired this step.
-    pub fn apply_sensors(&mut self, tlm: &mut Telemetry, fired: u64) {
-        if !self.has_sensor_faults {
-            return;
-        }
-        let before = *tlm;
-        for (i, a) in self.armed.iter_mut().enumerate() {
-            if !matches!(a.state, State::Active { .. }) {
-                continue;
-            }
-            let Some(field) = a.spec.target.as_deref() else {
-                continue;
-            };
-            match a.spec.kind {
-                FaultKind::SensorBias => {
-                    let v = a.spec.param("value");
-                    for x in field_mut(tlm, field) {
-                        *x += v;
-                    }
-                }
-                FaultKind::SensorNoise => {
-                    let sigma = a.spec.param("sigma");
-                    for x in field_mut(tlm, field) {
-                        *x += sigma * a.rng.sample::<f64, _>(StandardNormal);
-                    }
-                }
-                FaultKind::SensorDropout | FaultKind::SensorFrozen => {
-                    if fired & (1 << i) != 0 {
-                        // Dropout repeats the last value seen before; frozen sticks at
-                        // the value of the step it fired.
-                        a.held = match (a.spec.kind, self.last_tlm) {
-                            (FaultKind::SensorDropout, Some(last)) => last,
-                            _ => before,
-                        };
-                    }
-                    let mut held = [0.0; 4];
-                    let src = field_mut(&mut a.held, field);
-                    let n = src.len();
-                    held[..n].copy_from_slice(src);
-                    field_mut(tlm, field).copy_from_slice(&held[..n]);
-                }
-                _ => {}
-            }
-        }
-        self.last_tlm = Some(*tlm);
-    }
-
-    /// Whether Telemetry(k) is withheld from the flight software (telemetry dropped, or
-    /// the flight software paused).
-    pub fn telemetry_withheld(&self) -> bool {
-        self.active(FaultKind::TelemetryDrop) || self.active(FaultKind::StubPause)
-    }
-
-    /// A stale duplicate due now (it arrives before this step's command and is
-    /// discarded as late).
-    pub fn take_duplicate(&mut self) -> Option<Command> {
-        self.duplicate.take()
-    }
-
-    /// The link faults on a command received from the flight software: returns what
-    /// reaches the sanitiser (`None`: nothing arrived).
-    pub fn on_command(&mut self, cmd: Option<Command>) -> Option<Command> {
-        let mut cmd = cmd;
-        for a in self.armed.iter_mut() {
-            if !matches!(a.state, State::Active { .. }) {
-                continue;
-            }
-            match a.spec.kind {
-                FaultKind::CommandDrop => cmd = None,
-                FaultKind::CommandDelay => {
-                    let steps = a.spec.param("steps") as usize;
-                    if let Some(c) = cmd {
-                        a.delayed.push_back(c);
-                    }
-                    cmd = if a.delayed.len() > steps {
-                        a.delayed.pop_front()
-                    } else {
-                        None
-                    };
-                }
-                FaultKind::CommandDuplicate => {
-                    if let Some(c) = cmd {
-                        self.duplicate = Some(c);
-                    }
-                }
-                FaultKind::CommandCorrupt => {
-                    if let Some(c) = cmd.as_mut() {
-                        corrupt(c, a.spec.param("bits") as u32, &mut a.rng);
-                    }
-                }
-                _ => {}
-            }
-        }
-        cmd
+    /// The sensor stage and the link stage, borrowed apart (the scheduler wraps its link
+    /// in the second while it applies the first).
+    pub fn stages(&mut self) -> (&mut SensorFaults, &mut LinkFaults) {
+        (&mut self.sensors, &mut self.link)
     }
 
     /// What fired and cleared, for the report.
     pub fn report(&self) -> Vec<FaultReport> {
-        self.armed
+        self.specs
             .iter()
-            .filter_map(|a| {
+            .zip(&self.timings)
+            .filter_map(|(spec, a)| {
                 let (t_ns, step) = a.fired_at?;
                 Some(FaultReport {
-                    kind: a.spec.kind.name().into(),
-                    target: a.spec.target.clone(),
-                    spec: a.spec.to_string(),
+                    kind: spec.kind.name().into(),
+                    target: spec.target.clone(),
+                    spec: spec.to_string(),
                     t_s: t_ns as f64 * 1e-9,
                     step,
                     cleared_t_s: a.cleared_at_ns.map(|t| t as f64 * 1e-9),
                 })
             })
             .collect()
-    }
-}
-
-/// Flips `bits` random bits of a command's payload (thrusts, switches, torques: bytes
-/// 40..112), as a damaged packet would arrive.
-fn corrupt(cmd: &mut Command, bits: u32, rng: &mut ChaCha8Rng) {
-    use oils_shared::AsBytes;
-    let mut bytes = [0u8; core::mem::size_of::<Command>()];
-    bytes.copy_from_slice(cmd.as_bytes());
-    for _ in 0..bits {
-        let bit = rng.gen_range(40 * 8..112 * 8);
-        bytes[bit / 8] ^= 1 << (bit % 8);
-    }
-    if let Some(c) = Command::from_bytes(&bytes) {
-        *cmd = c;
-    }
-}
-
-/// The values of a telemetry field a sensor fault acts on.
-fn field_mut<'a>(tlm: &'a mut Telemetry, field: &str) -> &'a mut [f64] {
-    let p = &mut tlm.propulsion;
-    match field {
-        "altitude_m" => std::slice::from_mut(&mut tlm.altitude_m),
-        "position_m" => &mut tlm.nav.pos_mci_m,
-        "velocity_m_s" => &mut tlm.nav.vel_mci_m_s,
-        "attitude" => &mut tlm.nav.q_mci_from_body,
-        "rate_rad_s" => &mut tlm.nav.rate_body_rad_s,
-        "accel_m_s2" => &mut tlm.accel_body_m_s2,
-        "mass_kg" => std::slice::from_mut(&mut tlm.mass_estimate_kg),
-        "gas_pressure_pa" => std::slice::from_mut(&mut p.gas_pressure_pa),
-        "fuel_tank_pressure_pa" => std::slice::from_mut(&mut p.fuel_tank_pressure_pa),
-        "ox_tank_pressure_pa" => std::slice::from_mut(&mut p.ox_tank_pressure_pa),
-        _ => {
-            // thrust1_n .. thrust4_n, chamber_pressure1_pa .. chamber_pressure4_pa
-            let engine = |prefix: &str, suffix: &str| {
-                field
-                    .strip_prefix(prefix)
-                    .and_then(|r| r.strip_suffix(suffix))
-                    .and_then(|n| n.parse::<usize>().ok())
-                    .filter(|n| (1..=4).contains(n))
-                    .map(|n| n - 1)
-            };
-            if let Some(e) = engine("thrust", "_n") {
-                std::slice::from_mut(&mut p.engines[e].thrust_n)
-            } else if let Some(e) = engine("chamber_pressure", "_pa") {
-                std::slice::from_mut(&mut p.engines[e].chamber_pressure_pa)
-            } else {
-                &mut []
-            }
-        }
     }
 }

@@ -448,6 +448,33 @@ impl FaultSpec {
         Ok(())
     }
 
+    /// Refuses a trigger that can never fire in a run of `duration_s` simulated seconds
+    /// with steps of `dt_ns`: a time or step at or beyond the end, a random window that
+    /// opens at or after it, or an altitude at or below the ground (touchdown ends the
+    /// run first). A fault that cannot fire is a mistake in the configuration, not a
+    /// quiet no-op (issue #36).
+    pub fn check_can_fire(&self, duration_s: f64, dt_ns: u64) -> Result<(), String> {
+        let ctx = |m: String| format!("fault `{self}`: {m}");
+        match self.trigger {
+            Trigger::Time(t) if t >= duration_s => Err(ctx(format!(
+                "trigger t={t} s is at or beyond the run's duration of {duration_s} s: it can never fire"
+            ))),
+            Trigger::Step(k) if (k as f64) * (dt_ns as f64) * 1e-9 >= duration_s => {
+                Err(ctx(format!(
+                    "trigger step={k} is at or beyond the run's last step ({duration_s} s at {} ms): it can never fire",
+                    dt_ns as f64 * 1e-6
+                )))
+            }
+            Trigger::AltitudeBelow(a) if a <= 0.0 => Err(ctx(format!(
+                "trigger alt={a} m: the true altitude never falls below {a} m (touchdown ends the run at 0 m): it can never fire"
+            ))),
+            Trigger::Random { from_s, .. } if from_s >= duration_s => Err(ctx(format!(
+                "trigger window opens at {from_s} s, at or beyond the run's duration of {duration_s} s: it can never fire"
+            ))),
+            _ => Ok(()),
+        }
+    }
+
     /// A parameter (present after `validate`).
     pub fn param(&self, key: &str) -> f64 {
         self.params.get(key).copied().unwrap_or(f64::NAN)
@@ -497,10 +524,17 @@ impl FromStr for FaultSpec {
             let (k, v) = kv
                 .split_once('=')
                 .ok_or_else(|| format!("fault `{s}`: parameter `{kv}` is not NAME=VALUE"))?;
-            params.insert(
-                k.to_string(),
-                number(k, v).map_err(|e| format!("fault `{s}`: {e}"))?,
-            );
+            let value = number(k, v).map_err(|e| format!("fault `{s}`: {e}"))?;
+            if params.insert(k.to_string(), value).is_some() {
+                return Err(format!(
+                    "fault `{s}`: parameter `{k}` is given twice (give it once)"
+                ));
+            }
+        }
+        if when.matches(",for=").count() > 1 {
+            return Err(format!(
+                "fault `{s}`: parameter `for` is given twice (give it once)"
+            ));
         }
         // `for=S` closes the trigger part.
         let (trigger_text, duration_s) = match when.rsplit_once(",for=") {
@@ -566,9 +600,49 @@ mod tests {
             ("engine-off:1", "expected KIND"),
             ("stub-pause@t=1", "for=SECONDS"),
             ("regulator-open:1@t=1", "takes no target"),
+            (
+                "stub-pause@t=1,for=1,for=2",
+                "parameter `for` is given twice",
+            ),
+            (
+                "thrust-degraded:1,factor=0.5,factor=0.6@t=1",
+                "parameter `factor` is given twice",
+            ),
         ] {
             let e = s.parse::<FaultSpec>().unwrap_err();
             assert!(e.contains(needle), "{s}: {e}");
+        }
+    }
+
+    #[test]
+    fn triggers_that_can_never_fire_are_refused_naming_the_fault_and_trigger() {
+        let dt_ns = 10_000_000;
+        for (s, needle) in [
+            ("engine-off:1@t=1e9", "t=1000000000"),
+            ("engine-off:1@t=800", "t=800"),
+            ("engine-off:1@alt=-5", "alt=-5"),
+            ("engine-off:1@alt=0", "alt=0"),
+            ("engine-off:1@step=80000", "step=80000"),
+            (
+                "engine-off:1@random,p=1,window=900..950",
+                "window opens at 900",
+            ),
+        ] {
+            let f: FaultSpec = s.parse().unwrap();
+            let e = f.check_can_fire(800.0, dt_ns).unwrap_err();
+            assert!(
+                e.contains(needle) && e.contains("never fire") && e.contains("engine-off"),
+                "{s}: {e}"
+            );
+        }
+        for s in [
+            "engine-off:1@t=799.99",
+            "engine-off:1@alt=0.5",
+            "engine-off:1@step=79999",
+            "engine-off:1@random,p=1,window=700..950",
+        ] {
+            let f: FaultSpec = s.parse().unwrap();
+            assert_eq!(f.check_can_fire(800.0, dt_ns), Ok(()), "{s}");
         }
     }
 }

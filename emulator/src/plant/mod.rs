@@ -1,18 +1,24 @@
-//! The plant: the lander as a 6-DOF rigid body of varying mass around a spherical,
-//! non-rotating Moon, driven by a propulsion model and saturated attitude thrusters,
-//! until its footpads touch the surface.
+//! The plant: the lander as a 6-DOF rigid body of varying mass around a rotating Moon,
+//! driven by a propulsion model and saturated attitude thrusters, standing on four
+//! legs once it touches the ground, until it rests or tips.
 //!
-//! Frames: `mci` is Moon-centred inertial; the Moon's rotation (the surface moves 4.6 m/s at
-//! the equator) is neglected, so the surface is fixed in `mci` and touchdown speeds are
-//! relative to it. Body +Z is the main-engine thrust axis. See `docs/plant.md`.
+//! Frames ([`frames`]): the state is integrated in `mci` (Moon-centred inertial); the
+//! ground is fixed in `mcmf`, which turns at the sidereal rate, so touchdown speeds are
+//! relative to the turning surface. Body +Z is the main-engine thrust axis. See
+//! `docs/plant.md`.
 //!
 //! One bench step: the propulsion model is stepped first with the command held; the
 //! rigid body is then integrated over the step (RK4) with the model's mean thrust held
-//! and the mass falling linearly by what was ejected. If the footpads reach the surface
-//! inside the step, the contact instant is found by re-integrating shorter sub-steps.
+//! and the mass falling linearly by what was ejected. If a footpad reaches the ground
+//! inside the step, the first-contact instant is found by re-integrating shorter
+//! sub-steps; from there the legs' spring-damper loads join in, in sub-steps of at most
+//! [`legs::CONTACT_SUBSTEP_NS`].
 
+pub mod frames;
+pub mod ground;
 pub mod initial;
 pub mod integrator;
+pub mod legs;
 pub mod model_error;
 pub mod nav_noise;
 pub mod rigid_body;
@@ -20,12 +26,15 @@ pub mod rigid_body;
 use crate::config::{ConfigError, ScenarioConfig, TouchdownLimits};
 use crate::faults::PlantFault;
 use crate::propulsion::{EngineCommand, Propulsion, PropulsionFault, PropulsionOutput};
+use frames::MoonRotation;
+use ground::Ground;
 use integrator::RK4;
+use legs::{Legs, CONTACT_SUBSTEP_NS};
 use nalgebra::Vector3;
 use nav_noise::NavNoise;
 use oils_shared::{
     EngineReading, NavState, PacketHeader, PropulsionReadings, Telemetry, ENGINE_COUNT,
-    TLM_FLAG_NAV_NOISE,
+    TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_NAV_NOISE,
 };
 use rigid_body::{Dynamics, HeldLoads, MassModel, StateVector};
 
@@ -51,34 +60,85 @@ pub struct ActuatorCommand {
 /// The state of the vehicle at the end of a step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum PlantStatus {
-    /// Still in the air.
+    /// In the air, or on its legs and not yet at rest.
     Flying,
-    /// The footpads reached the surface during this step (or earlier).
+    /// The landing is over: at rest, tipped, too fast at contact, or out of time to
+    /// settle (this step or earlier).
     Touchdown(TouchdownState),
 }
 
-/// The vehicle at the instant of contact.
+/// Why a touchdown is not a landing.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CrashReason {
+    /// Speed towards the surface at first contact over the limit.
+    VerticalSpeed,
+    /// Speed along the surface at first contact over the limit.
+    HorizontalSpeed,
+    /// The vehicle fell over (centre of mass past the footprint's edge).
+    TipOver,
+    /// The ground under the footprint steeper than the limit.
+    Slope,
+    /// At rest, but tilted more than the limit.
+    Tilt,
+    /// Still moving when the settling time ran out.
+    NotAtRest,
+}
+
+impl CrashReason {
+    /// The name the report and the log use.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            CrashReason::VerticalSpeed => "vertical-speed",
+            CrashReason::HorizontalSpeed => "horizontal-speed",
+            CrashReason::TipOver => "tip-over",
+            CrashReason::Slope => "slope",
+            CrashReason::Tilt => "tilt",
+            CrashReason::NotAtRest => "not-at-rest",
+        }
+    }
+}
+
+/// How the vehicle met the ground: first contact, and how it ended.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct TouchdownState {
-    /// Contact time since the start of the run, seconds.
+    /// First-contact time since the start of the run, seconds.
     pub t_s: f64,
-    /// Speed towards the surface at contact, m/s (>= 0).
+    /// Speed towards the surface at first contact, relative to the (turning) ground,
+    /// m/s (>= 0).
     pub vertical_speed_mps: f64,
-    /// Speed along the surface at contact, m/s.
+    /// Speed along the surface at first contact, relative to the ground, m/s.
     pub horizontal_speed_mps: f64,
-    /// Angle between body +Z and the local vertical, degrees.
+    /// Angle between body +Z and the local vertical at the end (at rest, tipped, or
+    /// at first contact when that ended it), degrees.
     pub tilt_deg: f64,
-    /// Main and attitude-thruster propellant used up to contact, kilograms.
+    /// The same angle at first contact, degrees.
+    pub contact_tilt_deg: f64,
+    /// Slope of the ground under the footprint at first contact, degrees.
+    pub slope_deg: f64,
+    /// Time the landing ended (at rest, tipped, judged), seconds since the start.
+    pub end_t_s: f64,
+    /// Main and attitude-thruster propellant used by the end, kilograms.
     pub propellant_used_kg: f64,
-    /// Every quantity within the configured touchdown limits.
+    /// Every quantity within the configured touchdown limits, at rest and upright.
     pub landed: bool,
+    /// Why it is not a landing (`None` when landed).
+    pub reason: Option<CrashReason>,
+}
+
+/// First contact, kept while the vehicle settles on its legs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Contact {
+    td: TouchdownState,
+    /// Time spent continuously at rest, seconds.
+    rest_s: f64,
 }
 
 /// Fixed numbers the plant derives from the configuration at construction.
 #[derive(Debug, Clone, Copy)]
 struct Setup {
     dynamics: Dynamics,
-    moon_radius_m: f64,
+    rotation: MoonRotation,
     leg_height_m: f64,
     wet_mass_kg: f64,
     engine_pos_body_m: [Vector3<f64>; ENGINE_COUNT],
@@ -96,6 +156,10 @@ struct Limits {
     vertical_speed_mps: f64,
     horizontal_speed_mps: f64,
     tilt_deg: f64,
+    slope_deg: f64,
+    rest_speed_m_s: f64,
+    rest_hold_s: f64,
+    settle_timeout_s: f64,
 }
 
 impl From<&TouchdownLimits> for Limits {
@@ -104,6 +168,10 @@ impl From<&TouchdownLimits> for Limits {
             vertical_speed_mps: l.vertical_speed_mps,
             horizontal_speed_mps: l.horizontal_speed_mps,
             tilt_deg: l.tilt_deg,
+            slope_deg: l.slope_deg,
+            rest_speed_m_s: l.rest_speed_m_s,
+            rest_hold_s: l.rest_hold_s,
+            settle_timeout_s: l.settle_timeout_s,
         }
     }
 }
@@ -121,6 +189,15 @@ pub struct Plant {
     specific_force_body_m_s2: Vector3<f64>,
     time_ns: i64,
     rcs_used_kg: f64,
+    /// The ground the legs meet.
+    ground: Ground,
+    /// The legs and their stick points.
+    legs: Legs,
+    /// First contact, while settling.
+    contact: Option<Contact>,
+    /// Footpads touching at the end of the last step.
+    pads_in_contact: u8,
+    /// The landing's end, once it is over.
     touchdown: Option<TouchdownState>,
     noise: Option<NavNoise>,
     /// Engine faults acting on the command.
@@ -157,8 +234,10 @@ impl Plant {
                 mu_m3_s2: cfg.moon.mu_m3_s2,
                 mass: MassModel::new(lander, cfg.propulsion.propellant_kg),
             },
-            moon_radius_m: cfg.moon.radius_m,
-            leg_height_m: lander.leg_height_m,
+            rotation: MoonRotation {
+                rate_rad_s: cfg.moon.rotation_rate_rad_s,
+            },
+            leg_height_m: lander.leg_height_m(),
             wet_mass_kg: cfg.wet_mass_kg(),
             // Moment arms from the true centre of mass (offset 0: the design one).
             engine_pos_body_m: lander
@@ -183,6 +262,17 @@ impl Plant {
             rcs_exhaust_m_s: lander.rcs_isp_s * G0_M_S2,
             limits: Limits::from(&cfg.touchdown),
         };
+        let ground = Ground::new(
+            &cfg.terrain,
+            cfg.site.latitude_deg,
+            cfg.site.longitude_deg,
+            cfg.moon.radius_m,
+        )
+        .map_err(|e| ConfigError {
+            field: "terrain",
+            value: e.to_string(),
+            why: "the terrain could not be built",
+        })?;
         let prop_out = propulsion.output();
         let mut state = initial::initial_state(cfg);
         state.mass_kg = (setup.wet_mass_kg - prop_out.ejected_kg()).max(lander.dry_mass_kg);
@@ -199,6 +289,10 @@ impl Plant {
             specific_force_body_m_s2: Vector3::zeros(),
             time_ns: 0,
             rcs_used_kg: 0.0,
+            ground,
+            legs: Legs::new(lander),
+            contact: None,
+            pads_in_contact: 0,
             touchdown: None,
             noise,
             engine_faults: [EngineFault::None; ENGINE_COUNT],
@@ -240,6 +334,9 @@ impl Plant {
                 engines,
             },
         };
+        if self.pads_in_contact > 0 {
+            tlm.header.flags |= TLM_FLAG_FOOTPAD_CONTACT;
+        }
         if let Some(noise) = self.noise.as_mut() {
             noise.apply(&mut tlm);
             tlm.header.flags |= TLM_FLAG_NAV_NOISE;
@@ -247,9 +344,9 @@ impl Plant {
         tlm
     }
 
-    /// Advances one bench step of `dt_ns` with `cmd` held. After touchdown the state is
-    /// frozen at the contact instant and every further call returns the same touchdown.
-    /// No allocation, I/O or clock.
+    /// Advances one bench step of `dt_ns` with `cmd` held. Once the landing is over the
+    /// state is frozen and every further call returns the same touchdown. No
+    /// allocation, I/O or clock.
     pub fn step(&mut self, cmd: &ActuatorCommand, dt_ns: u64) -> PlantStatus {
         if let Some(td) = self.touchdown {
             return PlantStatus::Touchdown(td);
@@ -357,9 +454,8 @@ impl Plant {
         };
 
         // 4. Rigid body over the step.
+        let step_start_s = self.time_ns as f64 * 1e-9;
         let x0 = self.state.to_vector();
-        let x1 = self.integrate(&loads, &x0, dt_s);
-        let end = RigidBodyState::from_vector(&x1, mass_end_kg);
         self.time_ns = self.time_ns.saturating_add(dt_ns as i64);
         self.specific_force_body_m_s2 = match &setup.engine_dir_body {
             None => Vector3::new(
@@ -375,24 +471,142 @@ impl Plant {
                     / mass_end_kg
             }
         };
+        self.rcs_used_kg = rcs_used_after_kg;
+        let end_s = self.time_ns as f64 * 1e-9;
 
-        if self.footpad_height_m(&end.pos_mci_m) > 0.0 {
-            self.state = end;
-            self.rcs_used_kg = rcs_used_after_kg;
+        if self.contact.is_some() {
+            // 5b. On the legs: the whole step with the contact loads.
+            let x1 = self.integrate_on_legs(&loads, &x0, 0.0, dt_s, step_start_s, dt_ns);
+            self.state = RigidBodyState::from_vector(&x1, mass_end_kg);
+            return self.settle(&x1, end_s, dt_s);
+        }
+
+        let x1 = self.integrate(&loads, &x0, dt_s);
+        if !self.may_touch(&x1, end_s) || self.lowest_pad_m(&x1, end_s) > 0.0 {
+            self.state = RigidBodyState::from_vector(&x1, mass_end_kg);
             return PlantStatus::Flying;
         }
 
-        // 5. Contact inside the step: find the instant, freeze the state there.
-        let frac = self.contact_fraction(&loads, &x0, dt_s);
+        // 5. First contact inside the step: find the instant.
+        let frac = self.contact_fraction(&loads, &x0, dt_s, step_start_s);
         let x_c = self.integrate(&loads, &x0, frac * dt_s);
         let mass_c_kg = mass_start_kg - (mass_start_kg - mass_end_kg) * frac;
-        let contact = RigidBodyState::from_vector(&x_c, mass_c_kg);
-        self.rcs_used_kg += rcs_kg * frac;
-        let step_start_s = (self.time_ns - dt_ns as i64) as f64 * 1e-9;
-        let td = self.touchdown_state(&contact, step_start_s + frac * dt_s);
-        self.state = contact;
+        let first = RigidBodyState::from_vector(&x_c, mass_c_kg);
+        let t_contact_s = step_start_s + frac * dt_s;
+        let td = self.first_contact(&first, t_contact_s);
+        if td.reason.is_some() {
+            // Too fast: a crash at contact, nothing left to settle.
+            self.state = first;
+            self.touchdown = Some(td);
+            self.pads_in_contact = 1;
+            return PlantStatus::Touchdown(td);
+        }
+        self.contact = Some(Contact { td, rest_s: 0.0 });
+        let x1 = self.integrate_on_legs(&loads, &x_c, frac * dt_s, dt_s, step_start_s, dt_ns);
+        self.state = RigidBodyState::from_vector(&x1, mass_end_kg);
+        self.settle(&x1, end_s, dt_s)
+    }
+
+    /// Integrates from `t_from_s` to `t_to_s` (seconds into the step that started at
+    /// `step_start_s`) with the legs' loads, in sub-steps of at most
+    /// [`CONTACT_SUBSTEP_NS`]; the stick points are updated between sub-steps.
+    fn integrate_on_legs(
+        &mut self,
+        loads: &HeldLoads,
+        x0: &StateVector,
+        t_from_s: f64,
+        t_to_s: f64,
+        step_start_s: f64,
+        dt_ns: u64,
+    ) -> StateVector {
+        let n = dt_ns.div_ceil(CONTACT_SUBSTEP_NS).max(1) as usize;
+        let h_s = (t_to_s - t_from_s) / n as f64;
+        let mut x = *x0;
+        let dyn_ = self.setup.dynamics;
+        let rotation = self.setup.rotation;
+        for k in 0..n {
+            let t_a = t_from_s + h_s * k as f64;
+            let legs = &self.legs;
+            let ground = &self.ground;
+            x = RK4.step(t_a, h_s, &x, |t, x| {
+                let mut dx = dyn_.derivative(loads, t, x);
+                let c = legs.loads(x, step_start_s + t, &rotation, ground);
+                let mass_kg = loads.mass_start_kg - loads.mass_flow_kg_s * t;
+                let inertia = dyn_.mass.inertia_kg_m2(mass_kg);
+                let accel = c.force_mci_n / mass_kg;
+                let w_dot = c.torque_body_nm.component_div(&inertia);
+                for i in 0..3 {
+                    dx[3 + i] += accel[i];
+                    dx[10 + i] += w_dot[i];
+                }
+                dx
+            });
+            // Keep the quaternion unit between sub-steps, as the state conversion does.
+            let q_norm = x.fixed_rows::<4>(6).norm();
+            for i in 6..10 {
+                x[i] /= q_norm;
+            }
+            self.legs
+                .update_anchors(&x, step_start_s + t_a + h_s, &rotation, &self.ground);
+        }
+        x
+    }
+
+    /// After a step on the legs: tipped, at rest, or out of time ends the landing.
+    fn settle(&mut self, x: &StateVector, t_s: f64, dt_s: f64) -> PlantStatus {
+        let rotation = self.setup.rotation;
+        self.pads_in_contact = self.legs.pads_in_contact(x, t_s, &rotation, &self.ground);
+        let Some(mut contact) = self.contact else {
+            return PlantStatus::Flying;
+        };
+        let lim = self.setup.limits;
+        let tilt_deg = self.tilt_deg(&self.state);
+        let tilt_from_ground_deg = self.tilt_from_ground_deg(&self.state, t_s);
+        let fastest = self.legs.fastest_pad_m_s(x, t_s, &rotation, &self.ground);
+        contact.rest_s = if fastest < lim.rest_speed_m_s && self.pads_in_contact > 0 {
+            contact.rest_s + dt_s
+        } else {
+            0.0
+        };
+        self.contact = Some(contact);
+        let tipped = tilt_from_ground_deg > self.legs.tip_over_deg();
+        let at_rest = contact.rest_s >= lim.rest_hold_s && contact.rest_s > 0.0;
+        let timed_out = t_s - contact.td.t_s >= lim.settle_timeout_s;
+        if !(tipped || at_rest || timed_out) {
+            return PlantStatus::Flying;
+        }
+        let mut td = contact.td;
+        td.end_t_s = t_s;
+        td.tilt_deg = tilt_deg;
+        td.propellant_used_kg = self.setup.wet_mass_kg - self.state.mass_kg;
+        td.reason = if tipped {
+            Some(CrashReason::TipOver)
+        } else if td.slope_deg > lim.slope_deg {
+            Some(CrashReason::Slope)
+        } else if !at_rest {
+            Some(CrashReason::NotAtRest)
+        } else if tilt_deg > lim.tilt_deg {
+            Some(CrashReason::Tilt)
+        } else {
+            None
+        };
+        td.landed = td.reason.is_none();
         self.touchdown = Some(td);
         PlantStatus::Touchdown(td)
+    }
+
+    /// Whether any footpad could reach the ground from state `x` at `t_s` (the cheap
+    /// test that skips the per-footpad queries high up).
+    fn may_touch(&self, x: &StateVector, t_s: f64) -> bool {
+        let r = x.fixed_rows::<3>(0).into_owned();
+        let p_mcmf = self.setup.rotation.mcmf_from_mci(t_s) * r;
+        self.ground.height_m(&p_mcmf) - self.ground.max_elevation_m() <= self.legs.reach_m() + 1.0
+    }
+
+    /// Lowest footpad's height above the ground, metres.
+    fn lowest_pad_m(&self, x: &StateVector, t_s: f64) -> f64 {
+        self.legs
+            .lowest_height_m(x, t_s, &self.setup.rotation, &self.ground)
     }
 
     /// One RK4 step of `h_s` seconds from `x0` at the start of the bench step.
@@ -403,10 +617,16 @@ impl Plant {
 
     /// Fraction of the step at which the footpads touch: regula falsi (Illinois) on the
     /// footpad height of a re-integrated sub-step; height > 0 at 0, <= 0 at 1.
-    fn contact_fraction(&self, loads: &HeldLoads, x0: &StateVector, dt_s: f64) -> f64 {
+    fn contact_fraction(
+        &self,
+        loads: &HeldLoads,
+        x0: &StateVector,
+        dt_s: f64,
+        step_start_s: f64,
+    ) -> f64 {
         let height = |frac: f64| {
             let x = self.integrate(loads, x0, frac * dt_s);
-            self.footpad_height_m(&x.fixed_rows::<3>(0).into_owned())
+            self.lowest_pad_m(&x, step_start_s + frac * dt_s)
         };
         let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
         let (mut h_lo, mut h_hi) = (height(lo), height(hi));
@@ -443,32 +663,70 @@ impl Plant {
         frac
     }
 
-    fn touchdown_state(&self, s: &RigidBodyState, t_s: f64) -> TouchdownState {
+    /// The touchdown as first contact sees it; a speed over the limits ends it there.
+    fn first_contact(&self, s: &RigidBodyState, t_s: f64) -> TouchdownState {
+        let rotation = &self.setup.rotation;
         let up = s.pos_mci_m.normalize();
-        let v_up = s.vel_mci_m_s.dot(&up);
-        let horizontal = (s.vel_mci_m_s - up * v_up).norm();
-        let tilt_deg = s
-            .thrust_axis_mci()
-            .dot(&up)
+        let v_rel = rotation.surface_relative_mci(&s.pos_mci_m, &s.vel_mci_m_s);
+        let v_up = v_rel.dot(&up);
+        let horizontal = (v_rel - up * v_up).norm();
+        let vertical = v_up.abs();
+        let tilt_deg = self.tilt_deg(s);
+        let p_mcmf = rotation.mcmf_from_mci(t_s) * s.pos_mci_m;
+        let slope_deg = self
+            .ground
+            .normal_mcmf(&p_mcmf)
+            .dot(&p_mcmf.normalize())
             .clamp(-1.0, 1.0)
             .acos()
             .to_degrees();
-        let vertical = v_up.abs();
         let lim = &self.setup.limits;
+        let reason = if vertical > lim.vertical_speed_mps {
+            Some(CrashReason::VerticalSpeed)
+        } else if horizontal > lim.horizontal_speed_mps {
+            Some(CrashReason::HorizontalSpeed)
+        } else {
+            None
+        };
         TouchdownState {
             t_s,
             vertical_speed_mps: vertical,
             horizontal_speed_mps: horizontal,
             tilt_deg,
+            contact_tilt_deg: tilt_deg,
+            slope_deg,
+            end_t_s: t_s,
             propellant_used_kg: self.setup.wet_mass_kg - s.mass_kg,
-            landed: vertical <= lim.vertical_speed_mps
-                && horizontal <= lim.horizontal_speed_mps
-                && tilt_deg <= lim.tilt_deg,
+            landed: false,
+            reason,
         }
     }
 
+    /// Angle between body +Z and the local vertical, degrees.
+    fn tilt_deg(&self, s: &RigidBodyState) -> f64 {
+        s.thrust_axis_mci()
+            .dot(&s.pos_mci_m.normalize())
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees()
+    }
+
+    /// Angle between body +Z and the ground's normal below the vehicle, degrees.
+    fn tilt_from_ground_deg(&self, s: &RigidBodyState, t_s: f64) -> f64 {
+        let to_mcmf = self.setup.rotation.mcmf_from_mci(t_s);
+        let n_mci = to_mcmf.inverse() * self.ground.normal_mcmf(&(to_mcmf * s.pos_mci_m));
+        s.thrust_axis_mci()
+            .dot(&n_mci)
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees()
+    }
+
+    /// Height of the footpad plane above the ground below the centre of mass, metres.
     fn footpad_height_m(&self, pos_mci_m: &Vector3<f64>) -> f64 {
-        pos_mci_m.norm() - self.setup.moon_radius_m - self.setup.leg_height_m
+        let t_s = self.time_ns as f64 * 1e-9;
+        let p_mcmf = self.setup.rotation.mcmf_from_mci(t_s) * pos_mci_m;
+        self.ground.height_m(&p_mcmf) - self.setup.leg_height_m
     }
 
     /// True height of the footpads above the surface, metres.

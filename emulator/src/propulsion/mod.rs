@@ -7,6 +7,7 @@
 //! accounting: the vehicle mass is the initial mass minus what the model reports ejected.
 
 pub mod diagnostics;
+pub mod held;
 pub mod hifi;
 pub mod ideal;
 pub mod shadow;
@@ -260,7 +261,7 @@ pub fn build(spec: &PropulsionSpec) -> Result<Box<dyn Propulsion>, BuildError> {
     Ok(match spec.kind {
         PropulsionKind::Ideal => Box::new(ideal::IdealPropulsion::new(&spec.engines)),
         PropulsionKind::Hifi => Box::new(build_hifi(spec)?),
-        PropulsionKind::Surrogate => Box::new(build_surrogate(spec)?),
+        PropulsionKind::Surrogate => build_surrogate_held(spec)?,
         PropulsionKind::Shadow => Box::new(shadow::ShadowPropulsion::new(
             build_hifi(spec)?,
             build_surrogate(spec)?,
@@ -271,6 +272,46 @@ pub fn build(spec: &PropulsionSpec) -> Result<Box<dyn Propulsion>, BuildError> {
 /// The hifi model of `spec` (whatever its kind), for callers that need the concrete type.
 pub fn build_hifi(spec: &PropulsionSpec) -> Result<hifi::HifiPropulsion, BuildError> {
     Ok(hifi::HifiPropulsion::new(&spec.hifi, &spec.engines)?)
+}
+
+/// The surrogate for the bench step of `spec`: stepped directly when the step is a whole
+/// number of its samples, else (a plant step that divides its sample time, as 1 ms under
+/// a 10 ms model) sampled and held ([`held::Held`]).
+fn build_surrogate_held(spec: &PropulsionSpec) -> Result<Box<dyn Propulsion>, BuildError> {
+    use surrogate::model_file::ModelFile;
+    let sample_ns = match &spec.surrogate_model {
+        Some(path) => ModelFile::load(path)?.model.sample_time_ns,
+        None => surrogate::SurrogatePropulsion::default_sample_time_ns(),
+    };
+    match spec.step_ns {
+        Some(step) if step > 0 && step < sample_ns && sample_ns.is_multiple_of(step) => {
+            let mut at_sample = spec.clone();
+            at_sample.step_ns = Some(sample_ns);
+            Ok(Box::new(held::Held::new(
+                build_surrogate(&at_sample)?,
+                sample_ns,
+            )))
+        }
+        _ => Ok(Box::new(build_surrogate(spec)?)),
+    }
+}
+
+/// The propulsion model's own period for a bench step of `step_ns`, nanoseconds: the
+/// surrogate's sample time (held under a faster plant, sub-stepped under a slower one),
+/// the bench step for the others (hifi sub-steps internally, ideal is exact).
+pub fn model_period_ns(spec: &PropulsionSpec) -> Result<u64, BuildError> {
+    let step = spec.step_ns.unwrap_or(10_000_000);
+    Ok(match spec.kind {
+        PropulsionKind::Surrogate | PropulsionKind::Shadow => match &spec.surrogate_model {
+            Some(path) => {
+                surrogate::model_file::ModelFile::load(path)?
+                    .model
+                    .sample_time_ns
+            }
+            None => surrogate::SurrogatePropulsion::default_sample_time_ns(),
+        },
+        PropulsionKind::Ideal | PropulsionKind::Hifi => step,
+    })
 }
 
 /// The surrogate of `spec` (whatever its kind), for callers that need the concrete type.

@@ -20,6 +20,7 @@
 #include <string.h>
 
 #define MOON_MU_M3_S2 4.9028e12
+#define MOON_ROTATION_RAD_S 2.6617e-6 /* sidereal: 2 pi / 27.321661 d */
 #define ENGINE_MIN_N 320.0   /* 40 % of 800 N */
 #define ENGINE_MAX_N 800.0
 #define INERTIA_KG_M2 1000.0 /* rough, every axis */
@@ -81,11 +82,24 @@ int32_t oils_fsw_step(void *context, const oils_telemetry *tlm, oils_command *cm
   const double up[3] = {nav->pos_mci_m[0] / r, nav->pos_mci_m[1] / r, nav->pos_mci_m[2] / r};
   const double g = MOON_MU_M3_S2 / (r * r);
 
+  /* On the legs: engines off, no torque; the vehicle settles under its weight. */
+  if (tlm->header.flags & OILS_TLM_FLAG_FOOTPAD_CONTACT) {
+    memset(cmd->thrust_cmd_n, 0, sizeof cmd->thrust_cmd_n);
+    memset(cmd->engine_on, 0, sizeof cmd->engine_on);
+    memset(cmd->torque_cmd_body_nm, 0, sizeof cmd->torque_cmd_body_nm);
+    return 0;
+  }
+
+  /* Velocity relative to the turning ground: v - omega x r, omega along mci +Z. */
+  const double v_rel[3] = {nav->vel_mci_m_s[0] + MOON_ROTATION_RAD_S * nav->pos_mci_m[1],
+                           nav->vel_mci_m_s[1] - MOON_ROTATION_RAD_S * nav->pos_mci_m[0],
+                           nav->vel_mci_m_s[2]};
+
   /* Vertical: follow a descent-speed profile that brakes to touchdown speed. */
   const double h = fmax(tlm->altitude_m, 0.0);
   double v_ref = fmin(ctx->max_descent_speed_m_s, sqrt(2.0 * ctx->decel_m_s2 * h));
   v_ref = -fmax(v_ref, ctx->touchdown_speed_m_s);
-  const double v_up = dot(nav->vel_mci_m_s, up);
+  const double v_up = dot(v_rel, up);
   const double a_up = g + 1.0 * (v_ref - v_up);
 
   /* Horizontal: null the velocity, tilting at most 10 degrees (3 near the ground). */
@@ -93,7 +107,7 @@ int32_t oils_fsw_step(void *context, const oils_telemetry *tlm, oils_command *cm
   const double max_tilt = tan((h > 20.0 ? 10.0 : 3.0) * DEG_TO_RAD);
   double a_h[3], a_h_norm = 0.0;
   for (int i = 0; i < 3; i++) {
-    a_h[i] = -0.3 * (nav->vel_mci_m_s[i] - v_up * up[i]);
+    a_h[i] = -0.3 * (v_rel[i] - v_up * up[i]);
     a_h_norm += a_h[i] * a_h[i];
   }
   a_h_norm = sqrt(a_h_norm);

@@ -90,6 +90,7 @@ mod tests {
             mass_kg: 1000.0,
             up_mci: Vector3::x(),
             gravity_m_s2: 1.6,
+            omega_moon_mci: Vector3::zeros(),
         }
     }
 

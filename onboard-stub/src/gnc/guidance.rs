@@ -53,6 +53,23 @@ pub struct LandingSite {
     pub target_vel_mci_m_s: Vector3<f64>,
     /// Time at which fine braking should reach the target, seconds.
     pub arrival_t_s: f64,
+    /// Time the site was chosen, seconds: the `mci` vectors above are where the
+    /// (turning) site was then.
+    pub chosen_t_s: f64,
+}
+
+impl LandingSite {
+    /// Where the Moon's rotation (`omega_rad_s` about `mci` +Z) has carried the
+    /// site-fixed point `p_mci` (given at `chosen_t_s`) by `t_s`.
+    pub fn turned(&self, p_mci: &Vector3<f64>, t_s: f64, omega_rad_s: f64) -> Vector3<f64> {
+        let angle = omega_rad_s * (t_s - self.chosen_t_s);
+        let (s, c) = angle.sin_cos();
+        Vector3::new(
+            c * p_mci.x - s * p_mci.y,
+            s * p_mci.x + c * p_mci.y,
+            p_mci.z,
+        )
+    }
 }
 
 /// What guidance asks for this step.
@@ -222,6 +239,7 @@ impl Guidance {
                 target_mci_m: nav.pos_mci_m,
                 target_vel_mci_m_s: Vector3::zeros(),
                 arrival_t_s: nav.t_s,
+                chosen_t_s: nav.t_s,
             });
             let phase = if h > self.cfg.hover_altitude_m + self.cfg.hover_capture_m {
                 Phase::TerminalDescent
@@ -303,6 +321,7 @@ impl Guidance {
             target_mci_m: up_site * (surface_r + c.fine_target_altitude_m),
             target_vel_mci_m_s: up_site * c.fine_target_vertical_speed_m_s,
             arrival_t_s: nav.t_s + tgo,
+            chosen_t_s: nav.t_s,
         });
     }
 
@@ -319,8 +338,14 @@ impl Guidance {
         if tgo > self.cfg.fine_hold_tgo_s {
             let r = nav.pos_mci_m;
             let v = nav.vel_mci_m_s;
-            let a = (site.target_mci_m - r - v * tgo) * (6.0 / (tgo * tgo))
-                - (site.target_vel_mci_m_s - v) * (2.0 / tgo)
+            // The target turns with the Moon: where it will be at arrival, moving with
+            // the ground (plus the planned vertical speed).
+            let omega = self.cfg.moon_rotation_rad_s;
+            let r_f = site.turned(&site.target_mci_m, site.arrival_t_s, omega);
+            let v_f = site.turned(&site.target_vel_mci_m_s, site.arrival_t_s, omega)
+                + Vector3::new(0.0, 0.0, omega).cross(&r_f);
+            let a = (r_f - r - v * tgo) * (6.0 / (tgo * tgo))
+                - (v_f - v) * (2.0 / tgo)
                 - nav.gravity_mci_m_s2();
             self.held_accel_mci_m_s2 = a;
         }
@@ -372,7 +397,9 @@ impl Guidance {
         let mut a_h = -vh * c.terminal_gain_horizontal_speed_1_s;
         if self.phase != Phase::FinalDescent {
             if let Some(site) = self.site {
-                let off = nav.pos_mci_m - site.surface_mci_m;
+                let surface_now =
+                    site.turned(&site.surface_mci_m, nav.t_s, self.cfg.moon_rotation_rad_s);
+                let off = nav.pos_mci_m - surface_now;
                 let mut off_h = off - nav.up_mci * off.dot(&nav.up_mci);
                 let n = off_h.norm();
                 if n > c.terminal_max_position_error_m {
@@ -417,6 +444,7 @@ mod tests {
             mass_kg: 1000.0,
             up_mci: r / rn,
             gravity_m_s2: cfg.moon_mu_m3_s2 / (rn * rn),
+            omega_moon_mci: Vector3::new(0.0, 0.0, cfg.moon_rotation_rad_s),
         }
     }
 
@@ -446,14 +474,15 @@ mod tests {
             t += dt;
             assert!(t < 1_000.0, "fine braking never ended");
         }
+        // The target turned with the Moon since it was chosen; the speeds that count
+        // are over the (turning) ground.
         let site = g.site().unwrap();
-        let up = site.target_mci_m.normalize();
+        let omega = cfg.moon_rotation_rad_s;
+        let target = site.turned(&site.target_mci_m, t, omega);
+        let up = target.normalize();
+        let v = v - Vector3::new(0.0, 0.0, omega).cross(&r);
         let v_h = (v - up * v.dot(&up)).norm();
-        assert!(
-            (r - site.target_mci_m).norm() < 5.0,
-            "{}",
-            (r - site.target_mci_m).norm()
-        );
+        assert!((r - target).norm() < 5.0, "{}", (r - target).norm());
         assert!(v_h < 0.5, "horizontal {v_h}");
         assert!((v.dot(&up) - cfg.fine_target_vertical_speed_m_s).abs() < 0.5);
         // Planned within fine_accel_fraction of the maximum (a little slack for the

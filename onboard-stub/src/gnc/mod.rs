@@ -17,7 +17,7 @@ use attitude::AttitudeController;
 use guidance::{Guidance, Phase};
 use nalgebra::Vector3;
 use navigation::NavFilter;
-use oils_shared::{Command, Telemetry, ENGINE_COUNT};
+use oils_shared::{Command, Telemetry, ENGINE_COUNT, TLM_FLAG_FOOTPAD_CONTACT};
 use thrust_loop::ThrustLoop;
 
 /// Everything the onboard software assumes about the vehicle, the Moon and its own
@@ -26,6 +26,9 @@ use thrust_loop::ThrustLoop;
 pub struct GncConfig {
     /// Moon gravitational parameter, m^3/s^2.
     pub moon_mu_m3_s2: f64,
+    /// Moon rotation rate about the inertial +Z (its pole), rad/s: the ground the
+    /// vehicle lands on moves at `omega x r`.
+    pub moon_rotation_rad_s: f64,
     /// Main engine positions relative to the centre of mass, body axes, metres.
     pub engine_positions_body_m: [[f64; 3]; ENGINE_COUNT],
     /// Rated thrust per engine, newtons.
@@ -157,6 +160,7 @@ impl Default for GncConfig {
     fn default() -> Self {
         Self {
             moon_mu_m3_s2: 4.9028e12,
+            moon_rotation_rad_s: 2.6617e-6,
             engine_positions_body_m: [
                 [0.6, 0.6, -0.8],
                 [-0.6, 0.6, -0.8],
@@ -327,6 +331,8 @@ pub struct ReferenceGnc {
     last_t_s: f64,
     /// Engine-out detection.
     monitor: EngineMonitor,
+    /// A footpad touched: the engines stay off.
+    touched_down: bool,
 }
 
 /// Detects a main engine that stopped delivering: lit and commanded for a while, yet
@@ -405,6 +411,7 @@ impl ReferenceGnc {
             last_cmd_total_n: 0.0,
             last_t_s: 0.0,
             monitor: EngineMonitor::default(),
+            touched_down: false,
             cfg,
         })
     }
@@ -486,6 +493,16 @@ impl FlightSoftware for ReferenceGnc {
 
     fn step(&mut self, tlm: &Telemetry) -> Command {
         let nav = self.nav.update(tlm);
+        if tlm.header.flags & TLM_FLAG_FOOTPAD_CONTACT != 0 {
+            // On the legs: engines off for good (the touchdown switches' cut-off), no
+            // attitude torque; the vehicle settles under its own weight.
+            self.touched_down = true;
+        }
+        if self.touched_down {
+            self.monitor
+                .commanded(&[0.0; ENGINE_COUNT], &[false; ENGINE_COUNT]);
+            return Command::default();
+        }
         let dt_s = (nav.t_s - self.last_t_s).max(0.0);
         self.last_t_s = nav.t_s;
         if self.monitor.failed.is_none() && self.monitor.update(tlm, dt_s).is_some() {

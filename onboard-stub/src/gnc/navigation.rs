@@ -35,6 +35,8 @@ pub struct NavSolution {
     pub up_mci: Vector3<f64>,
     /// Gravity magnitude at the estimated position, m/s^2.
     pub gravity_m_s2: f64,
+    /// The Moon's angular velocity, `mci`, rad/s.
+    pub omega_moon_mci: Vector3<f64>,
 }
 
 impl NavSolution {
@@ -45,7 +47,13 @@ impl NavSolution {
 
     /// Horizontal velocity vector, `mci`, m/s.
     pub fn horizontal_velocity_mci_m_s(&self) -> Vector3<f64> {
-        self.vel_mci_m_s - self.up_mci * self.vertical_speed_m_s()
+        let v = self.surface_velocity_mci_m_s();
+        v - self.up_mci * v.dot(&self.up_mci)
+    }
+
+    /// Velocity relative to the turning ground, `v - omega x r`, `mci` axes.
+    pub fn surface_velocity_mci_m_s(&self) -> Vector3<f64> {
+        self.vel_mci_m_s - self.omega_moon_mci.cross(&self.pos_mci_m)
     }
 
     /// Gravity vector, `mci`, m/s^2.
@@ -63,6 +71,7 @@ impl NavSolution {
 #[derive(Debug, Clone)]
 pub struct NavFilter {
     mu_m3_s2: f64,
+    omega_moon_mci: Vector3<f64>,
     gain_pos: f64,
     gain_vel: f64,
     gain_alt: f64,
@@ -83,6 +92,7 @@ impl NavFilter {
     pub fn new(cfg: &GncConfig) -> Self {
         Self {
             mu_m3_s2: cfg.moon_mu_m3_s2,
+            omega_moon_mci: Vector3::new(0.0, 0.0, cfg.moon_rotation_rad_s),
             gain_pos: cfg.nav_gain_position,
             gain_vel: cfg.nav_gain_velocity,
             gain_alt: cfg.nav_gain_altitude,
@@ -143,6 +153,7 @@ impl NavFilter {
             mass_kg: tlm.mass_estimate_kg,
             up_mci: pos / r,
             gravity_m_s2: self.mu_m3_s2 / (r * r),
+            omega_moon_mci: self.omega_moon_mci,
         }
     }
 }

@@ -12,9 +12,10 @@ import argparse
 import math
 import sys
 
-from oils_fsw import ENGINE_COUNT, Command, Telemetry, fly
+from oils_fsw import ENGINE_COUNT, TLM_FLAG_FOOTPAD_CONTACT, Command, Telemetry, fly
 
 MOON_MU_M3_S2 = 4.9028e12
+MOON_ROTATION_RAD_S = 2.6617e-6  # sidereal: 2 pi / 27.321661 d, about mci +Z
 ENGINE_MIN_N = 320.0  # 40 % of 800 N
 ENGINE_MAX_N = 800.0
 INERTIA_KG_M2 = 1000.0  # rough, every axis
@@ -41,8 +42,13 @@ class TerminalDescent:
         self.decel_m_s2 = decel_m_s2
 
     def step(self, tlm: Telemetry) -> Command:
+        if tlm.header.flags & TLM_FLAG_FOOTPAD_CONTACT:
+            return Command()  # on the legs: engines off, no torque
         nav = tlm.nav
-        pos, vel = nav.pos_mci_m, nav.vel_mci_m_s
+        pos = nav.pos_mci_m
+        # Velocity relative to the turning ground: v - omega x r, omega along mci +Z.
+        w = MOON_ROTATION_RAD_S
+        vel = (nav.vel_mci_m_s[0] + w * pos[1], nav.vel_mci_m_s[1] - w * pos[0], nav.vel_mci_m_s[2])
         r = math.sqrt(pos[0] ** 2 + pos[1] ** 2 + pos[2] ** 2)
         up = (pos[0] / r, pos[1] / r, pos[2] / r)
         g = MOON_MU_M3_S2 / (r * r)

@@ -104,6 +104,15 @@ impl SurrogatePropulsion {
         Self::new(&file, cfg, step)
     }
 
+    /// The committed default model's sample time, nanoseconds.
+    pub fn default_sample_time_ns() -> u64 {
+        // Parsed once per process: a campaign asks once per case.
+        static SAMPLE_NS: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+        *SAMPLE_NS.get_or_init(|| {
+            ModelFile::parse(DEFAULT_MODEL_JSON).map_or(10_000_000, |f| f.model.sample_time_ns)
+        })
+    }
+
     /// Steps on which some feature left the training envelope (and was clamped).
     pub fn out_of_envelope_steps(&self) -> u64 {
         self.predictor.out_of_envelope_steps()

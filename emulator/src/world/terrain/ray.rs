@@ -1,0 +1,128 @@
+//! Ray casts on the terrain (for altimeter and velocimeter beams), allocation-free.
+//!
+//! March: the height above ground `g(t)` along a unit ray changes by at most
+//! `L = sqrt(1 + s_max^2)` per metre of range (`s_max` the grid's gradient bound), so a
+//! step of `g / L` cannot cross the surface (sphere tracing). Steps never shrink below
+//! `spacing / 8`, so a ray grazing a crest by less than about `L * spacing / 16` may pass
+//! it; a crossing is then bracketed and refined by the Illinois variant of regula falsi
+//! to 1e-6 m in range.
+
+use super::surface::Terrain;
+use nalgebra::Vector3;
+
+/// Range tolerance of the refined intersection, m.
+pub const RANGE_TOL_M: f64 = 1e-6;
+/// Smallest march step as a fraction of the grid spacing.
+const MIN_STEP_FRACTION: f64 = 0.125;
+/// Smallest march step without a grid (the smooth sphere, where `g / L` converges), m.
+const MIN_STEP_SMOOTH_M: f64 = 1e-3;
+/// Iteration caps: march steps and refinement steps (each far above what rays need).
+const MAX_MARCH: usize = 1 << 20;
+const MAX_REFINE: usize = 200;
+
+/// Where a ray meets the terrain.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// Distance from the ray's origin along its unit direction, m.
+    pub range_m: f64,
+    /// The hit point, site frame, m.
+    pub point_site: Vector3<f64>,
+    /// Unit surface normal at the hit, site frame.
+    pub normal_site: Vector3<f64>,
+    /// Angle between the reversed beam and the normal, degrees (0: head-on).
+    pub incidence_deg: f64,
+}
+
+impl Terrain {
+    /// The first point where the ray `origin + t dir` (t in `[0, max_range_m]`) meets
+    /// the terrain. `dir` need not be unit length. `None` if it misses within range, or
+    /// if an input is not finite or `dir` is zero. An origin at or below the ground hits
+    /// at range 0.
+    pub fn ray_cast(
+        &self,
+        origin_site: &Vector3<f64>,
+        dir_site: &Vector3<f64>,
+        max_range_m: f64,
+    ) -> Option<Hit> {
+        let norm = dir_site.norm();
+        let finite = origin_site.iter().all(|x| x.is_finite()) && norm.is_finite();
+        if !finite || norm == 0.0 || max_range_m.is_nan() || max_range_m < 0.0 {
+            return None;
+        }
+        let d = dir_site / norm;
+        let g = |t: f64| self.height_above_surface_m(&(origin_site + d * t));
+        let min_step = self
+            .grid
+            .as_ref()
+            .map_or(MIN_STEP_SMOOTH_M, |gr| gr.spacing_m() * MIN_STEP_FRACTION);
+
+        let mut t0 = 0.0;
+        let mut g0 = g(0.0);
+        if g0 <= 0.0 {
+            return Some(self.hit(origin_site, &d, 0.0));
+        }
+        for _ in 0..MAX_MARCH {
+            if t0 >= max_range_m {
+                return None;
+            }
+            let t1 = (t0 + (g0 / self.lipschitz).max(min_step)).min(max_range_m);
+            let g1 = g(t1);
+            if g1 <= 0.0 {
+                let t = refine(&g, t0, g0, t1, g1);
+                return Some(self.hit(origin_site, &d, t));
+            }
+            t0 = t1;
+            g0 = g1;
+        }
+        None
+    }
+
+    fn hit(&self, origin: &Vector3<f64>, d: &Vector3<f64>, t: f64) -> Hit {
+        let p = origin + d * t;
+        let (e, n) = self.map_of_site(&p);
+        let normal = self.normal_site(e, n);
+        let cos_inc = (-d.dot(&normal)).clamp(-1.0, 1.0);
+        Hit {
+            range_m: t,
+            point_site: p,
+            normal_site: normal,
+            incidence_deg: cos_inc.acos().to_degrees(),
+        }
+    }
+}
+
+/// Illinois regula falsi on a bracket with `g(a) > 0 >= g(b)`: the crossing's range.
+fn refine(g: &impl Fn(f64) -> f64, mut a: f64, mut ga: f64, mut b: f64, mut gb: f64) -> f64 {
+    let mut side = 0i8;
+    for _ in 0..MAX_REFINE {
+        if b - a <= RANGE_TOL_M || gb == 0.0 {
+            break;
+        }
+        let mut c = (a * gb - b * ga) / (gb - ga);
+        if !(c > a && c < b) {
+            c = 0.5 * (a + b);
+        }
+        let gc = g(c);
+        if gc.abs() < 1e-12 {
+            return c;
+        }
+        if gc > 0.0 {
+            a = c;
+            ga = gc;
+            if side == 1 {
+                gb *= 0.5;
+            }
+            side = 1;
+        } else {
+            b = c;
+            gb = gc;
+            if side == -1 {
+                ga *= 0.5;
+            }
+            side = -1;
+        }
+    }
+    // The ground side of the bracket: the returned point is never above the surface by
+    // more than the tolerance.
+    b
+}
