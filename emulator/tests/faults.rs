@@ -3,6 +3,8 @@
 //! faults in the telemetry but not in the truth, determinism, refusals, and the
 //! reference GNC's engine-out landing.
 
+mod fly;
+use fly::{fly, try_fly};
 use oils_emulator::faults::{FaultPlan, FaultSpec};
 use oils_emulator::propulsion::{EngineCommand, PropulsionKind};
 use oils_emulator::recorder::{read_log, Log, REC_FAULT_FIRED};
@@ -22,22 +24,6 @@ fn config(model: PropulsionKind, faults: &[&str], duration_s: f64) -> RunConfig 
     };
     cfg.log.enabled = false;
     cfg
-}
-
-fn try_fly(cfg: &RunConfig) -> Result<RunReport, session::SessionError> {
-    let run_id = session::fresh_run_id();
-    let fsw = oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id).unwrap();
-    session::run(
-        cfg,
-        run_id,
-        &AtomicBool::new(false),
-        session::Onboard::InProcess(fsw),
-        session::Extras::default(),
-    )
-}
-
-fn fly(cfg: &RunConfig) -> RunReport {
-    try_fly(cfg).unwrap()
 }
 
 fn fly_logged(name: &str, mut cfg: RunConfig) -> (RunReport, Log) {

@@ -1,12 +1,11 @@
 //! Multi-rate time (#32): a plant period, the propulsion model's own period and the
 //! flight-software cycle on one base tick, in process.
 
+mod fly;
+use fly::{fly, try_fly};
 use oils_emulator::propulsion::PropulsionKind;
-use oils_emulator::report::RunReport;
 use oils_emulator::run_config::{LinkKind, RunConfig};
 use oils_emulator::scheduler::{Mode, Outcome};
-use oils_emulator::session;
-use std::sync::atomic::AtomicBool;
 
 fn config(model: PropulsionKind, dt_ms: u64, fsw_ms: Option<u64>, duration_s: f64) -> RunConfig {
     let mut cfg = RunConfig {
@@ -19,22 +18,6 @@ fn config(model: PropulsionKind, dt_ms: u64, fsw_ms: Option<u64>, duration_s: f6
     };
     cfg.log.enabled = false;
     cfg
-}
-
-fn try_fly(cfg: &RunConfig) -> Result<RunReport, session::SessionError> {
-    let run_id = session::fresh_run_id();
-    let fsw = oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id).unwrap();
-    session::run(
-        cfg,
-        run_id,
-        &AtomicBool::new(false),
-        session::Onboard::InProcess(fsw),
-        session::Extras::default(),
-    )
-}
-
-fn fly(cfg: &RunConfig) -> RunReport {
-    try_fly(cfg).unwrap()
 }
 
 #[test]
