@@ -106,9 +106,10 @@ fn main() {
         for k in 0..200_000u64 {
             let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
             let cmd = gnc.step(&tlm);
-            if let PlantStatus::Touchdown(td) =
-                plant.step(&sanitize(&cmd, cfg.propulsion.max_thrust_n).0, DT_NS)
-            {
+            if let PlantStatus::Touchdown(td) = plant.step(
+                &sanitize(&cmd, cfg.propulsion.max_thrust_n, tlm.header.t_ns, DT_NS).0,
+                DT_NS,
+            ) {
                 landed = Some(td);
                 break;
             }

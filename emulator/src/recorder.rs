@@ -1099,7 +1099,12 @@ pub fn commands_as_profile(
         .filter(|r| r.flags & REC_COMMAND_RECEIVED != 0)
         .step_by(every.max(1))
         .map(|r| {
-            let (applied, _) = crate::sanitize::sanitize(&r.command, max_thrust_n);
+            let (applied, _) = crate::sanitize::sanitize(
+                &r.command,
+                max_thrust_n,
+                r.telemetry.header.t_ns,
+                u64::MAX,
+            );
             oils_shared::profile::ProfileRow {
                 t_ns: r.telemetry.header.t_ns,
                 thrust_cmd_n: applied

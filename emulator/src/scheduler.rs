@@ -446,7 +446,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         // Link faults act between the wire and the sanitiser.
         match link.deliver(wire_cmd) {
             Some(cmd) => {
-                let (safe, rejected) = sanitize(&cmd, cfg.max_thrust_n);
+                let (safe, rejected) = sanitize(&cmd, cfg.max_thrust_n, t_ns, cfg.fsw_period_ns);
                 if rejected > 0 {
                     rejected_commands += 1;
                     rejected_values += rejected as u64;

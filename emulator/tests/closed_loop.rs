@@ -50,9 +50,10 @@ fn fly<F: FlightSoftware>(
                 phases.push((plant.time_ns() as f64 * 1e-9, p));
             }
         }
-        if let PlantStatus::Touchdown(td) =
-            plant.step(&sanitize(&cmd, cfg.propulsion.max_thrust_n).0, DT_NS)
-        {
+        if let PlantStatus::Touchdown(td) = plant.step(
+            &sanitize(&cmd, cfg.propulsion.max_thrust_n, tlm.header.t_ns, DT_NS).0,
+            DT_NS,
+        ) {
             touchdown = Some(td);
             break;
         }
@@ -238,9 +239,10 @@ fn profile_playback_drives_the_plant() {
             up_speed_at_5s = s.vel_mci_m_s.dot(&s.pos_mci_m.normalize());
             assert!((tlm.propulsion.engines[0].thrust_n - 800.0).abs() < 1e-3);
         }
-        if let PlantStatus::Touchdown(td) =
-            plant.step(&sanitize(&cmd, cfg.propulsion.max_thrust_n).0, DT_NS)
-        {
+        if let PlantStatus::Touchdown(td) = plant.step(
+            &sanitize(&cmd, cfg.propulsion.max_thrust_n, tlm.header.t_ns, DT_NS).0,
+            DT_NS,
+        ) {
             touchdown = Some(td);
             break;
         }

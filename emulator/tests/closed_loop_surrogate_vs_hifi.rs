@@ -43,9 +43,10 @@ fn land(
     for k in 0..200_000u64 {
         let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
         let cmd = gnc.step(&tlm);
-        if let PlantStatus::Touchdown(td) =
-            plant.step(&sanitize(&cmd, cfg.propulsion.max_thrust_n).0, DT_NS)
-        {
+        if let PlantStatus::Touchdown(td) = plant.step(
+            &sanitize(&cmd, cfg.propulsion.max_thrust_n, tlm.header.t_ns, DT_NS).0,
+            DT_NS,
+        ) {
             return (td, plant.propulsion_diagnostics());
         }
     }

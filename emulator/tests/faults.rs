@@ -149,6 +149,7 @@ fn a_stuck_valve_holds_its_engine_while_the_others_follow_the_command() {
             on: [true; 4],
         },
         torque_cmd_body_nm: [0.0; 3],
+        ..Default::default()
     };
     for _ in 0..300 {
         plant.step(&cmd(700.0), 10_000_000);

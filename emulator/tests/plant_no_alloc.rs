@@ -25,6 +25,7 @@ fn step_and_telemetry_do_not_allocate_through_flight_and_touchdown() {
             on: [true, true, false, true],
         },
         torque_cmd_body_nm: [3.0, -2.0, 1.0],
+        ..Default::default()
     };
 
     let before = common::allocations();

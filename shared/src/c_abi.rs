@@ -16,6 +16,12 @@
 //! the Rust layout; the test `c_header_is_current` regenerates and diffs it, and the header
 //! `_Static_assert`s every size and offset where a C compiler reads it.
 
+use crate::{
+    ALTIMETER_SAMPLES_MAX, ATTITUDE_MODE_IDEAL_TORQUE, ATTITUDE_MODE_THRUSTERS, IMU_SAMPLES_MAX,
+    SAMPLE_FLAG_INHIBITED, SAMPLE_FLAG_NO_LOCK, SAMPLE_FLAG_OUTAGE, SAMPLE_FLAG_SATURATED,
+    STAR_TRACKER_SAMPLES_MAX, THRUSTER_COUNT, TLM_FLAG_IDEAL_NAV, TLM_FLAG_SENSORS,
+    VELOCIMETER_BEAMS, VELOCIMETER_SAMPLES_MAX,
+};
 use crate::{ENGINE_COUNT, PROTOCOL_VERSION, SCHEMA, SCHEMA_HASH};
 use crate::{TLM_FLAG_END_OF_RUN, TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_NAV_NOISE};
 use core::ffi::c_char;
@@ -164,6 +170,20 @@ pub fn c_header() -> String {
          #define OILS_TLM_FLAG_END_OF_RUN {TLM_FLAG_END_OF_RUN}u /* last telemetry: answer nothing */\n\
          #define OILS_TLM_FLAG_NAV_NOISE {TLM_FLAG_NAV_NOISE}u  /* nav values carry seeded noise */\n\
          #define OILS_TLM_FLAG_FOOTPAD_CONTACT {TLM_FLAG_FOOTPAD_CONTACT}u  /* a footpad touches the ground: engines off */\n\
+         #define OILS_TLM_FLAG_IDEAL_NAV {TLM_FLAG_IDEAL_NAV}u  /* nav, accel_body_m_s2, altitude_m are filled */\n\
+         #define OILS_TLM_FLAG_SENSORS {TLM_FLAG_SENSORS}u  /* sensors holds the device samples */\n\
+         #define OILS_THRUSTER_COUNT {THRUSTER_COUNT}\n\
+         #define OILS_VELOCIMETER_BEAMS {VELOCIMETER_BEAMS}\n\
+         #define OILS_IMU_SAMPLES_MAX {IMU_SAMPLES_MAX}\n\
+         #define OILS_STAR_TRACKER_SAMPLES_MAX {STAR_TRACKER_SAMPLES_MAX}\n\
+         #define OILS_ALTIMETER_SAMPLES_MAX {ALTIMETER_SAMPLES_MAX}\n\
+         #define OILS_VELOCIMETER_SAMPLES_MAX {VELOCIMETER_SAMPLES_MAX}\n\
+         #define OILS_SAMPLE_FLAG_SATURATED {SAMPLE_FLAG_SATURATED}u\n\
+         #define OILS_SAMPLE_FLAG_NO_LOCK {SAMPLE_FLAG_NO_LOCK}u\n\
+         #define OILS_SAMPLE_FLAG_INHIBITED {SAMPLE_FLAG_INHIBITED}u\n\
+         #define OILS_SAMPLE_FLAG_OUTAGE {SAMPLE_FLAG_OUTAGE}u\n\
+         #define OILS_ATTITUDE_MODE_IDEAL_TORQUE {ATTITUDE_MODE_IDEAL_TORQUE}u\n\
+         #define OILS_ATTITUDE_MODE_THRUSTERS {ATTITUDE_MODE_THRUSTERS}u\n\
          #define OILS_FSW_STATUS_OK {FSW_STATUS_OK} /* any other value from oils_fsw_step stops the run */\n"
     );
     let _ = writeln!(
@@ -225,8 +245,9 @@ pub fn c_header() -> String {
          \n/* Called once before tick 0: allocate everything here. Return your context (any\n \
          * non-NULL pointer), or NULL to refuse the run (the stub exits with an error). */\n\
          void *oils_fsw_init(const oils_fsw_config *config);\n\
-         \n/* Called once per step with Telemetry(k): fill cmd->thrust_cmd_n, cmd->engine_on\n \
-         * (0/1) and cmd->torque_cmd_body_nm (cmd arrives zeroed; the stub stamps the header\n \
+         \n/* Called once per cycle with Telemetry(k): fill cmd->thrust_cmd_n, cmd->engine_on\n \
+         * (0/1), and cmd->torque_cmd_body_nm (attitude_mode 0) or cmd->thruster_on_time_ns\n \
+         * (attitude_mode 1) (cmd arrives zeroed; the stub stamps the header\n \
          * and stub_compute_ns). Must not block, allocate or read the wall clock: simulated\n \
          * time is tlm->header.t_ns. Return OILS_FSW_STATUS_OK, or any other value to stop\n \
          * the run with that error code. */\n\
@@ -327,20 +348,63 @@ mod tests {
                 ox_tank_pressure_pa,
                 engines
             },
+            ImuSample {
+                t_ns,
+                delta_v_body_m_s,
+                delta_theta_body_rad,
+                valid,
+                flags
+            },
+            StarTrackerSample {
+                t_ns,
+                q_mci_from_body,
+                valid,
+                flags
+            },
+            AltimeterSample {
+                t_ns,
+                range_m,
+                valid,
+                flags
+            },
+            VelocimeterSample {
+                t_ns,
+                los_velocity_m_s,
+                range_m,
+                valid,
+                flags
+            },
+            SensorFrame {
+                imu_count,
+                star_tracker_count,
+                laser_altimeter_count,
+                rf_altimeter_count,
+                velocimeter_count,
+                reserved,
+                imu,
+                star_tracker,
+                laser_altimeter,
+                rf_altimeter,
+                velocimeter
+            },
             Telemetry {
                 header,
                 nav,
                 accel_body_m_s2,
                 altitude_m,
                 mass_estimate_kg,
-                propulsion
+                propulsion,
+                sensors
             },
             Command {
                 header,
                 thrust_cmd_n,
                 engine_on,
                 torque_cmd_body_nm,
-                stub_compute_ns
+                stub_compute_ns,
+                thruster_on_time_ns,
+                attitude_mode,
+                reserved
             },
             FswConfig {
                 abi_version,

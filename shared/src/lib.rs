@@ -1,16 +1,23 @@
 //! Wire protocol of the oils bench: the only crate a flight-software author needs.
 //!
-//! Two packets cross the link every step, both fixed-size `#[repr(C)]` structs sent
-//! zero-copy through iceoryx2 shared memory:
+//! Two packets cross the link every flight-software cycle, both fixed-size `#[repr(C)]`
+//! structs sent zero-copy through iceoryx2 shared memory:
 //!
-//! * [`Telemetry`]`(k)`: emulator -> onboard computer, the state at `t_k`;
-//! * [`Command`]`(k)`: onboard computer -> emulator, held over `[t_k, t_k+1)`.
+//! * [`Telemetry`]`(k)`: emulator -> onboard computer, at `t_k`: the propulsion readings,
+//!   a [`SensorFrame`] with every device sample produced since cycle `k-1` (each with its
+//!   own timestamp), and, as an "ideal navigation" source, the true state (+ noise);
+//! * [`Command`]`(k)`: onboard computer -> emulator, held over cycle `k`: main-engine
+//!   throttles and on/off, attitude-thruster on-times (or an ideal body torque).
+//!
+//! Protocol v2 carries the devices in one frame per cycle rather than one service per
+//! sensor: lockstep and the run digest stay one exchange per cycle, and C and Python
+//! clients keep their single subscription (see `docs/protocol.md`).
 //!
 //! Every field is `f64`, `u64`, `i64` or `u32` and every struct is padded by hand to a
 //! multiple of 8 bytes, so the layout is the same in Rust, C, C++ and Python `ctypes`.
 //! `docs/protocol.md` lists every offset; the test `layout_is_pinned` fails if one moves.
 //!
-//! Frames: `mci` is Moon-centred inertial (the bench neglects the Moon's rotation);
+//! Frames: `mci` is Moon-centred inertial (the Moon turns in it at the sidereal rate);
 //! `body` has +Z along the main-engine thrust (up at touchdown), engines on the -Z deck.
 //! Quaternions are `[w, x, y, z]`, scalar first, rotating body vectors into `mci`.
 #![warn(missing_docs)]
@@ -27,10 +34,22 @@ pub mod service;
 pub mod signals;
 
 /// Protocol version; bump on any change to a packet layout or meaning.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// Number of main engines.
 pub const ENGINE_COUNT: usize = 4;
+/// Number of attitude thrusters.
+pub const THRUSTER_COUNT: usize = 8;
+/// Beams of the laser Doppler velocimeter.
+pub const VELOCIMETER_BEAMS: usize = 3;
+/// IMU samples a [`SensorFrame`] can carry: enough for a 40 ms cycle at 200 Hz.
+pub const IMU_SAMPLES_MAX: usize = 8;
+/// Star-tracker samples a [`SensorFrame`] can carry.
+pub const STAR_TRACKER_SAMPLES_MAX: usize = 2;
+/// Samples of each altimeter a [`SensorFrame`] can carry.
+pub const ALTIMETER_SAMPLES_MAX: usize = 2;
+/// Velocimeter samples a [`SensorFrame`] can carry.
+pub const VELOCIMETER_SAMPLES_MAX: usize = 2;
 
 /// Telemetry flag: this is the last telemetry of the run; the stub answers nothing and exits.
 pub const TLM_FLAG_END_OF_RUN: u32 = 1 << 0;
@@ -39,6 +58,28 @@ pub const TLM_FLAG_NAV_NOISE: u32 = 1 << 1;
 /// Telemetry flag: at least one footpad touches the ground (the legs' touchdown
 /// switches); flight software shuts the engines down on it.
 pub const TLM_FLAG_FOOTPAD_CONTACT: u32 = 1 << 2;
+/// Telemetry flag: `nav`, `accel_body_m_s2` and `altitude_m` hold the ideal navigation
+/// source (the truth, plus noise with [`TLM_FLAG_NAV_NOISE`]); without it they are zero.
+pub const TLM_FLAG_IDEAL_NAV: u32 = 1 << 3;
+/// Telemetry flag: `sensors` holds the device samples since the last cycle.
+pub const TLM_FLAG_SENSORS: u32 = 1 << 4;
+
+/// Sample flag: the device saturated (an IMU axis at its range limit).
+pub const SAMPLE_FLAG_SATURATED: u32 = 1 << 0;
+/// Sample flag: no return (beyond maximum range, below minimum, grazing incidence, or
+/// nothing in the beam).
+pub const SAMPLE_FLAG_NO_LOCK: u32 = 1 << 1;
+/// Sample flag: the device is inhibited (a safety switch, a fault) and reports nothing.
+pub const SAMPLE_FLAG_INHIBITED: u32 = 1 << 2;
+/// Sample flag: the device is in an outage (a star tracker blinded, a dropout).
+pub const SAMPLE_FLAG_OUTAGE: u32 = 1 << 3;
+
+/// `Command::attitude_mode`: the ideal body-torque actuator (`torque_cmd_body_nm`,
+/// saturated by the plant); thruster on-times are ignored.
+pub const ATTITUDE_MODE_IDEAL_TORQUE: u32 = 0;
+/// `Command::attitude_mode`: the attitude thrusters fire for `thruster_on_time_ns`;
+/// `torque_cmd_body_nm` is ignored.
+pub const ATTITUDE_MODE_THRUSTERS: u32 = 1;
 
 /// Human-readable schema: one entry per struct, `Struct{field:type@offset,...}=size|`. Its hash,
 /// [`SCHEMA_HASH`], travels in every header so two peers compiled from different
@@ -48,8 +89,13 @@ pub const SCHEMA: &str = concat!(
     "NavState{pos_mci_m:[f64;3]@0,vel_mci_m_s:[f64;3]@24,q_mci_from_body:[f64;4]@48,rate_body_rad_s:[f64;3]@80}=104|",
     "EngineReading{thrust_n:f64@0,chamber_pressure_pa:f64@8,valve_open:u32@16,flags:u32@20}=24|",
     "PropulsionReadings{gas_pressure_pa:f64@0,fuel_tank_pressure_pa:f64@8,ox_tank_pressure_pa:f64@16,engines:[EngineReading;4]@24}=120|",
-    "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184}=304|",
-    "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112}=120|",
+    "ImuSample{t_ns:i64@0,delta_v_body_m_s:[f64;3]@8,delta_theta_body_rad:[f64;3]@32,valid:u32@56,flags:u32@60}=64|",
+    "StarTrackerSample{t_ns:i64@0,q_mci_from_body:[f64;4]@8,valid:u32@40,flags:u32@44}=48|",
+    "AltimeterSample{t_ns:i64@0,range_m:f64@8,valid:u32@16,flags:u32@20}=24|",
+    "VelocimeterSample{t_ns:i64@0,los_velocity_m_s:[f64;3]@8,range_m:[f64;3]@32,valid:[u32;3]@56,flags:u32@68}=72|",
+    "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,reserved:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728}=872|",
+    "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1176|",
+    "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188}=192|",
 );
 
 /// FNV-1a over [`SCHEMA`], evaluated at compile time.
@@ -74,7 +120,7 @@ pub const SCHEMA_HASH: u64 = schema_hash_of(SCHEMA);
 /// Header at the start of every packet.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v1.PacketHeader")]
+#[type_name("oils.v2.PacketHeader")]
 pub struct PacketHeader {
     /// [`PROTOCOL_VERSION`] of the sender.
     pub protocol_version: u32,
@@ -146,7 +192,7 @@ impl core::error::Error for ProtocolMismatch {}
 /// Navigation state as the onboard computer sees it (possibly with seeded noise).
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v1.NavState")]
+#[type_name("oils.v2.NavState")]
 pub struct NavState {
     /// Position of the centre of mass, Moon-centred inertial, metres.
     pub pos_mci_m: [f64; 3],
@@ -161,7 +207,7 @@ pub struct NavState {
 /// One main engine's readings.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v1.EngineReading")]
+#[type_name("oils.v2.EngineReading")]
 pub struct EngineReading {
     /// Thrust as sensed (the propulsion model's output), newtons.
     pub thrust_n: f64,
@@ -176,7 +222,7 @@ pub struct EngineReading {
 /// Propulsion system readings.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v1.PropulsionReadings")]
+#[type_name("oils.v2.PropulsionReadings")]
 pub struct PropulsionReadings {
     /// Helium bottle pressure, pascals.
     pub gas_pressure_pa: f64,
@@ -188,10 +234,107 @@ pub struct PropulsionReadings {
     pub engines: [EngineReading; ENGINE_COUNT],
 }
 
-/// Emulator -> onboard computer, once per step: the state at `t_k`.
+/// One IMU sample: velocity and angle increments over the IMU period ending at `t_ns`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v1.Telemetry")]
+#[type_name("oils.v2.ImuSample")]
+pub struct ImuSample {
+    /// End of the integration period (time of validity), ns since the start of the run.
+    pub t_ns: i64,
+    /// Integrated specific force over the period, IMU (= body) axes, m/s.
+    pub delta_v_body_m_s: [f64; 3],
+    /// Integrated angular rate over the period, IMU (= body) axes, rad.
+    pub delta_theta_body_rad: [f64; 3],
+    /// 1 when the sample is good, 0 when it must not be used.
+    pub valid: u32,
+    /// `SAMPLE_FLAG_*` bits.
+    pub flags: u32,
+}
+
+/// One star-tracker sample: the body attitude it measured.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v2.StarTrackerSample")]
+pub struct StarTrackerSample {
+    /// Time of validity, ns since the start of the run.
+    pub t_ns: i64,
+    /// Measured attitude `[w, x, y, z]`, rotates body vectors into `mci` (the tracker's
+    /// mounting already removed).
+    pub q_mci_from_body: [f64; 4],
+    /// 1 when the sample is good.
+    pub valid: u32,
+    /// `SAMPLE_FLAG_*` bits.
+    pub flags: u32,
+}
+
+/// One altimeter sample: slant range along the beam to the terrain.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v2.AltimeterSample")]
+pub struct AltimeterSample {
+    /// Time of validity, ns since the start of the run.
+    pub t_ns: i64,
+    /// Slant range along the beam, metres (0 when not valid).
+    pub range_m: f64,
+    /// 1 when the sample is good.
+    pub valid: u32,
+    /// `SAMPLE_FLAG_*` bits.
+    pub flags: u32,
+}
+
+/// One laser Doppler velocimeter sample: per beam, the line-of-sight velocity relative
+/// to the surface and the range.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v2.VelocimeterSample")]
+pub struct VelocimeterSample {
+    /// Time of validity, ns since the start of the run.
+    pub t_ns: i64,
+    /// Velocity of the vehicle relative to the ground projected on each beam's unit
+    /// vector (positive moving along the beam, towards the ground), m/s.
+    pub los_velocity_m_s: [f64; VELOCIMETER_BEAMS],
+    /// Range along each beam, metres.
+    pub range_m: [f64; VELOCIMETER_BEAMS],
+    /// Per beam, 1 when good.
+    pub valid: [u32; VELOCIMETER_BEAMS],
+    /// `SAMPLE_FLAG_*` bits (of any beam).
+    pub flags: u32,
+}
+
+/// Every device sample produced since the last cycle, oldest first per device; the
+/// counts say how many entries of each array hold samples (the rest are zero).
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v2.SensorFrame")]
+pub struct SensorFrame {
+    /// Entries of `imu` in use.
+    pub imu_count: u32,
+    /// Entries of `star_tracker` in use.
+    pub star_tracker_count: u32,
+    /// Entries of `laser_altimeter` in use.
+    pub laser_altimeter_count: u32,
+    /// Entries of `rf_altimeter` in use.
+    pub rf_altimeter_count: u32,
+    /// Entries of `velocimeter` in use.
+    pub velocimeter_count: u32,
+    /// Zero.
+    pub reserved: u32,
+    /// IMU samples.
+    pub imu: [ImuSample; IMU_SAMPLES_MAX],
+    /// Star-tracker samples.
+    pub star_tracker: [StarTrackerSample; STAR_TRACKER_SAMPLES_MAX],
+    /// Laser altimeter samples.
+    pub laser_altimeter: [AltimeterSample; ALTIMETER_SAMPLES_MAX],
+    /// RF (Ka-band) altimeter samples.
+    pub rf_altimeter: [AltimeterSample; ALTIMETER_SAMPLES_MAX],
+    /// Laser Doppler velocimeter samples.
+    pub velocimeter: [VelocimeterSample; VELOCIMETER_SAMPLES_MAX],
+}
+
+/// Emulator -> onboard computer, once per flight-software cycle, at `t_k`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v2.Telemetry")]
 pub struct Telemetry {
     /// Packet header.
     pub header: PacketHeader,
@@ -205,12 +348,14 @@ pub struct Telemetry {
     pub mass_estimate_kg: f64,
     /// Propulsion readings.
     pub propulsion: PropulsionReadings,
+    /// Device samples since the last cycle (with [`TLM_FLAG_SENSORS`]).
+    pub sensors: SensorFrame,
 }
 
 /// Onboard computer -> emulator, once per step: held over `[t_k, t_k+1)`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v1.Command")]
+#[type_name("oils.v2.Command")]
 pub struct Command {
     /// Packet header; `step` must echo the telemetry it answers.
     pub header: PacketHeader,
@@ -218,11 +363,20 @@ pub struct Command {
     pub thrust_cmd_n: [f64; ENGINE_COUNT],
     /// 1 = engine on, 0 = off (any other value is rejected and treated as off).
     pub engine_on: [u32; ENGINE_COUNT],
-    /// Torque demanded of the attitude thrusters, body axes, N m (saturated by the plant).
+    /// Ideal body torque, body axes, N m (saturated by the plant); used with
+    /// [`ATTITUDE_MODE_IDEAL_TORQUE`] only.
     pub torque_cmd_body_nm: [f64; 3],
     /// The flight software's own compute time for this step, nanoseconds (wall clock,
     /// measured by the stub; excluded from the run digest).
     pub stub_compute_ns: u64,
+    /// Per attitude thruster, its on-time from the start of this cycle, nanoseconds
+    /// (clamped to the cycle); used with [`ATTITUDE_MODE_THRUSTERS`] only.
+    pub thruster_on_time_ns: [u64; THRUSTER_COUNT],
+    /// [`ATTITUDE_MODE_IDEAL_TORQUE`] or [`ATTITUDE_MODE_THRUSTERS`] (any other value is
+    /// rejected and treated as ideal torque with zero torque).
+    pub attitude_mode: u32,
+    /// Zero.
+    pub reserved: u32,
 }
 
 /// Views a packet as bytes, for digests and log records.
@@ -304,20 +458,41 @@ mod tests {
         assert_eq!(offset_of!(PropulsionReadings, ox_tank_pressure_pa), 16);
         assert_eq!(offset_of!(PropulsionReadings, engines), 24);
 
-        assert_eq!(size_of::<Telemetry>(), 304);
+        assert_eq!(size_of::<ImuSample>(), 64);
+        assert_eq!(offset_of!(ImuSample, delta_v_body_m_s), 8);
+        assert_eq!(offset_of!(ImuSample, delta_theta_body_rad), 32);
+        assert_eq!(offset_of!(ImuSample, valid), 56);
+        assert_eq!(size_of::<StarTrackerSample>(), 48);
+        assert_eq!(offset_of!(StarTrackerSample, valid), 40);
+        assert_eq!(size_of::<AltimeterSample>(), 24);
+        assert_eq!(size_of::<VelocimeterSample>(), 72);
+        assert_eq!(offset_of!(VelocimeterSample, valid), 56);
+        assert_eq!(offset_of!(VelocimeterSample, flags), 68);
+        assert_eq!(size_of::<SensorFrame>(), 872);
+        assert_eq!(offset_of!(SensorFrame, imu), 24);
+        assert_eq!(offset_of!(SensorFrame, star_tracker), 536);
+        assert_eq!(offset_of!(SensorFrame, laser_altimeter), 632);
+        assert_eq!(offset_of!(SensorFrame, rf_altimeter), 680);
+        assert_eq!(offset_of!(SensorFrame, velocimeter), 728);
+
+        assert_eq!(size_of::<Telemetry>(), 1176);
         assert_eq!(offset_of!(Telemetry, header), 0);
         assert_eq!(offset_of!(Telemetry, nav), 40);
         assert_eq!(offset_of!(Telemetry, accel_body_m_s2), 144);
         assert_eq!(offset_of!(Telemetry, altitude_m), 168);
         assert_eq!(offset_of!(Telemetry, mass_estimate_kg), 176);
         assert_eq!(offset_of!(Telemetry, propulsion), 184);
+        assert_eq!(offset_of!(Telemetry, sensors), 304);
 
-        assert_eq!(size_of::<Command>(), 120);
+        assert_eq!(size_of::<Command>(), 192);
         assert_eq!(offset_of!(Command, header), 0);
         assert_eq!(offset_of!(Command, thrust_cmd_n), 40);
         assert_eq!(offset_of!(Command, engine_on), 72);
         assert_eq!(offset_of!(Command, torque_cmd_body_nm), 88);
         assert_eq!(offset_of!(Command, stub_compute_ns), 112);
+        assert_eq!(offset_of!(Command, thruster_on_time_ns), 120);
+        assert_eq!(offset_of!(Command, attitude_mode), 184);
+        assert_eq!(offset_of!(Command, reserved), 188);
     }
 
     #[test]
@@ -330,8 +505,23 @@ mod tests {
             8 * 3 + 4 * size_of::<EngineReading>(),
             size_of::<PropulsionReadings>()
         );
-        assert_eq!(40 + 104 + 24 + 8 + 8 + 120, size_of::<Telemetry>());
-        assert_eq!(40 + 32 + 16 + 24 + 8, size_of::<Command>());
+        assert_eq!(8 + 24 + 24 + 4 + 4, size_of::<ImuSample>());
+        assert_eq!(8 + 32 + 4 + 4, size_of::<StarTrackerSample>());
+        assert_eq!(8 + 8 + 4 + 4, size_of::<AltimeterSample>());
+        assert_eq!(8 + 24 + 24 + 12 + 4, size_of::<VelocimeterSample>());
+        assert_eq!(
+            6 * 4
+                + IMU_SAMPLES_MAX * size_of::<ImuSample>()
+                + STAR_TRACKER_SAMPLES_MAX * size_of::<StarTrackerSample>()
+                + 2 * ALTIMETER_SAMPLES_MAX * size_of::<AltimeterSample>()
+                + VELOCIMETER_SAMPLES_MAX * size_of::<VelocimeterSample>(),
+            size_of::<SensorFrame>()
+        );
+        assert_eq!(
+            40 + 104 + 24 + 8 + 8 + 120 + size_of::<SensorFrame>(),
+            size_of::<Telemetry>()
+        );
+        assert_eq!(40 + 32 + 16 + 24 + 8 + 64 + 4 + 4, size_of::<Command>());
     }
 
     #[test]
@@ -343,6 +533,11 @@ mod tests {
             ("NavState", size_of::<NavState>()),
             ("EngineReading", size_of::<EngineReading>()),
             ("PropulsionReadings", size_of::<PropulsionReadings>()),
+            ("ImuSample", size_of::<ImuSample>()),
+            ("StarTrackerSample", size_of::<StarTrackerSample>()),
+            ("AltimeterSample", size_of::<AltimeterSample>()),
+            ("VelocimeterSample", size_of::<VelocimeterSample>()),
+            ("SensorFrame", size_of::<SensorFrame>()),
             ("Telemetry", size_of::<Telemetry>()),
             ("Command", size_of::<Command>()),
         ] {
@@ -361,7 +556,7 @@ mod tests {
         h.protocol_version = 7;
         h.schema_hash = 0xdead;
         let err = h.check_peer().unwrap_err().to_string();
-        assert!(err.contains("v1") && err.contains("v7"), "{err}");
+        assert!(err.contains("v2") && err.contains("v7"), "{err}");
         assert!(err.contains("0x000000000000dead"), "{err}");
     }
 

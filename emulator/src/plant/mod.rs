@@ -53,8 +53,18 @@ const CONTACT_MAX_ITERATIONS: usize = 60;
 pub struct ActuatorCommand {
     /// Main engine commands.
     pub engines: EngineCommand,
-    /// Torque demanded of the attitude thrusters, body axes, N m (saturated here).
+    /// Ideal body torque, body axes, N m (saturated here); used when
+    /// `use_thrusters` is false.
     pub torque_cmd_body_nm: [f64; 3],
+    /// The attitude thrusters fire for `thruster_on_time_ns` (protocol
+    /// `ATTITUDE_MODE_THRUSTERS`) instead of the ideal torque.
+    pub use_thrusters: bool,
+    /// Per attitude thruster, its commanded on-time from `cycle_start_ns`, ns.
+    pub thruster_on_time_ns: [u64; oils_shared::THRUSTER_COUNT],
+    /// Start of the flight-software cycle this command was issued for, ns since the
+    /// start of the run: thruster pulses are timed from it, so a command held over a
+    /// missed cycle does not fire its pulses again.
+    pub cycle_start_ns: i64,
 }
 
 /// The state of the vehicle at the end of a step.
@@ -333,6 +343,7 @@ impl Plant {
                 ox_tank_pressure_pa: self.prop_out.ox_tank_pressure_pa,
                 engines,
             },
+            sensors: Default::default(),
         };
         if self.pads_in_contact > 0 {
             tlm.header.flags |= TLM_FLAG_FOOTPAD_CONTACT;
