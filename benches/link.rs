@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 #[type_name("oils.bench.Ping")]
 struct Ping {
     seq: u64,
-    body: [u64; 37],
+    body: [u64; 146],
 }
 
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
@@ -30,7 +30,7 @@ struct Ping {
 #[type_name("oils.bench.Pong")]
 struct Pong {
     seq: u64,
-    body: [u64; 14],
+    body: [u64; 23],
 }
 
 const _: () = assert!(core::mem::size_of::<Ping>() == core::mem::size_of::<Telemetry>());
@@ -66,7 +66,7 @@ fn bare_echo(id: u64) {
             if seq == STOP {
                 return;
             }
-            publ.send_copy(Pong { seq, body: [0; 14] }).unwrap();
+            publ.send_copy(Pong { seq, body: [0; 23] }).unwrap();
         } else {
             core::hint::spin_loop();
         }
@@ -124,7 +124,7 @@ fn bench_bare(c: &mut Criterion) {
     let mut seq = 0u64;
     let mut round_trip = || {
         seq += 1;
-        publ.send_copy(Ping { seq, body: [0; 37] }).unwrap();
+        publ.send_copy(Ping { seq, body: [0; 146] }).unwrap();
         loop {
             if let Some(s) = sub.receive().unwrap() {
                 if s.seq == seq {
@@ -138,7 +138,7 @@ fn bench_bare(c: &mut Criterion) {
     c.bench_function("bare_iceoryx2_pingpong", |b| b.iter(&mut round_trip));
     publ.send_copy(Ping {
         seq: STOP,
-        body: [0; 37],
+        body: [0; 146],
     })
     .unwrap();
     child.wait().unwrap();

@@ -32,19 +32,25 @@ pub enum Topic {
     Propulsion,
     /// The step's timing (wall-clock measurements).
     Timing,
+    /// The devices: every sensor sample Telemetry(k) carries, by device, and the
+    /// attitude-thruster command. Its CSV columns carry no topic prefix and start with
+    /// the device (`imu_`, `star_tracker_`, `laser_altimeter_`, `rf_altimeter_`,
+    /// `velocimeter_`, `thruster_`).
+    Devices,
 }
 
 impl Topic {
     /// Every topic, in table order.
-    pub const ALL: [Topic; 5] = [
+    pub const ALL: [Topic; 6] = [
         Topic::Telemetry,
         Topic::Command,
         Topic::Truth,
         Topic::Propulsion,
         Topic::Timing,
+        Topic::Devices,
     ];
 
-    /// Short name: `telemetry`, `command`, `truth`, `propulsion`, `timing`.
+    /// Short name: `telemetry`, `command`, `truth`, `propulsion`, `timing`, `devices`.
     pub fn name(self) -> &'static str {
         match self {
             Topic::Telemetry => "telemetry",
@@ -52,6 +58,7 @@ impl Topic {
             Topic::Truth => "truth",
             Topic::Propulsion => "propulsion",
             Topic::Timing => "timing",
+            Topic::Devices => "devices",
         }
     }
 }
@@ -210,6 +217,13 @@ impl Field {
     /// The CSV column (and Foxglove message path, without the `/oils/`) of value `i`:
     /// `truth.pos_mci_m[0]`, `telemetry.propulsion.engines[2].thrust_n`.
     pub fn column(&self, i: usize) -> String {
+        if self.topic == Topic::Devices {
+            // Device columns start with the device (`imu_delta_v_x_body_m_s[0]`).
+            return match self.len {
+                None => self.path.to_string(),
+                Some(_) => format!("{}[{i}]", self.path),
+            };
+        }
         let topic = self.topic.name();
         match (self.len, self.path.contains("[]")) {
             (None, _) => format!("{topic}.{}", self.path),
@@ -555,6 +569,12 @@ macro_rules! echo {
 
 /// Engines.
 const E: usize = oils_shared::ENGINE_COUNT;
+/// Sample capacities of the sensor frame, and attitude thrusters.
+const IMU_N: usize = oils_shared::IMU_SAMPLES_MAX;
+const ST_N: usize = oils_shared::STAR_TRACKER_SAMPLES_MAX;
+const ALT_N: usize = oils_shared::ALTIMETER_SAMPLES_MAX;
+const VEL_N: usize = oils_shared::VELOCIMETER_SAMPLES_MAX;
+const THR_N: usize = oils_shared::THRUSTER_COUNT;
 
 /// Simulated time of a record, seconds.
 fn t_s(r: &Record) -> f64 {
@@ -803,10 +823,200 @@ pub static FIELDS: &[Field] = &[
     slot!(Timing, "transport_ns", OptU64, 60, |r| r
         .timing
         .transport_ns),
+    // The devices: Telemetry(k)'s sensor samples by device (slot i of each array is
+    // the i-th sample of the cycle, `*_count` of them in use), and the attitude-thruster
+    // command as received and as applied.
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_count", U32, |r| r.telemetry.sensors.imu_count)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_t_ns", I64, IMU_N, |r, i| r.telemetry.sensors.imu[i].t_ns)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_delta_v_x_body_m_s", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_v_body_m_s[0])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_delta_v_y_body_m_s", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_v_body_m_s[1])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_delta_v_z_body_m_s", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_v_body_m_s[2])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_delta_theta_x_body_rad", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_theta_body_rad[0])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_delta_theta_y_body_rad", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_theta_body_rad[1])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_delta_theta_z_body_rad", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_theta_body_rad[2])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_valid", U32, IMU_N, |r, i| r.telemetry.sensors.imu[i].valid)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "imu_flags", U32, IMU_N, |r, i| r.telemetry.sensors.imu[i].flags)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "star_tracker_count", U32, |r| r.telemetry.sensors.star_tracker_count)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "star_tracker_t_ns", I64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].t_ns)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "star_tracker_q_w_mci_from_body", F64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[0])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "star_tracker_q_x_mci_from_body", F64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[1])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "star_tracker_q_y_mci_from_body", F64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[2])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "star_tracker_q_z_mci_from_body", F64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[3])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "star_tracker_valid", U32, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].valid)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "star_tracker_flags", U32, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].flags)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "laser_altimeter_count", U32, |r| r.telemetry.sensors.laser_altimeter_count)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "laser_altimeter_t_ns", I64, ALT_N, |r, i| r.telemetry.sensors.laser_altimeter[i].t_ns)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "laser_altimeter_range_m", F64, ALT_N, |r, i| r.telemetry.sensors.laser_altimeter[i].range_m)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "laser_altimeter_valid", U32, ALT_N, |r, i| r.telemetry.sensors.laser_altimeter[i].valid)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "laser_altimeter_flags", U32, ALT_N, |r, i| r.telemetry.sensors.laser_altimeter[i].flags)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "rf_altimeter_count", U32, |r| r.telemetry.sensors.rf_altimeter_count)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "rf_altimeter_t_ns", I64, ALT_N, |r, i| r.telemetry.sensors.rf_altimeter[i].t_ns)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "rf_altimeter_range_m", F64, ALT_N, |r, i| r.telemetry.sensors.rf_altimeter[i].range_m)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "rf_altimeter_valid", U32, ALT_N, |r, i| r.telemetry.sensors.rf_altimeter[i].valid)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "rf_altimeter_flags", U32, ALT_N, |r, i| r.telemetry.sensors.rf_altimeter[i].flags)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_count", U32, |r| r.telemetry.sensors.velocimeter_count)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_t_ns", I64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].t_ns)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_beam0_los_velocity_m_s", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].los_velocity_m_s[0])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_beam0_range_m", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].range_m[0])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_beam0_valid", U32, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].valid[0])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_beam1_los_velocity_m_s", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].los_velocity_m_s[1])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_beam1_range_m", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].range_m[1])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_beam1_valid", U32, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].valid[1])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_beam2_los_velocity_m_s", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].los_velocity_m_s[2])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_beam2_range_m", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].range_m[2])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_beam2_valid", U32, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].valid[2])
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "velocimeter_flags", U32, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].flags)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "thruster_attitude_mode", U32, |r| r.command.attitude_mode)
+    },
+    Field {
+        since: 3,
+        ..packet!(Devices, "thruster_on_time_ns", U64, THR_N, |r, i| r.command.thruster_on_time_ns[i])
+    },
+    Field {
+        since: 3,
+        ..slot!(Devices, "thruster_applied_use_thrusters", Bool, 61, |r| r
+            .applied
+            .use_thrusters)
+    },
+    Field {
+        since: 3,
+        ..slot!(
+            Devices,
+            "thruster_applied_on_time_ns",
+            U64,
+            THR_N,
+            62,
+            1,
+            |r, i| r.applied.thruster_on_time_ns[i]
+        )
+    },
 ];
 
-/// The newest MCAP message format: `oils-mcap-2` added `truth.faults_active`.
-pub const MESSAGE_FORMAT: u32 = 2;
+/// The newest MCAP message format: `oils-mcap-2` added `truth.faults_active`,
+/// `oils-mcap-3` the `devices` message (protocol v2's sensor samples and thrusters).
+pub const MESSAGE_FORMAT: u32 = 3;
 
 /// The CSV header: one column per value of every field the CSV has.
 pub fn csv_columns() -> Vec<String> {

@@ -4,23 +4,23 @@
 //!
 //! File layout (little-endian):
 //! ```text
-//! magic      8 bytes  "OILSLOG4"
+//! magic      8 bytes  "OILSLOG5"
 //! header_len u32      length of the JSON header that follows
 //! header_crc u32      CRC-32 of the header bytes (an edited header is refused)
 //! header     JSON     the run's whole configuration (RunConfig), run id, protocol version
 //! records    RECORD_SIZE bytes each:
-//!            flags u32 | crc32 u32 | Telemetry (304 bytes) | Command (120 bytes)
+//!            flags u32 | crc32 u32 | Telemetry (1176 bytes) | Command (192 bytes)
 //!            | applied command, true state, active faults and the step's timing:
 //!              TRUTH_VALUES f64s, the slots of `log_fields::FIELDS` (a timing figure
 //!              the step has not is NaN)
 //! trailer    TRAILER_SIZE bytes, written when the log is closed:
-//!            "OILSEND4" | records u64 | crc32 u32 (of the 16 bytes before it)
+//!            "OILSEND5" | records u64 | crc32 u32 (of the 16 bytes before it)
 //! ```
 //! The CRC-32 covers the flags and everything after the CRC, so a damaged record is
 //! found and named by its position, never read as data. A log without its trailer (or
 //! whose trailer counts other records than it holds) is read, with a warning: the run
-//! was interrupted (kill -9, a full disk) or the file was cut. OILSLOG3 logs (no header
-//! CRC, no trailer) are still read.
+//! was interrupted (kill -9, a full disk) or the file was cut. OILSLOG3 and OILSLOG4 logs
+//! hold protocol v1 packets and are refused with a message that says how to re-run them.
 //!
 //! The file is created 0600 and locked (`flock`, exclusive) for the whole run: a second
 //! run given the same `--log` fails at once, before it touches the file.
@@ -43,11 +43,13 @@ use std::thread::JoinHandle;
 use thiserror::Error;
 
 /// File magic of this format.
-pub const MAGIC: &[u8; 8] = b"OILSLOG4";
-/// Magic of the format before the header CRC and the trailer: still read.
+pub const MAGIC: &[u8; 8] = b"OILSLOG5";
+/// Magic of the formats with protocol v1 packets (OILSLOG4; OILSLOG3 before the header
+/// CRC and the trailer): refused with a clear message.
+const MAGIC_V4: &[u8; 8] = b"OILSLOG4";
 const MAGIC_V3: &[u8; 8] = b"OILSLOG3";
 /// Magic of the trailer that closes a log.
-const TRAILER_MAGIC: &[u8; 8] = b"OILSEND4";
+const TRAILER_MAGIC: &[u8; 8] = b"OILSEND5";
 /// Bytes of the trailer.
 pub const TRAILER_SIZE: usize = 20;
 /// Magic of the format before per-step timing, refused with a clear message.
@@ -55,7 +57,7 @@ const MAGIC_V2: &[u8; 8] = b"OILSLOG2";
 /// Magic of the first format (wire packets only), refused with a clear message.
 const MAGIC_V1: &[u8; 8] = b"OILSLOG1";
 /// Number of f64 values after the packets in a record.
-pub const TRUTH_VALUES: usize = 61;
+pub const TRUTH_VALUES: usize = 70;
 const TLM_SIZE: usize = core::mem::size_of::<Telemetry>();
 const CMD_SIZE: usize = core::mem::size_of::<Command>();
 /// Bytes per record.
@@ -356,7 +358,7 @@ impl Recorder {
         Self::over(path, Box::new(file), header_json)
     }
 
-    /// A recorder writing OILSLOG4 to `out` (a file; in tests, a writer that fails);
+    /// A recorder writing OILSLOG5 to `out` (a file; in tests, a writer that fails);
     /// `path` names it in errors.
     pub fn over(
         path: &Path,
@@ -469,7 +471,7 @@ impl Drop for Recorder {
     }
 }
 
-/// Where the OILSLOG4 writer puts its bytes: a file (synced at the end), or a test's
+/// Where the OILSLOG5 writer puts its bytes: a file (synced at the end), or a test's
 /// writer.
 pub trait Sink: Write + Send {
     /// Makes what was written durable (`fsync` for a file).
@@ -572,7 +574,7 @@ pub struct Log {
     pub damaged_records: Vec<u64>,
     /// Bytes after the last whole record (a crash mid-write leaves some).
     pub trailing_bytes: usize,
-    /// Whether the log holds its run's end: the end-of-run record, and (OILSLOG4) the
+    /// Whether the log holds its run's end: the end-of-run record, and (OILSLOG5) the
     /// trailer counting every record. `false`: the run was interrupted (kill -9, a full
     /// disk) or the file cut; every record before is still read.
     pub complete: bool,
@@ -663,19 +665,22 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
     };
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V1 {
         return Err(not_log(
-            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG4 log",
+            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG5 log",
         ));
     }
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V2 {
         return Err(not_log(
-            "an OILSLOG2 log, the format before per-step timing was recorded; run again (`oils run --config-from` its report) to get an OILSLOG4 log",
+            "an OILSLOG2 log, the format before per-step timing was recorded; run again (`oils run --config-from` its report) to get an OILSLOG5 log",
         ));
     }
-    let v3 = bytes.len() >= 8 && &bytes[..8] == MAGIC_V3;
-    if bytes.len() < 12 || (&bytes[..8] != MAGIC && !v3) {
+    if bytes.len() >= 8 && (&bytes[..8] == MAGIC_V3 || &bytes[..8] == MAGIC_V4) {
         return Err(not_log(
-            "missing OILSLOG4 magic (this program reads OILSLOG4 and OILSLOG3)",
+            "an OILSLOG3/OILSLOG4 log, with protocol v1 packets; run again (`oils run --config-from` its report) to get an OILSLOG5 log",
         ));
+    }
+    let v3 = false;
+    if bytes.len() < 12 || &bytes[..8] != MAGIC {
+        return Err(not_log("missing OILSLOG5 magic (this program reads OILSLOG5)"));
     }
     let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
     let header_start: usize = if v3 { 12 } else { 16 };
@@ -862,6 +867,37 @@ pub(crate) mod tests {
         r.applied.engines.thrust_cmd_n = [next(), next(), next(), next()];
         r.applied.engines.on = [true, false, false, true];
         r.applied.torque_cmd_body_nm = [next(), next(), next()];
+        // Protocol v2: every device sample slot and the thruster command.
+        let f = &mut r.telemetry.sensors;
+        (f.imu_count, f.star_tracker_count) = (8, 2);
+        (f.laser_altimeter_count, f.rf_altimeter_count, f.velocimeter_count) = (1, 2, 1);
+        for (k, s) in f.imu.iter_mut().enumerate() {
+            s.t_ns = 5_000_000 + k as i64;
+            s.delta_v_body_m_s = [next(), next(), next()];
+            s.delta_theta_body_rad = [next(), next(), next()];
+            (s.valid, s.flags) = (k as u32 % 2, k as u32 + 10);
+        }
+        for (k, s) in f.star_tracker.iter_mut().enumerate() {
+            s.t_ns = 6_000_000 + k as i64;
+            s.q_mci_from_body = [next(), next(), next(), next()];
+            (s.valid, s.flags) = (1, k as u32 + 20);
+        }
+        for (k, s) in f.laser_altimeter.iter_mut().chain(&mut f.rf_altimeter).enumerate() {
+            s.t_ns = 7_000_000 + k as i64;
+            s.range_m = next();
+            (s.valid, s.flags) = (k as u32 % 2, k as u32 + 30);
+        }
+        for (k, s) in f.velocimeter.iter_mut().enumerate() {
+            s.t_ns = 8_000_000 + k as i64;
+            s.los_velocity_m_s = [next(), next(), next()];
+            s.range_m = [next(), next(), next()];
+            s.valid = [1, 0, k as u32];
+            s.flags = k as u32 + 40;
+        }
+        r.command.attitude_mode = 1;
+        r.command.thruster_on_time_ns = [11, 22, 33, 44, 55, 66, 77, 88];
+        r.applied.use_thrusters = true;
+        r.applied.thruster_on_time_ns = [1, 2, 3, 4, 5, 6, 7, 8];
         let tr = &mut r.truth;
         for v in tr
             .pos_mci_m

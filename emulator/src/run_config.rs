@@ -53,6 +53,62 @@ impl std::str::FromStr for LinkKind {
     }
 }
 
+/// What the telemetry carries for the flight software to navigate from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TelemetrySource {
+    /// The ideal navigation source only: the true state plus seeded noise in `nav`,
+    /// `accel_body_m_s2` and `altitude_m` (`TLM_FLAG_IDEAL_NAV`); no device samples. For
+    /// flight software without navigation of its own (the reference GNC today).
+    #[default]
+    Nav,
+    /// The devices only: every sensor sample since the last cycle in `sensors`
+    /// (`TLM_FLAG_SENSORS`); the ideal navigation fields are zero.
+    Sensors,
+    /// Both: the devices, and the ideal navigation source beside them (to compare a
+    /// navigation filter with, or to log the devices under a GNC that needs `nav`).
+    Both,
+}
+
+impl TelemetrySource {
+    /// Name as on the command line.
+    pub fn as_str(&self) -> &'static str {
+        match self {
+            TelemetrySource::Nav => "nav",
+            TelemetrySource::Sensors => "sensors",
+            TelemetrySource::Both => "both",
+        }
+    }
+
+    /// Whether the ideal navigation fields are filled.
+    pub fn ideal_nav(&self) -> bool {
+        matches!(self, TelemetrySource::Nav | TelemetrySource::Both)
+    }
+
+    /// Whether the devices run and fill the sensor frame.
+    pub fn sensors(&self) -> bool {
+        matches!(self, TelemetrySource::Sensors | TelemetrySource::Both)
+    }
+
+    fn is_default(&self) -> bool {
+        *self == TelemetrySource::Nav
+    }
+}
+
+impl std::str::FromStr for TelemetrySource {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "nav" => Ok(TelemetrySource::Nav),
+            "sensors" => Ok(TelemetrySource::Sensors),
+            "both" => Ok(TelemetrySource::Both),
+            other => Err(format!(
+                "unknown telemetry source `{other}` (expected nav, sensors or both)"
+            )),
+        }
+    }
+}
+
 /// How a process waits for its peer's next packet (iceoryx2 link only).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -132,7 +188,7 @@ pub struct LogConfig {
     /// The log file; default `oils-out/<run id>.oilslog` (`.mcap` for MCAP).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub path: Option<PathBuf>,
-    /// The log's format: `oilslog` (OILSLOG4, the default) or `mcap`.
+    /// The log's format: `oilslog` (OILSLOG5, the default) or `mcap`.
     #[serde(skip_serializing_if = "crate::recorder::LogFormat::is_default")]
     pub format: crate::recorder::LogFormat,
 }
@@ -168,6 +224,10 @@ pub struct RunConfig {
     pub fsw_period_ms: Option<u64>,
     /// Longest simulated time, seconds; the run ends `completed` if still flying.
     pub duration_s: f64,
+    /// What the telemetry carries: `nav` (ideal navigation), `sensors` (device samples)
+    /// or `both`.
+    #[serde(skip_serializing_if = "TelemetrySource::is_default")]
+    pub telemetry: TelemetrySource,
     /// Seed of every random stream.
     pub seed: u64,
     /// Propulsion model.
@@ -227,6 +287,7 @@ impl Default for RunConfig {
             dt_ms: 10,
             fsw_period_ms: None,
             duration_s: 2000.0,
+            telemetry: TelemetrySource::Nav,
             seed: 0,
             propulsion: PropulsionKind::Surrogate,
             model: None,
@@ -381,6 +442,13 @@ impl RunConfig {
                     ));
                 }
             }
+        }
+        if self.fsw == FswSpec::Gnc && self.telemetry == TelemetrySource::Sensors {
+            return Err(invalid(
+                "telemetry",
+                "sensors",
+                "the reference GNC navigates from the ideal navigation source: use telemetry = \"nav\" or \"both\" with it (--telemetry both flies it and logs the devices)",
+            ));
         }
         match (&self.fsw, &self.profile) {
             (FswSpec::Playback, None) => {

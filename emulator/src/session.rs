@@ -126,7 +126,9 @@ pub fn fresh_run_id() -> u64 {
 /// The plant a configuration describes, with its propulsion model (built before tick 0).
 pub fn build_plant(cfg: &RunConfig) -> Result<Plant, SessionError> {
     let propulsion = propulsion::build(&cfg.propulsion_spec())?;
-    Ok(Plant::new(&cfg.scenario, propulsion, cfg.seed)?)
+    let mut plant = Plant::new(&cfg.scenario, propulsion, cfg.seed)?;
+    plant.set_ideal_nav(cfg.telemetry.ideal_nav());
+    Ok(plant)
 }
 
 /// The run's faults, armed, after checking that the plant's propulsion model can
@@ -440,7 +442,7 @@ pub struct Replay {
 /// fed back in, and each telemetry the emulator publishes must equal the recorded one
 /// (else the replay stops with the first step that differs). The digest comes out the
 /// recorded run's: record == replay. `log` is the file at `log_path`, read by whichever
-/// reader its format needs ([`crate::recorder::read_log`] for OILSLOG4).
+/// reader its format needs ([`crate::recorder::read_log`] for OILSLOG5).
 ///
 /// The replay ends where the log does: at the step its end record names, as the
 /// recorded run ended it (before or after that step's telemetry went out, the end record

@@ -1,4 +1,4 @@
-"""ctypes mirrors of the oils wire packets (protocol v1).
+"""ctypes mirrors of the oils wire packets (protocol v2).
 
 Field for field the Rust structs of ``shared/src/lib.rs`` and the C structs of
 ``shared/include/oils.h``; ``docs/protocol.md`` gives every unit and frame. The test
@@ -8,11 +8,25 @@ hash against what the Rust side prints (``cargo run -p oils-shared --example lay
 
 import ctypes
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 ENGINE_COUNT = 4
+THRUSTER_COUNT = 8
+VELOCIMETER_BEAMS = 3
+IMU_SAMPLES_MAX = 8
+STAR_TRACKER_SAMPLES_MAX = 2
+ALTIMETER_SAMPLES_MAX = 2
+VELOCIMETER_SAMPLES_MAX = 2
 TLM_FLAG_END_OF_RUN = 1 << 0  # last telemetry of the run: answer nothing
 TLM_FLAG_NAV_NOISE = 1 << 1  # navigation values carry seeded noise
 TLM_FLAG_FOOTPAD_CONTACT = 1 << 2  # a footpad touches the ground: engines off
+TLM_FLAG_IDEAL_NAV = 1 << 3  # nav, accel_body_m_s2, altitude_m hold the ideal navigation source
+TLM_FLAG_SENSORS = 1 << 4  # sensors holds the device samples since the last cycle
+SAMPLE_FLAG_SATURATED = 1 << 0
+SAMPLE_FLAG_NO_LOCK = 1 << 1  # no return: out of range, grazing, nothing in the beam
+SAMPLE_FLAG_INHIBITED = 1 << 2
+SAMPLE_FLAG_OUTAGE = 1 << 3
+ATTITUDE_MODE_IDEAL_TORQUE = 0  # torque_cmd_body_nm is applied (saturated)
+ATTITUDE_MODE_THRUSTERS = 1  # thruster_on_time_ns fire the attitude thrusters
 
 #: The layout as text; its FNV-1a 64 hash travels in every packet header.
 SCHEMA = (
@@ -20,8 +34,13 @@ SCHEMA = (
     "NavState{pos_mci_m:[f64;3]@0,vel_mci_m_s:[f64;3]@24,q_mci_from_body:[f64;4]@48,rate_body_rad_s:[f64;3]@80}=104|"
     "EngineReading{thrust_n:f64@0,chamber_pressure_pa:f64@8,valve_open:u32@16,flags:u32@20}=24|"
     "PropulsionReadings{gas_pressure_pa:f64@0,fuel_tank_pressure_pa:f64@8,ox_tank_pressure_pa:f64@16,engines:[EngineReading;4]@24}=120|"
-    "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184}=304|"
-    "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112}=120|"
+    "ImuSample{t_ns:i64@0,delta_v_body_m_s:[f64;3]@8,delta_theta_body_rad:[f64;3]@32,valid:u32@56,flags:u32@60}=64|"
+    "StarTrackerSample{t_ns:i64@0,q_mci_from_body:[f64;4]@8,valid:u32@40,flags:u32@44}=48|"
+    "AltimeterSample{t_ns:i64@0,range_m:f64@8,valid:u32@16,flags:u32@20}=24|"
+    "VelocimeterSample{t_ns:i64@0,los_velocity_m_s:[f64;3]@8,range_m:[f64;3]@32,valid:[u32;3]@56,flags:u32@68}=72|"
+    "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,reserved:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728}=872|"
+    "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1176|"
+    "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188}=192|"
 )
 
 
@@ -34,7 +53,7 @@ def fnv1a64(text: str) -> int:
     return h
 
 
-SCHEMA_HASH = fnv1a64(SCHEMA)  # 0xa8f0da5f8f0aee6e
+SCHEMA_HASH = fnv1a64(SCHEMA)  # 0x6b7aac819410d7f5
 
 _f64 = ctypes.c_double
 _u32 = ctypes.c_uint32
@@ -88,36 +107,104 @@ class PropulsionReadings(ctypes.Structure):
     ]
 
 
+class ImuSample(ctypes.Structure):
+    """Velocity and angle increments over the IMU period ending at t_ns, body axes."""
+
+    _fields_ = [
+        ("t_ns", _i64),
+        ("delta_v_body_m_s", _f64 * 3),
+        ("delta_theta_body_rad", _f64 * 3),
+        ("valid", _u32),
+        ("flags", _u32),  # SAMPLE_FLAG_*
+    ]
+
+
+class StarTrackerSample(ctypes.Structure):
+    """Measured attitude [w, x, y, z], body -> mci."""
+
+    _fields_ = [
+        ("t_ns", _i64),
+        ("q_mci_from_body", _f64 * 4),
+        ("valid", _u32),
+        ("flags", _u32),
+    ]
+
+
+class AltimeterSample(ctypes.Structure):
+    """Slant range along the beam to the terrain."""
+
+    _fields_ = [
+        ("t_ns", _i64),
+        ("range_m", _f64),
+        ("valid", _u32),
+        ("flags", _u32),
+    ]
+
+
+class VelocimeterSample(ctypes.Structure):
+    """Per beam: velocity relative to the ground along the beam, and range."""
+
+    _fields_ = [
+        ("t_ns", _i64),
+        ("los_velocity_m_s", _f64 * VELOCIMETER_BEAMS),
+        ("range_m", _f64 * VELOCIMETER_BEAMS),
+        ("valid", _u32 * VELOCIMETER_BEAMS),
+        ("flags", _u32),
+    ]
+
+
+class SensorFrame(ctypes.Structure):
+    """Every device sample since the last cycle; *_count entries of each array are used."""
+
+    _fields_ = [
+        ("imu_count", _u32),
+        ("star_tracker_count", _u32),
+        ("laser_altimeter_count", _u32),
+        ("rf_altimeter_count", _u32),
+        ("velocimeter_count", _u32),
+        ("reserved", _u32),
+        ("imu", ImuSample * IMU_SAMPLES_MAX),
+        ("star_tracker", StarTrackerSample * STAR_TRACKER_SAMPLES_MAX),
+        ("laser_altimeter", AltimeterSample * ALTIMETER_SAMPLES_MAX),
+        ("rf_altimeter", AltimeterSample * ALTIMETER_SAMPLES_MAX),
+        ("velocimeter", VelocimeterSample * VELOCIMETER_SAMPLES_MAX),
+    ]
+
+
 class Telemetry(ctypes.Structure):
-    """Emulator -> flight software, once per step: the state at t_k (304 bytes)."""
+    """Emulator -> flight software, once per cycle, at t_k (1176 bytes)."""
 
     _fields_ = [
         ("header", PacketHeader),
         ("nav", NavState),
-        ("accel_body_m_s2", _f64 * 3),  # specific force, body axes
-        ("altitude_m", _f64),  # footpads above the surface
+        ("accel_body_m_s2", _f64 * 3),  # specific force, body axes (ideal navigation)
+        ("altitude_m", _f64),  # footpads above the surface (ideal navigation)
         ("mass_estimate_kg", _f64),
         ("propulsion", PropulsionReadings),
+        ("sensors", SensorFrame),  # with TLM_FLAG_SENSORS
     ]
 
     @staticmethod
     def type_name() -> str:
         """iceoryx2 type name (must match the Rust side)."""
-        return "oils.v1.Telemetry"
+        return "oils.v2.Telemetry"
 
 
 class Command(ctypes.Structure):
-    """Flight software -> emulator, once per step: held over [t_k, t_k+1) (120 bytes)."""
+    """Flight software -> emulator, once per cycle: held over [t_k, t_k+1) (192 bytes)."""
 
     _fields_ = [
         ("header", PacketHeader),  # echo run_id, step, t_ns of the telemetry answered
         ("thrust_cmd_n", _f64 * ENGINE_COUNT),  # 0..800 N
         ("engine_on", _u32 * ENGINE_COUNT),  # 0 or 1
-        ("torque_cmd_body_nm", _f64 * 3),  # attitude thrusters, body axes
+        ("torque_cmd_body_nm", _f64 * 3),  # ideal torque, body axes (attitude_mode 0)
         ("stub_compute_ns", _u64),  # your step's compute time (not in the digest)
+        ("thruster_on_time_ns", _u64 * THRUSTER_COUNT),  # from the cycle start (attitude_mode 1)
+        ("attitude_mode", _u32),  # ATTITUDE_MODE_*
+        ("reserved", _u32),
     ]
 
     @staticmethod
     def type_name() -> str:
         """iceoryx2 type name (must match the Rust side)."""
-        return "oils.v1.Command"
+        return "oils.v2.Command"

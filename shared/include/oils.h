@@ -16,14 +16,28 @@
 extern "C" {
 #endif
 
-#define OILS_PROTOCOL_VERSION 1u
-#define OILS_SCHEMA_HASH UINT64_C(0xa8f0da5f8f0aee6e)
+#define OILS_PROTOCOL_VERSION 2u
+#define OILS_SCHEMA_HASH UINT64_C(0x6b7aac819410d7f5)
 #define OILS_FSW_ABI_VERSION 1u
-#define OILS_FSW_LAYOUT_HASH UINT64_C(0x0275de28a2a3628b)
+#define OILS_FSW_LAYOUT_HASH UINT64_C(0xed5e40d868baa0fe)
 #define OILS_ENGINE_COUNT 4
 #define OILS_TLM_FLAG_END_OF_RUN 1u /* last telemetry: answer nothing */
 #define OILS_TLM_FLAG_NAV_NOISE 2u  /* nav values carry seeded noise */
 #define OILS_TLM_FLAG_FOOTPAD_CONTACT 4u  /* a footpad touches the ground: engines off */
+#define OILS_TLM_FLAG_IDEAL_NAV 8u  /* nav, accel_body_m_s2, altitude_m are filled */
+#define OILS_TLM_FLAG_SENSORS 16u  /* sensors holds the device samples */
+#define OILS_THRUSTER_COUNT 8
+#define OILS_VELOCIMETER_BEAMS 3
+#define OILS_IMU_SAMPLES_MAX 8
+#define OILS_STAR_TRACKER_SAMPLES_MAX 2
+#define OILS_ALTIMETER_SAMPLES_MAX 2
+#define OILS_VELOCIMETER_SAMPLES_MAX 2
+#define OILS_SAMPLE_FLAG_SATURATED 1u
+#define OILS_SAMPLE_FLAG_NO_LOCK 2u
+#define OILS_SAMPLE_FLAG_INHIBITED 4u
+#define OILS_SAMPLE_FLAG_OUTAGE 8u
+#define OILS_ATTITUDE_MODE_IDEAL_TORQUE 0u
+#define OILS_ATTITUDE_MODE_THRUSTERS 1u
 #define OILS_FSW_STATUS_OK 0 /* any other value from oils_fsw_step stops the run */
 
 /* The schema string whose FNV-1a 64 hash is OILS_SCHEMA_HASH. */
@@ -32,8 +46,13 @@ extern "C" {
   "NavState{pos_mci_m:[f64;3]@0,vel_mci_m_s:[f64;3]@24,q_mci_from_body:[f64;4]@48,rate_body_rad_s:[f64;3]@80}=104|" \
   "EngineReading{thrust_n:f64@0,chamber_pressure_pa:f64@8,valve_open:u32@16,flags:u32@20}=24|" \
   "PropulsionReadings{gas_pressure_pa:f64@0,fuel_tank_pressure_pa:f64@8,ox_tank_pressure_pa:f64@16,engines:[EngineReading;4]@24}=120|" \
-  "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184}=304|" \
-  "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112}=120|"
+  "ImuSample{t_ns:i64@0,delta_v_body_m_s:[f64;3]@8,delta_theta_body_rad:[f64;3]@32,valid:u32@56,flags:u32@60}=64|" \
+  "StarTrackerSample{t_ns:i64@0,q_mci_from_body:[f64;4]@8,valid:u32@40,flags:u32@44}=48|" \
+  "AltimeterSample{t_ns:i64@0,range_m:f64@8,valid:u32@16,flags:u32@20}=24|" \
+  "VelocimeterSample{t_ns:i64@0,los_velocity_m_s:[f64;3]@8,range_m:[f64;3]@32,valid:[u32;3]@56,flags:u32@68}=72|" \
+  "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,reserved:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728}=872|" \
+  "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1176|" \
+  "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188}=192|"
 
 typedef struct oils_packet_header {
   uint32_t protocol_version;
@@ -65,6 +84,50 @@ typedef struct oils_propulsion_readings {
   oils_engine_reading engines[4];
 } oils_propulsion_readings;
 
+typedef struct oils_imu_sample {
+  int64_t t_ns;
+  double delta_v_body_m_s[3];
+  double delta_theta_body_rad[3];
+  uint32_t valid;
+  uint32_t flags;
+} oils_imu_sample;
+
+typedef struct oils_star_tracker_sample {
+  int64_t t_ns;
+  double q_mci_from_body[4];
+  uint32_t valid;
+  uint32_t flags;
+} oils_star_tracker_sample;
+
+typedef struct oils_altimeter_sample {
+  int64_t t_ns;
+  double range_m;
+  uint32_t valid;
+  uint32_t flags;
+} oils_altimeter_sample;
+
+typedef struct oils_velocimeter_sample {
+  int64_t t_ns;
+  double los_velocity_m_s[3];
+  double range_m[3];
+  uint32_t valid[3];
+  uint32_t flags;
+} oils_velocimeter_sample;
+
+typedef struct oils_sensor_frame {
+  uint32_t imu_count;
+  uint32_t star_tracker_count;
+  uint32_t laser_altimeter_count;
+  uint32_t rf_altimeter_count;
+  uint32_t velocimeter_count;
+  uint32_t reserved;
+  oils_imu_sample imu[8];
+  oils_star_tracker_sample star_tracker[2];
+  oils_altimeter_sample laser_altimeter[2];
+  oils_altimeter_sample rf_altimeter[2];
+  oils_velocimeter_sample velocimeter[2];
+} oils_sensor_frame;
+
 typedef struct oils_telemetry {
   oils_packet_header header;
   oils_nav_state nav;
@@ -72,6 +135,7 @@ typedef struct oils_telemetry {
   double altitude_m;
   double mass_estimate_kg;
   oils_propulsion_readings propulsion;
+  oils_sensor_frame sensors;
 } oils_telemetry;
 
 typedef struct oils_command {
@@ -80,6 +144,9 @@ typedef struct oils_command {
   uint32_t engine_on[4];
   double torque_cmd_body_nm[3];
   uint64_t stub_compute_ns;
+  uint64_t thruster_on_time_ns[8];
+  uint32_t attitude_mode;
+  uint32_t reserved;
 } oils_command;
 
 typedef struct oils_fsw_config {
@@ -119,19 +186,57 @@ OILS_STATIC_ASSERT(offsetof(oils_propulsion_readings, fuel_tank_pressure_pa) == 
 OILS_STATIC_ASSERT(offsetof(oils_propulsion_readings, ox_tank_pressure_pa) == 16, "oils_propulsion_readings.ox_tank_pressure_pa offset");
 OILS_STATIC_ASSERT(offsetof(oils_propulsion_readings, engines) == 24, "oils_propulsion_readings.engines offset");
 OILS_STATIC_ASSERT(sizeof(oils_propulsion_readings) == 120, "oils_propulsion_readings size");
+OILS_STATIC_ASSERT(offsetof(oils_imu_sample, t_ns) == 0, "oils_imu_sample.t_ns offset");
+OILS_STATIC_ASSERT(offsetof(oils_imu_sample, delta_v_body_m_s) == 8, "oils_imu_sample.delta_v_body_m_s offset");
+OILS_STATIC_ASSERT(offsetof(oils_imu_sample, delta_theta_body_rad) == 32, "oils_imu_sample.delta_theta_body_rad offset");
+OILS_STATIC_ASSERT(offsetof(oils_imu_sample, valid) == 56, "oils_imu_sample.valid offset");
+OILS_STATIC_ASSERT(offsetof(oils_imu_sample, flags) == 60, "oils_imu_sample.flags offset");
+OILS_STATIC_ASSERT(sizeof(oils_imu_sample) == 64, "oils_imu_sample size");
+OILS_STATIC_ASSERT(offsetof(oils_star_tracker_sample, t_ns) == 0, "oils_star_tracker_sample.t_ns offset");
+OILS_STATIC_ASSERT(offsetof(oils_star_tracker_sample, q_mci_from_body) == 8, "oils_star_tracker_sample.q_mci_from_body offset");
+OILS_STATIC_ASSERT(offsetof(oils_star_tracker_sample, valid) == 40, "oils_star_tracker_sample.valid offset");
+OILS_STATIC_ASSERT(offsetof(oils_star_tracker_sample, flags) == 44, "oils_star_tracker_sample.flags offset");
+OILS_STATIC_ASSERT(sizeof(oils_star_tracker_sample) == 48, "oils_star_tracker_sample size");
+OILS_STATIC_ASSERT(offsetof(oils_altimeter_sample, t_ns) == 0, "oils_altimeter_sample.t_ns offset");
+OILS_STATIC_ASSERT(offsetof(oils_altimeter_sample, range_m) == 8, "oils_altimeter_sample.range_m offset");
+OILS_STATIC_ASSERT(offsetof(oils_altimeter_sample, valid) == 16, "oils_altimeter_sample.valid offset");
+OILS_STATIC_ASSERT(offsetof(oils_altimeter_sample, flags) == 20, "oils_altimeter_sample.flags offset");
+OILS_STATIC_ASSERT(sizeof(oils_altimeter_sample) == 24, "oils_altimeter_sample size");
+OILS_STATIC_ASSERT(offsetof(oils_velocimeter_sample, t_ns) == 0, "oils_velocimeter_sample.t_ns offset");
+OILS_STATIC_ASSERT(offsetof(oils_velocimeter_sample, los_velocity_m_s) == 8, "oils_velocimeter_sample.los_velocity_m_s offset");
+OILS_STATIC_ASSERT(offsetof(oils_velocimeter_sample, range_m) == 32, "oils_velocimeter_sample.range_m offset");
+OILS_STATIC_ASSERT(offsetof(oils_velocimeter_sample, valid) == 56, "oils_velocimeter_sample.valid offset");
+OILS_STATIC_ASSERT(offsetof(oils_velocimeter_sample, flags) == 68, "oils_velocimeter_sample.flags offset");
+OILS_STATIC_ASSERT(sizeof(oils_velocimeter_sample) == 72, "oils_velocimeter_sample size");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, imu_count) == 0, "oils_sensor_frame.imu_count offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, star_tracker_count) == 4, "oils_sensor_frame.star_tracker_count offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, laser_altimeter_count) == 8, "oils_sensor_frame.laser_altimeter_count offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, rf_altimeter_count) == 12, "oils_sensor_frame.rf_altimeter_count offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, velocimeter_count) == 16, "oils_sensor_frame.velocimeter_count offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, reserved) == 20, "oils_sensor_frame.reserved offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, imu) == 24, "oils_sensor_frame.imu offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, star_tracker) == 536, "oils_sensor_frame.star_tracker offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, laser_altimeter) == 632, "oils_sensor_frame.laser_altimeter offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, rf_altimeter) == 680, "oils_sensor_frame.rf_altimeter offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, velocimeter) == 728, "oils_sensor_frame.velocimeter offset");
+OILS_STATIC_ASSERT(sizeof(oils_sensor_frame) == 872, "oils_sensor_frame size");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, header) == 0, "oils_telemetry.header offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, nav) == 40, "oils_telemetry.nav offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, accel_body_m_s2) == 144, "oils_telemetry.accel_body_m_s2 offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, altitude_m) == 168, "oils_telemetry.altitude_m offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, mass_estimate_kg) == 176, "oils_telemetry.mass_estimate_kg offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, propulsion) == 184, "oils_telemetry.propulsion offset");
-OILS_STATIC_ASSERT(sizeof(oils_telemetry) == 304, "oils_telemetry size");
+OILS_STATIC_ASSERT(offsetof(oils_telemetry, sensors) == 304, "oils_telemetry.sensors offset");
+OILS_STATIC_ASSERT(sizeof(oils_telemetry) == 1176, "oils_telemetry size");
 OILS_STATIC_ASSERT(offsetof(oils_command, header) == 0, "oils_command.header offset");
 OILS_STATIC_ASSERT(offsetof(oils_command, thrust_cmd_n) == 40, "oils_command.thrust_cmd_n offset");
 OILS_STATIC_ASSERT(offsetof(oils_command, engine_on) == 72, "oils_command.engine_on offset");
 OILS_STATIC_ASSERT(offsetof(oils_command, torque_cmd_body_nm) == 88, "oils_command.torque_cmd_body_nm offset");
 OILS_STATIC_ASSERT(offsetof(oils_command, stub_compute_ns) == 112, "oils_command.stub_compute_ns offset");
-OILS_STATIC_ASSERT(sizeof(oils_command) == 120, "oils_command size");
+OILS_STATIC_ASSERT(offsetof(oils_command, thruster_on_time_ns) == 120, "oils_command.thruster_on_time_ns offset");
+OILS_STATIC_ASSERT(offsetof(oils_command, attitude_mode) == 184, "oils_command.attitude_mode offset");
+OILS_STATIC_ASSERT(offsetof(oils_command, reserved) == 188, "oils_command.reserved offset");
+OILS_STATIC_ASSERT(sizeof(oils_command) == 192, "oils_command size");
 OILS_STATIC_ASSERT(offsetof(oils_fsw_config, abi_version) == 0, "oils_fsw_config.abi_version offset");
 OILS_STATIC_ASSERT(offsetof(oils_fsw_config, protocol_version) == 4, "oils_fsw_config.protocol_version offset");
 OILS_STATIC_ASSERT(offsetof(oils_fsw_config, schema_hash) == 8, "oils_fsw_config.schema_hash offset");
@@ -151,8 +256,9 @@ uint64_t oils_fsw_layout_hash(void);
  * non-NULL pointer), or NULL to refuse the run (the stub exits with an error). */
 void *oils_fsw_init(const oils_fsw_config *config);
 
-/* Called once per step with Telemetry(k): fill cmd->thrust_cmd_n, cmd->engine_on
- * (0/1) and cmd->torque_cmd_body_nm (cmd arrives zeroed; the stub stamps the header
+/* Called once per cycle with Telemetry(k): fill cmd->thrust_cmd_n, cmd->engine_on
+ * (0/1), and cmd->torque_cmd_body_nm (attitude_mode 0) or cmd->thruster_on_time_ns
+ * (attitude_mode 1) (cmd arrives zeroed; the stub stamps the header
  * and stub_compute_ns). Must not block, allocate or read the wall clock: simulated
  * time is tlm->header.t_ns. Return OILS_FSW_STATUS_OK, or any other value to stop
  * the run with that error code. */

@@ -57,6 +57,12 @@ pub struct RunArgs {
     /// [default: 2000]
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
+    /// What the telemetry carries: nav (the ideal navigation source: true state plus
+    /// noise), sensors (the device samples: IMU, star tracker, altimeters, velocimeter)
+    /// or both. With sensors or both and no --dt-ms, the plant steps at 5 ms (the IMU's
+    /// 200 Hz). [default: nav]
+    #[arg(long, value_name = "nav|sensors|both")]
+    pub telemetry: Option<oils_emulator::run_config::TelemetrySource>,
     /// Propulsion model: surrogate (the learned model of the seed paper), hifi
     /// (physics, the truth model), ideal (first-order lag) or shadow (hifi drives, the
     /// surrogate runs beside it). [default: surrogate]
@@ -182,6 +188,13 @@ impl RunArgs {
              miss_policy => miss_policy, deadline_frac => deadline_frac,
              wake_spin_us => wake_spin_us, link_timeout_ms => link_timeout_ms,
              startup_timeout_ms => startup_timeout_ms);
+        if let Some(t) = self.telemetry {
+            cfg.telemetry = t;
+            // The devices' periods (the IMU's 5 ms) need a base tick that divides them.
+            if t.sensors() && self.dt_ms.is_none() && cfg.dt_ms == 10 {
+                cfg.dt_ms = 5;
+            }
+        }
         if let Some(p) = self.fsw_period_ms {
             cfg.fsw_period_ms = Some(p);
         }

@@ -34,7 +34,7 @@ use nalgebra::Vector3;
 use nav_noise::NavNoise;
 use oils_shared::{
     EngineReading, NavState, PacketHeader, PropulsionReadings, Telemetry, ENGINE_COUNT,
-    TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_NAV_NOISE,
+    TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_IDEAL_NAV, TLM_FLAG_NAV_NOISE,
 };
 use rigid_body::{Dynamics, HeldLoads, MassModel, StateVector};
 
@@ -210,6 +210,8 @@ pub struct Plant {
     /// The landing's end, once it is over.
     touchdown: Option<TouchdownState>,
     noise: Option<NavNoise>,
+    /// Whether the telemetry carries the ideal navigation source.
+    ideal_nav: bool,
     /// Engine faults acting on the command.
     engine_faults: [EngineFault; ENGINE_COUNT],
     /// Output scale of each engine (the configured thrust scale times a degradation
@@ -305,6 +307,7 @@ impl Plant {
             pads_in_contact: 0,
             touchdown: None,
             noise,
+            ideal_nav: true,
             engine_faults: [EngineFault::None; ENGINE_COUNT],
             output_factor: lander.engine_thrust_scale,
             thrust_scale: lander.engine_thrust_scale,
@@ -315,8 +318,16 @@ impl Plant {
         })
     }
 
-    /// Telemetry of the current state. Fills everything but `header`, which is kept as
-    /// given apart from OR-ing in [`TLM_FLAG_NAV_NOISE`] when noise is on.
+    /// Whether [`Plant::telemetry`] fills the ideal navigation source (`nav`,
+    /// `accel_body_m_s2`, `altitude_m`, [`TLM_FLAG_IDEAL_NAV`]); on unless told. Off, the
+    /// fields are zero and the navigation noise stream is not drawn.
+    pub fn set_ideal_nav(&mut self, on: bool) {
+        self.ideal_nav = on;
+    }
+
+    /// Telemetry of the current state. Fills everything but `header` and `sensors`;
+    /// the header is kept as given apart from OR-ing in [`TLM_FLAG_IDEAL_NAV`],
+    /// [`TLM_FLAG_NAV_NOISE`] and [`TLM_FLAG_FOOTPAD_CONTACT`].
     pub fn telemetry(&mut self, header: PacketHeader) -> Telemetry {
         let s = &self.state;
         let q = s.q_mci_from_body.quaternion();
@@ -348,6 +359,13 @@ impl Plant {
         if self.pads_in_contact > 0 {
             tlm.header.flags |= TLM_FLAG_FOOTPAD_CONTACT;
         }
+        if !self.ideal_nav {
+            tlm.nav = NavState::default();
+            tlm.accel_body_m_s2 = [0.0; 3];
+            tlm.altitude_m = 0.0;
+            return tlm;
+        }
+        tlm.header.flags |= TLM_FLAG_IDEAL_NAV;
         if let Some(noise) = self.noise.as_mut() {
             noise.apply(&mut tlm);
             tlm.header.flags |= TLM_FLAG_NAV_NOISE;
