@@ -40,7 +40,7 @@
 //! total:             I = F D = F (T + d_close - d_open)
 //! ```
 //! Once the valve is closed with nothing pending and `x` falls below [`TAIL_CUTOFF`],
-//! `x` is set to 0 (the impulse lost is below `1e-12 F tau`) and the bank is idle.
+//! `x` is set to 0 (the impulse lost is below `1e-15 F tau`) and the bank is idle.
 //!
 //! # What a step gives
 //! For the plant step `[t, t + dt]`, with `J_i` thruster `i`'s impulse in it, position
@@ -66,7 +66,7 @@ const G0_M_S2: f64 = 9.80665;
 pub const PULSES_PER_THRUSTER: usize = 8;
 
 /// Thrust fraction below which a closed thruster's tail is set to zero.
-pub const TAIL_CUTOFF: f64 = 1e-12;
+pub const TAIL_CUTOFF: f64 = 1e-15;
 
 /// What the bank gives for one plant step.
 #[derive(Debug, Clone, Copy, PartialEq)]
