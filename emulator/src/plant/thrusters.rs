@@ -233,12 +233,12 @@ impl ThrusterBank {
         let mut force = Vector3::zeros();
         let mut torque = Vector3::zeros();
         let mut total_n_s = 0.0;
-        for i in 0..THRUSTER_COUNT {
+        for (i, impulse) in impulse_n_s.iter_mut().enumerate() {
             if self.count[i] == 0 && self.level[i] == 0.0 {
                 continue;
             }
             let j = self.thrust_n * self.integrate(i, t0_ns, t1_ns);
-            impulse_n_s[i] = j;
+            *impulse = j;
             total_n_s += j;
             let f = self.dir_body[i] * j;
             force += f;
@@ -397,12 +397,13 @@ mod tests {
     const MS: i64 = 1_000_000;
 
     fn bank(tau_s: f64) -> ThrusterBank {
-        let mut lander = LanderConfig::default();
-        lander.rcs_time_constant_s = tau_s;
-        lander.rcs_open_delay_s = 0.005;
-        lander.rcs_close_delay_s = 0.003;
-        lander.rcs_min_on_time_s = 0.010;
-        ThrusterBank::from_config(&lander)
+        ThrusterBank::from_config(&LanderConfig {
+            rcs_time_constant_s: tau_s,
+            rcs_open_delay_s: 0.005,
+            rcs_close_delay_s: 0.003,
+            rcs_min_on_time_s: 0.010,
+            ..Default::default()
+        })
     }
 
     /// Thrust fraction of an isolated pulse at time t (seconds), written independently
@@ -428,7 +429,7 @@ mod tests {
         let (t_o, t_f) = (0.025, 0.035);
         // Uneven steps that cut the open and close instants anywhere.
         let mut t = 0i64;
-        for dt in [7 * MS, 11 * MS, 9 * MS, 1 * MS, 3 * MS, 13 * MS, 17 * MS] {
+        for dt in [7 * MS, 11 * MS, 9 * MS, MS, 3 * MS, 13 * MS, 17 * MS] {
             let out = b.step(t, dt as u64);
             let (a, z) = (t as f64 * 1e-9, (t + dt) as f64 * 1e-9);
             // Composite Simpson on a profile smooth inside each piece.
