@@ -25,7 +25,8 @@ fn actuator(cmd: &Command) -> ActuatorCommand {
     ActuatorCommand {
         engines,
         torque_cmd_body_nm: cmd.torque_cmd_body_nm,
-    }..Default::default()
+        ..Default::default()
+    }
 }
 
 /// Steps `fsw` against a fresh plant to touchdown; returns the allocations counted in

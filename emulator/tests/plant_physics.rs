@@ -16,7 +16,7 @@ fn plant(cfg: &ScenarioConfig) -> Plant {
 }
 
 fn coast() -> ActuatorCommand {
-    ActuatorCommand::default()..Default::default()
+    ActuatorCommand::default()
 }
 
 fn full_thrust() -> ActuatorCommand {
@@ -26,7 +26,8 @@ fn full_thrust() -> ActuatorCommand {
             on: [true; 4],
         },
         torque_cmd_body_nm: [0.0; 3],
-    }..Default::default()
+        ..Default::default()
+    }
 }
 
 /// A circular orbit `altitude_m` above the footpads' reach (the Moon held still: the
