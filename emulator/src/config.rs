@@ -22,6 +22,8 @@ fixed_len! {
     inertia_dry: [f64; 3] => "lander.inertia_dry_kg_m2",
     engine_positions: [[f64; 3]; 4] => "lander.engine_positions_body_m",
     rcs_moment_arm: [f64; 3] => "lander.rcs_moment_arm_m",
+    rcs_positions: [[f64; 3]; oils_shared::THRUSTER_COUNT] => "lander.rcs_positions_body_m",
+    rcs_directions: [[f64; 3]; oils_shared::THRUSTER_COUNT] => "lander.rcs_directions_body",
     com_offset: [f64; 3] => "lander.com_offset_body_m",
     engine_thrust_scale: [f64; 4] => "lander.engine_thrust_scale",
     engine_misalignment: [[f64; 2]; 4] => "lander.engine_misalignment_deg",
@@ -277,6 +279,29 @@ pub struct LanderConfig {
     pub rcs_moment_arm_m: [f64; 3],
     /// Attitude thruster specific impulse, seconds (assumed).
     pub rcs_isp_s: f64,
+    /// Attitude thruster positions relative to the design centre of mass, body axes,
+    /// metres (assumed: four pods of two at the corners of a 2 m square at the centre
+    /// of mass's height; see `docs/plant.md`, "Attitude thrusters"). Used when the
+    /// flight software commands on-times (`ATTITUDE_MODE_THRUSTERS`); moment arms are
+    /// measured from the true centre of mass.
+    #[serde(deserialize_with = "rcs_positions")]
+    pub rcs_positions_body_m: [[f64; 3]; oils_shared::THRUSTER_COUNT],
+    /// Attitude thruster directions: the unit vector of the force each applies to the
+    /// vehicle (opposite its exhaust), body axes (assumed, with the positions).
+    #[serde(deserialize_with = "rcs_directions")]
+    pub rcs_directions_body: [[f64; 3]; oils_shared::THRUSTER_COUNT],
+    /// Shortest on-time an attitude thruster fires; a shorter one (not zero) is not
+    /// fired, seconds (assumed: the minimum impulse bit's ~10-20 ms).
+    pub rcs_min_on_time_s: f64,
+    /// Attitude thruster valve opening delay, from the command to the valve open,
+    /// seconds (assumed: ~5 ms).
+    pub rcs_open_delay_s: f64,
+    /// Attitude thruster valve closing delay, from the end of the command to the valve
+    /// closed, seconds (assumed: ~5 ms).
+    pub rcs_close_delay_s: f64,
+    /// Time constant of an attitude thruster's first-order thrust rise and tail,
+    /// seconds (assumed; 0 = thrust follows the valve at once).
+    pub rcs_time_constant_s: f64,
     /// Footpad centres relative to the centre of mass, body axes, metres (assumed: a
     /// 3.6 m square footprint, 1.2 m below the centre of mass). Their mean height
     /// below the centre of mass is the altitude reference ([`Self::leg_height_m`]).
@@ -304,6 +329,37 @@ pub struct LanderConfig {
     pub engine_misalignment_deg: [[f64; 2]; 4],
 }
 
+/// Default attitude thruster positions (assumed): pods A (+1, +1), B (+1, -1),
+/// C (-1, -1), D (-1, +1) at the centre of mass's height, two thrusters each.
+const RCS_POSITIONS_BODY_M: [[f64; 3]; oils_shared::THRUSTER_COUNT] = [
+    [1.0, 1.0, 0.0],
+    [1.0, 1.0, 0.0],
+    [1.0, -1.0, 0.0],
+    [1.0, -1.0, 0.0],
+    [-1.0, -1.0, 0.0],
+    [-1.0, -1.0, 0.0],
+    [-1.0, 1.0, 0.0],
+    [-1.0, 1.0, 0.0],
+];
+
+/// Default attitude thruster directions (assumed): per pod one along body Z (A and C
+/// +Z, B and D -Z) and one tangential (A and C counter-clockwise about +Z, B and D
+/// clockwise). Pure couples: +x (0, 2), -x (4, 6), +y (4, 2), -y (0, 6), +z (1, 5),
+/// -z (3, 7).
+const RCS_DIRECTIONS_BODY: [[f64; 3]; oils_shared::THRUSTER_COUNT] = {
+    const H: f64 = std::f64::consts::FRAC_1_SQRT_2;
+    [
+        [0.0, 0.0, 1.0],
+        [-H, H, 0.0],
+        [0.0, 0.0, -1.0],
+        [-H, -H, 0.0],
+        [0.0, 0.0, 1.0],
+        [H, -H, 0.0],
+        [0.0, 0.0, -1.0],
+        [H, H, 0.0],
+    ]
+};
+
 impl Default for LanderConfig {
     fn default() -> Self {
         Self {
@@ -319,6 +375,12 @@ impl Default for LanderConfig {
             rcs_thrust_n: 58.0,
             rcs_moment_arm_m: [1.0, 1.0, 1.0],
             rcs_isp_s: 220.0,
+            rcs_positions_body_m: RCS_POSITIONS_BODY_M,
+            rcs_directions_body: RCS_DIRECTIONS_BODY,
+            rcs_min_on_time_s: 0.010,
+            rcs_open_delay_s: 0.005,
+            rcs_close_delay_s: 0.005,
+            rcs_time_constant_s: 0.003,
             footpad_positions_body_m: [
                 [1.8, 0.0, -1.2],
                 [0.0, 1.8, -1.2],
@@ -397,6 +459,60 @@ impl LanderConfig {
             "in [0, 1e5] N",
         )?;
         positive_at_most("lander.rcs_isp_s", self.rcs_isp_s, 1e4, "in (0, 1e4] s")?;
+        for c in self.rcs_positions_body_m.iter().flatten() {
+            within(
+                "lander.rcs_positions_body_m",
+                *c,
+                -100.0,
+                100.0,
+                "in [-100, 100] m",
+            )?;
+        }
+        for d in &self.rcs_directions_body {
+            for c in d {
+                check(
+                    c.is_finite(),
+                    "lander.rcs_directions_body",
+                    *c,
+                    "finite components",
+                )?;
+            }
+            let norm = d.iter().map(|c| c * c).sum::<f64>().sqrt();
+            check(
+                (norm - 1.0).abs() <= 1e-6,
+                "lander.rcs_directions_body",
+                norm,
+                "unit vectors (norm within 1e-6 of 1)",
+            )?;
+        }
+        within(
+            "lander.rcs_min_on_time_s",
+            self.rcs_min_on_time_s,
+            0.0,
+            1.0,
+            "in [0, 1] s",
+        )?;
+        within(
+            "lander.rcs_open_delay_s",
+            self.rcs_open_delay_s,
+            0.0,
+            0.1,
+            "in [0, 0.1] s",
+        )?;
+        within(
+            "lander.rcs_close_delay_s",
+            self.rcs_close_delay_s,
+            0.0,
+            0.1,
+            "in [0, 0.1] s",
+        )?;
+        within(
+            "lander.rcs_time_constant_s",
+            self.rcs_time_constant_s,
+            0.0,
+            0.1,
+            "in [0, 0.1] s",
+        )?;
         for p in &self.footpad_positions_body_m {
             for c in p {
                 within(
@@ -937,6 +1053,24 @@ mod tests {
             ("moon.radius_m", |c, v| c.moon.radius_m = v),
             ("lander.dry_mass_kg", |c, v| c.lander.dry_mass_kg = v),
             ("lander.rcs_thrust_n", |c, v| c.lander.rcs_thrust_n = v),
+            ("lander.rcs_min_on_time_s", |c, v| {
+                c.lander.rcs_min_on_time_s = v
+            }),
+            ("lander.rcs_open_delay_s", |c, v| {
+                c.lander.rcs_open_delay_s = v
+            }),
+            ("lander.rcs_close_delay_s", |c, v| {
+                c.lander.rcs_close_delay_s = v
+            }),
+            ("lander.rcs_time_constant_s", |c, v| {
+                c.lander.rcs_time_constant_s = v
+            }),
+            ("lander.rcs_positions_body_m", |c, v| {
+                c.lander.rcs_positions_body_m[3][1] = v
+            }),
+            ("lander.rcs_directions_body", |c, v| {
+                c.lander.rcs_directions_body[6][0] = v
+            }),
             ("initial.altitude_m", |c, v| c.initial.altitude_m = v),
             ("initial.horizontal_speed_m_s", |c, v| {
                 c.initial.horizontal_speed_m_s = v
@@ -997,6 +1131,15 @@ mod tests {
         .to_string();
         assert!(
             e.contains("`lander.engine_positions_body_m` has 4 elements, expected 3"),
+            "{e}"
+        );
+        let e = toml::from_str::<ScenarioConfig>(
+            "[lander]\nrcs_directions_body = [[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("`lander.rcs_directions_body` has 7 elements, expected 8"),
             "{e}"
         );
         let e = toml::from_str::<ScenarioConfig>(

@@ -51,3 +51,54 @@ fn step_and_telemetry_do_not_allocate_through_flight_and_touchdown() {
         after - before
     );
 }
+
+#[test]
+fn thruster_path_does_not_allocate_through_flight_and_touchdown() {
+    let mut cfg = ScenarioConfig::default();
+    cfg.initial.altitude_m = 20.0;
+    cfg.initial.horizontal_speed_m_s = 0.5;
+    cfg.initial.thrust_pitch_deg = 90.0;
+    let mut plant = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 7).unwrap();
+    let cycle_ns = 20_000_000u64;
+    let mut cmd = ActuatorCommand {
+        engines: EngineCommand {
+            thrust_cmd_n: [400.0; 4],
+            on: [true, true, false, true],
+        },
+        use_thrusters: true,
+        ..Default::default()
+    };
+
+    let before = common::allocations();
+    let mut touched = false;
+    'run: for k in 0..50_000u64 {
+        // Every on-time path: off, below the minimum, a pulse, the whole cycle; a
+        // missed cycle every 7th (the command held, cycle start and all).
+        if k % 7 != 6 {
+            cmd.cycle_start_ns = (k * cycle_ns) as i64;
+            for (i, t) in cmd.thruster_on_time_ns.iter_mut().enumerate() {
+                *t = [0, 4_000_000, 12_000_000, cycle_ns][(i + k as usize) % 4];
+            }
+        }
+        for _ in 0..2 {
+            let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
+            std::hint::black_box(&tlm);
+            std::hint::black_box(plant.thrusters().thrust_now_n());
+            if let PlantStatus::Touchdown(td) = plant.step(&cmd, 10_000_000) {
+                std::hint::black_box(td);
+                touched = true;
+                std::hint::black_box(plant.step(&cmd, 10_000_000));
+                break 'run;
+            }
+        }
+    }
+    let after = common::allocations();
+    assert!(touched, "the run should reach the contact search path");
+    assert!(plant.rcs_propellant_used_kg() > 0.0, "the thrusters fired");
+    assert_eq!(
+        after - before,
+        0,
+        "plant allocated {} times",
+        after - before
+    );
+}

@@ -1,6 +1,7 @@
 //! The plant: the lander as a 6-DOF rigid body of varying mass around a rotating Moon,
-//! driven by a propulsion model and saturated attitude thrusters, standing on four
-//! legs once it touches the ground, until it rests or tips.
+//! driven by a propulsion model and attitude thrusters (an ideal saturated body torque,
+//! or eight on/off thrusters fired for commanded on-times, [`thrusters`]), standing on
+//! four legs once it touches the ground, until it rests or tips.
 //!
 //! Frames ([`frames`]): the state is integrated in `mci` (Moon-centred inertial); the
 //! ground is fixed in `mcmf`, which turns at the sidereal rate, so touchdown speeds are
@@ -22,6 +23,7 @@ pub mod legs;
 pub mod model_error;
 pub mod nav_noise;
 pub mod rigid_body;
+pub mod thrusters;
 
 use crate::config::{ConfigError, ScenarioConfig, TouchdownLimits};
 use crate::faults::PlantFault;
@@ -37,6 +39,7 @@ use oils_shared::{
     TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_IDEAL_NAV, TLM_FLAG_NAV_NOISE,
 };
 use rigid_body::{Dynamics, HeldLoads, MassModel, StateVector};
+use thrusters::ThrusterBank;
 
 pub use rigid_body::RigidBodyState;
 
@@ -221,6 +224,8 @@ pub struct Plant {
     thrust_scale: [f64; ENGINE_COUNT],
     /// Injected model error, when configured.
     model_error: Option<model_error::ModelError>,
+    /// The attitude thrusters at device level (used when the command asks for them).
+    thrusters: ThrusterBank,
 }
 
 /// An engine fault acting on the command the engine gets.
@@ -315,6 +320,7 @@ impl Plant {
                 .model_error
                 .enabled
                 .then(|| model_error::ModelError::new(&cfg.model_error)),
+            thrusters: ThrusterBank::from_config(lander),
         })
     }
 
@@ -416,29 +422,48 @@ impl Plant {
         self.last_engines = engines;
         let main_ejected_kg = (self.prop_out.ejected_kg() - ejected_before_kg).max(0.0);
 
-        // 2. Attitude thrusters: saturated torque; propellant at |torque| / arm / c.
-        let mut rcs_torque_nm =
-            Vector3::from(cmd.torque_cmd_body_nm).zip_map(&setup.rcs_max_torque_nm, |t, max| {
-                if t.is_finite() {
-                    t.clamp(-max, max)
-                } else {
-                    0.0
-                }
-            });
-        let rcs_flow_kg_s = rcs_torque_nm
-            .abs()
-            .component_div(&setup.rcs_moment_arm_m)
-            .sum()
-            / setup.rcs_exhaust_m_s;
+        // 2. Attitude thrusters. Ideal (attitude mode 0): saturated torque; propellant
+        // at |torque| / arm / c. Thrusters (mode 1, and the tails of pulses still
+        // thrusting after a switch back to mode 0): the bank's mean force and torque over
+        // the step, propellant at impulse / c. Both from the same tanks.
+        let (mut rcs_torque_nm, mut rcs_kg) = if cmd.use_thrusters {
+            (Vector3::zeros(), 0.0)
+        } else {
+            let torque = Vector3::from(cmd.torque_cmd_body_nm).zip_map(
+                &setup.rcs_max_torque_nm,
+                |t, max| {
+                    if t.is_finite() {
+                        t.clamp(-max, max)
+                    } else {
+                        0.0
+                    }
+                },
+            );
+            let rcs_flow_kg_s =
+                torque.abs().component_div(&setup.rcs_moment_arm_m).sum() / setup.rcs_exhaust_m_s;
+            (torque, rcs_flow_kg_s * dt_s)
+        };
+        let mut rcs_force_body_n = None;
+        if cmd.use_thrusters || self.thrusters.active() {
+            if cmd.use_thrusters {
+                self.thrusters
+                    .command(&cmd.thruster_on_time_ns, cmd.cycle_start_ns);
+            }
+            let out = self.thrusters.step(self.time_ns, dt_ns);
+            rcs_torque_nm += out.torque_body_nm;
+            rcs_kg += out.propellant_kg;
+            rcs_force_body_n = Some(out.force_body_n);
+        }
         let propellant_left_kg = (self.state.mass_kg - main_ejected_kg - dry_mass_kg).max(0.0);
-        let mut rcs_kg = rcs_flow_kg_s * dt_s;
+        let mut rcs_scale = 1.0;
         if rcs_kg > propellant_left_kg {
             // Tanks run dry inside the step: deliver the torque the remainder can buy.
-            rcs_torque_nm *= if rcs_kg > 0.0 {
+            rcs_scale = if rcs_kg > 0.0 {
                 propellant_left_kg / rcs_kg
             } else {
                 0.0
             };
+            rcs_torque_nm *= rcs_scale;
             rcs_kg = propellant_left_kg;
         }
 
@@ -463,6 +488,11 @@ impl Plant {
         if setup.engine_dir_body.is_none() {
             // Aligned engines: the nominal arithmetic, bit for bit.
             force_body_n = Vector3::new(0.0, 0.0, thrust_n);
+        }
+        if let Some(f) = rcs_force_body_n {
+            // Thrusters are not pure couples one by one: their net force moves the
+            // vehicle too.
+            force_body_n += f * rcs_scale;
         }
         let mass_start_kg = self.state.mass_kg;
         // Cumulative accounting keeps the mass exactly "wet - ejected - rcs used", never
@@ -500,6 +530,11 @@ impl Plant {
                     / mass_end_kg
             }
         };
+        if rcs_force_body_n.is_some() {
+            // The thrusters' force at the step's end, as the engines' above.
+            self.specific_force_body_m_s2 +=
+                self.thrusters.force_now_body_n() * rcs_scale / mass_end_kg;
+        }
         self.rcs_used_kg = rcs_used_after_kg;
         let end_s = self.time_ns as f64 * 1e-9;
 
@@ -788,6 +823,12 @@ impl Plant {
     /// Attitude-thruster propellant used so far, kilograms.
     pub fn rcs_propellant_used_kg(&self) -> f64 {
         self.rcs_used_kg
+    }
+
+    /// The attitude thrusters at device level (their on-times, valves and thrust at
+    /// the end of the last step, for logs).
+    pub fn thrusters(&self) -> &ThrusterBank {
+        &self.thrusters
     }
 
     /// The propulsion model's last output.
