@@ -937,15 +937,15 @@ pub(crate) mod tests {
     }
 
     /// The record's byte layout, pinned: the CRC-32 of a record with a different value in
-    /// every field, as OILSLOG3 wrote it before the field table (#31). A field moved,
-    /// converted differently or dropped changes it.
+    /// every field, as OILSLOG5 writes it (protocol v2 packets, the devices' slots). A
+    /// field moved, converted differently or dropped changes it.
     #[test]
-    fn the_record_layout_is_the_oilslog3_one() {
+    fn the_record_layout_is_pinned() {
         let r = distinct_record();
         let mut bytes = [0u8; RECORD_SIZE];
         r.encode(&mut bytes);
-        assert_eq!(RECORD_SIZE, 920);
-        assert_eq!(crc32fast::hash(&bytes), 3_707_164_916, "layout changed");
+        assert_eq!(RECORD_SIZE, 1936);
+        assert_eq!(crc32fast::hash(&bytes), 2_547_223_391, "layout changed");
         assert_eq!(Record::decode(&bytes), Some(r));
     }
 

@@ -25,7 +25,7 @@ enum Node {
 /// An object's members, in table order.
 type Members = Vec<(&'static str, Node)>;
 
-/// The shapes of the five per-step messages, built once from the table.
+/// The shapes of the six per-step messages, built once from the table.
 fn shapes() -> &'static [(Topic, Members)] {
     static SHAPES: OnceLock<Vec<(Topic, Members)>> = OnceLock::new();
     SHAPES.get_or_init(|| {
@@ -91,6 +91,7 @@ pub fn schema_name(topic: Topic) -> &'static str {
         Topic::Truth => "oils.TrueState",
         Topic::Propulsion => "oils.Propulsion",
         Topic::Timing => "oils.StepTiming",
+        Topic::Devices => "oils.Devices",
     }
 }
 

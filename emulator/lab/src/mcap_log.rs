@@ -74,6 +74,8 @@ pub mod topic {
     pub const PROPULSION: &str = "/oils/propulsion";
     /// Per-step timing.
     pub const TIMING: &str = "/oils/timing";
+    /// The devices' samples and the thruster command.
+    pub const DEVICES: &str = "/oils/devices";
     /// Frame transforms.
     pub const TF: &str = "/tf";
     /// The lander's pose in the site frame.
@@ -83,16 +85,19 @@ pub mod topic {
     /// The 3D scene (once).
     pub const SCENE: &str = "/oils/scene";
     /// The channels with exactly one message per record.
-    pub const PER_STEP: [&str; 7] = [TELEMETRY, COMMAND, TRUTH, PROPULSION, TIMING, TF, POSE];
+    pub const PER_STEP: [&str; 8] = [
+        TELEMETRY, COMMAND, TRUTH, PROPULSION, TIMING, DEVICES, TF, POSE,
+    ];
 }
 
 /// The field table's topics and their channels, in channel-id order.
-const PER_STEP_TOPICS: [(Topic, &str); 5] = [
+const PER_STEP_TOPICS: [(Topic, &str); 6] = [
     (Topic::Telemetry, topic::TELEMETRY),
     (Topic::Command, topic::COMMAND),
     (Topic::Truth, topic::TRUTH),
     (Topic::Propulsion, topic::PROPULSION),
     (Topic::Timing, topic::TIMING),
+    (Topic::Devices, topic::DEVICES),
 ];
 
 /// MCAP log errors.
@@ -363,7 +368,7 @@ fn list(item: String) -> String {
     format!(r#"{{"type":"array","items":{item}}}"#)
 }
 
-/// `(topic, schema name, schema JSON)` of every channel, in channel-id order: the five
+/// `(topic, schema name, schema JSON)` of every channel, in channel-id order: the six
 /// per-step messages of the field table, then Foxglove's.
 fn channels() -> Vec<(&'static str, &'static str, String)> {
     let mut out: Vec<(&'static str, &'static str, String)> = PER_STEP_TOPICS
@@ -483,10 +488,10 @@ struct Encoder {
     written: u64,
 }
 
-const CH_TF: usize = 5;
-const CH_POSE: usize = 6;
-const CH_EVENTS: usize = 7;
-const CH_SCENE: usize = 8;
+const CH_TF: usize = 6;
+const CH_POSE: usize = 7;
+const CH_EVENTS: usize = 8;
+const CH_SCENE: usize = 9;
 
 impl Encoder {
     fn new<W: Write + Seek>(w: &mut Writer<W>, header_json: &str) -> mcap::McapResult<Self> {
