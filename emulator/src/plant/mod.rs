@@ -219,6 +219,8 @@ pub struct Plant {
     thrust_scale: [f64; ENGINE_COUNT],
     /// Injected model error, when configured.
     model_error: Option<model_error::ModelError>,
+    /// State and time at the start of the last step, for [`Plant::sensor_truth`].
+    step_start: (RigidBodyState, i64),
 }
 
 /// An engine fault acting on the command the engine gets.
@@ -312,6 +314,7 @@ impl Plant {
                 .model_error
                 .enabled
                 .then(|| model_error::ModelError::new(&cfg.model_error)),
+            step_start: (state, 0),
         })
     }
 
@@ -362,6 +365,7 @@ impl Plant {
         if let Some(td) = self.touchdown {
             return PlantStatus::Touchdown(td);
         }
+        self.step_start = (self.state, self.time_ns);
         let dt_s = dt_ns as f64 * 1e-9;
         let setup = self.setup;
         let dry_mass_kg = setup.dynamics.mass.dry_mass_kg;
@@ -749,6 +753,48 @@ impl Plant {
     /// state is the contact state (see [`TouchdownState::t_s`]) and time stops.
     pub fn time_ns(&self) -> i64 {
         self.time_ns
+    }
+
+    /// The ground the legs meet and the sensor beams are cast on.
+    pub fn ground(&self) -> &Ground {
+        &self.ground
+    }
+
+    /// What the sensor models need after a step ([`crate::sensors::SensorSuite`]): the
+    /// state at its start and end, and the mean specific force over it, from the
+    /// velocity change less gravity (trapezoidal over the step), so every force the step
+    /// integrated (engines, thrusters, legs) is sensed. Call after each [`Plant::step`];
+    /// after touchdown time stops and `dt_ns` is 0.
+    pub fn sensor_truth(&self) -> crate::sensors::SensorTruth<'_> {
+        let (s0, t0_ns) = &self.step_start;
+        let s1 = &self.state;
+        let dt_ns = self.time_ns - t0_ns;
+        let mu = self.setup.dynamics.mu_m3_s2;
+        // The plant's gravity model (rigid_body::Dynamics): a central field.
+        let g = |r: &Vector3<f64>| -r * (mu / (r.norm() * r.norm() * r.norm()));
+        let q0 = s0.q_mci_from_body;
+        let q1 = s1.q_mci_from_body;
+        let f_mci = if dt_ns > 0 {
+            (s1.vel_mci_m_s - s0.vel_mci_m_s) / (dt_ns as f64 * 1e-9)
+                - (g(&s0.pos_mci_m) + g(&s1.pos_mci_m)) * 0.5
+        } else {
+            -g(&s1.pos_mci_m)
+        };
+        let q_mid = q0
+            * nalgebra::UnitQuaternion::from_scaled_axis((q0.inverse() * q1).scaled_axis() * 0.5);
+        let to_arr = |q: &nalgebra::UnitQuaternion<f64>| [q.w, q.i, q.j, q.k];
+        crate::sensors::SensorTruth {
+            t_ns: self.time_ns,
+            dt_ns: dt_ns.max(0) as u64,
+            pos_mci_m: s1.pos_mci_m.into(),
+            vel_mci_m_s: s1.vel_mci_m_s.into(),
+            q_start_mci_from_body: to_arr(&q0),
+            q_mci_from_body: to_arr(&q1),
+            rate_body_rad_s: s1.rate_body_rad_s.into(),
+            specific_force_body_m_s2: (q_mid.inverse() * f_mci).into(),
+            moon_rotation_rate_rad_s: self.setup.rotation.rate_rad_s,
+            ground: &self.ground,
+        }
     }
 
     /// The true rigid-body state.
