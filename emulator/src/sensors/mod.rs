@@ -95,6 +95,11 @@ impl SensorTruth<'_> {
     }
 }
 
+/// A `[w, x, y, z]` quaternion as a unit quaternion (normalised).
+pub fn quat_of(q: &[f64; 4]) -> UnitQuaternion<f64> {
+    quat(q)
+}
+
 pub(crate) fn quat(q: &[f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
 }
