@@ -45,7 +45,12 @@ pub struct ConfigError {
     pub why: &'static str,
 }
 
-fn check(ok: bool, field: &'static str, value: f64, why: &'static str) -> Result<(), ConfigError> {
+pub(crate) fn check(
+    ok: bool,
+    field: &'static str,
+    value: f64,
+    why: &'static str,
+) -> Result<(), ConfigError> {
     if ok && value.is_finite() {
         Ok(())
     } else {
@@ -58,7 +63,7 @@ fn check(ok: bool, field: &'static str, value: f64, why: &'static str) -> Result
 }
 
 /// `value` finite and in `[lo, hi]`; `why` states the bound (with its unit).
-fn within(
+pub(crate) fn within(
     field: &'static str,
     value: f64,
     lo: f64,
@@ -874,6 +879,9 @@ pub struct ScenarioConfig {
     /// Injected propulsion model error (the seed paper's Monte Carlo use of the
     /// surrogate's validated error); off by default.
     pub model_error: ModelErrorConfig,
+    /// The devices on board: IMU, star tracker, altimeters, velocimeter
+    /// (`docs/sensors.md`).
+    pub sensors: crate::sensors::SensorsConfig,
 }
 
 /// A seeded per-engine thrust error added to what the propulsion model delivers: how a
@@ -978,6 +986,7 @@ impl ScenarioConfig {
         self.model_error.validate()?;
         self.nav_noise.validate()?;
         self.touchdown.validate()?;
+        self.sensors.validate()?;
         Ok(())
     }
 

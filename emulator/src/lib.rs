@@ -7,7 +7,8 @@
 //! behind one trait, the learned surrogate's runtime among them), [`sanitize`] (the
 //! link's guard), [`link`] (the exchange: iceoryx2, in-process, replay), [`clock`]
 //! (lockstep, realtime, replay pacing), [`faults`], [`schedule`] (rate groups on one
-//! base tick), [`scheduler`] (the one step loop),
+//! base tick), [`scheduler`] (the one step loop), [`sensors`] (device models: IMU, star
+//! tracker, altimeters, velocimeter),
 //! [`timing`], [`digest`], [`recorder`], [`report`], [`session`] (one run, with the
 //! flight software handed in as a value), and [`exact_json`] (what the bench writes,
 //! read back bit for bit), [`fixed_len`] (arrays read at exactly their length), and
@@ -34,6 +35,7 @@ pub mod run_config;
 pub mod sanitize;
 pub mod schedule;
 pub mod scheduler;
+pub mod sensors;
 pub mod session;
 pub mod timing;
 pub mod world;

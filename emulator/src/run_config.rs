@@ -443,6 +443,18 @@ impl RunConfig {
                 }
             }
         }
+        if self.telemetry.sensors() {
+            self.scenario
+                .sensors
+                .check_rates(self.dt_ns(), self.fsw_period_ns())
+                .map_err(|e| {
+                    invalid(
+                        "telemetry",
+                        format!("{} ({e})", self.telemetry.as_str()),
+                        "the devices' periods must fit the plant step (--dt-ms 5 or 1 for the IMU's 200 Hz) and the flight-software cycle",
+                    )
+                })?;
+        }
         if self.fsw == FswSpec::Gnc && self.telemetry == TelemetrySource::Sensors {
             return Err(invalid(
                 "telemetry",

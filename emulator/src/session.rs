@@ -128,6 +128,12 @@ pub fn build_plant(cfg: &RunConfig) -> Result<Plant, SessionError> {
     let propulsion = propulsion::build(&cfg.propulsion_spec())?;
     let mut plant = Plant::new(&cfg.scenario, propulsion, cfg.seed)?;
     plant.set_ideal_nav(cfg.telemetry.ideal_nav());
+    if cfg.telemetry.sensors() {
+        plant.attach_sensors(crate::sensors::SensorSuite::new(
+            &cfg.scenario.sensors,
+            cfg.seed,
+        )?);
+    }
     Ok(plant)
 }
 

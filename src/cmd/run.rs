@@ -297,6 +297,22 @@ pub fn run(args: &RunArgs) -> Result<()> {
         println!("# plant_period_ns = {}", cfg.dt_ns());
         println!("# propulsion_period_ns = {propulsion_ns}");
         println!("# fsw_period_ns = {}", cfg.fsw_period_ns());
+        println!(
+            "\n# Telemetry: {} (ideal navigation {}, devices {})",
+            cfg.telemetry.as_str(),
+            if cfg.telemetry.ideal_nav() {
+                "on"
+            } else {
+                "off"
+            },
+            if cfg.telemetry.sensors() { "on" } else { "off" }
+        );
+        if cfg.telemetry.sensors() {
+            println!("# The sensor set and rates ([scenario.sensors]):");
+            for line in cfg.scenario.sensors.summary().lines() {
+                println!("# {line}");
+            }
+        }
         return Ok(());
     }
     if args.plots.is_some() && !cfg.log.enabled {

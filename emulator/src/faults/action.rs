@@ -5,6 +5,7 @@
 use super::spec::{FaultKind, FaultSpec};
 use super::PlantFault;
 use crate::propulsion::PropulsionFault;
+use crate::sensors::{DeviceFault, SensorTarget};
 use oils_shared::Telemetry;
 
 /// A telemetry field a sensor fault acts on, resolved from its name before tick 0.
@@ -142,6 +143,8 @@ pub enum FaultAction {
     Sensor(SensorAction, TlmField),
     /// On the link.
     Link(LinkAction),
+    /// Inside a device of the sensor suite ([`crate::sensors::SensorSuite::set_fault`]).
+    Device(SensorTarget, DeviceFault),
 }
 
 impl FaultAction {
@@ -151,6 +154,23 @@ impl FaultAction {
         let p = |key: &str| spec.params.get(key).copied();
         let e = spec.engine();
         let field = || spec.target.as_deref().and_then(TlmField::from_name);
+        if let Some(device) = spec.device_target() {
+            let fault = match spec.kind {
+                FaultKind::SensorBias => DeviceFault::Bias { value: p("value")? },
+                FaultKind::SensorNoise => DeviceFault::Noise {
+                    factor: p("factor")?,
+                },
+                FaultKind::SensorDropout => DeviceFault::Dropout,
+                FaultKind::SensorFrozen => DeviceFault::Frozen,
+                FaultKind::SensorSpike => DeviceFault::Spike { value: p("value")? },
+                FaultKind::SensorInhibit => DeviceFault::Inhibited,
+                _ => return None,
+            };
+            if spec.validate().is_err() {
+                return None;
+            }
+            return Some(FaultAction::Device(device, fault));
+        }
         Some(match spec.kind {
             FaultKind::EngineOff => FaultAction::Plant(PlantFault::EngineOff(e)),
             FaultKind::EngineStuck => FaultAction::Plant(PlantFault::EngineStuck(e)),
@@ -201,6 +221,8 @@ impl FaultAction {
             }
             FaultKind::SensorDropout => FaultAction::Sensor(SensorAction::Dropout, field()?),
             FaultKind::SensorFrozen => FaultAction::Sensor(SensorAction::Frozen, field()?),
+            // Device-only kinds (handled above).
+            FaultKind::SensorSpike | FaultKind::SensorInhibit => return None,
             FaultKind::CommandDrop => FaultAction::Link(LinkAction::CommandDrop),
             FaultKind::CommandDelay => FaultAction::Link(LinkAction::CommandDelay {
                 steps: p("steps")? as usize,

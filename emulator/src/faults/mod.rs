@@ -181,6 +181,7 @@ impl FaultPlan {
                 FaultAction::Plant(_) => {}
                 FaultAction::Sensor(a, field) => plan.sensors.add(i, a, field, rng),
                 FaultAction::Link(a) => plan.link.add(i, a, rng),
+                FaultAction::Device(..) => {}
             }
             plan.actions.push(action);
             plan.specs.push(spec.clone());
@@ -238,6 +239,38 @@ impl FaultPlan {
         match self.actions.get(i)? {
             FaultAction::Plant(f) => Some(*f),
             _ => None,
+        }
+    }
+
+    /// The device-side effect of fault `i`, if it acts inside a sensor device.
+    pub fn device_fault(
+        &self,
+        i: usize,
+    ) -> Option<(crate::sensors::SensorTarget, crate::sensors::DeviceFault)> {
+        match self.actions.get(i)? {
+            FaultAction::Device(target, fault) => Some((*target, *fault)),
+            _ => None,
+        }
+    }
+
+    /// Hands the device faults that fired and cleared this step (the masks
+    /// [`Self::advance`] returned) to the sensor suite. No allocation.
+    pub fn apply_device_faults(
+        &self,
+        fired: u64,
+        cleared: u64,
+        suite: &mut crate::sensors::SensorSuite,
+    ) {
+        for (i, action) in self.actions.iter().enumerate() {
+            if let FaultAction::Device(target, fault) = *action {
+                let bit = 1u64 << i;
+                if fired & bit != 0 {
+                    suite.set_fault(target, fault, true);
+                }
+                if cleared & bit != 0 {
+                    suite.set_fault(target, fault, false);
+                }
+            }
         }
     }
 

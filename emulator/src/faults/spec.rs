@@ -7,12 +7,15 @@
 //! thrust-degraded:1,factor=0.7@alt=5000   engine 1 at 70 % once below 5 km
 //! sensor-bias:altitude_m,value=50@t=500,for=30
 //! command-drop@random,p=0.2,window=100..800,for=2
+//! sensor-inhibit:laser-altimeter@t=0      a device (docs/sensors.md) rather than a field
+//! sensor-spike:laser-altimeter,value=-300@alt=2000
 //! ```
 //! Engines are numbered 1-4, as in the CSV export. Triggers: `t=S` (simulated time),
 //! `alt=M` (true altitude below M metres), `step=K`, or `random,p=P,window=A..B` (fires
 //! with probability P at a time drawn uniformly in [A, B] s, from the run's seed and the
 //! fault's position in the list only).
 
+use crate::sensors::SensorTarget;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt;
@@ -50,6 +53,11 @@ pub enum FaultKind {
     SensorDropout,
     /// A telemetry field frozen at its value when the fault fired.
     SensorFrozen,
+    /// A device's first sample after the fault fires carries an outlier (target: a
+    /// device; `value`).
+    SensorSpike,
+    /// A device inhibited: its samples arrive invalid, flagged (target: a device).
+    SensorInhibit,
     /// Commands lost on the link: the last applied command holds.
     CommandDrop,
     /// Commands arrive `steps` steps late.
@@ -132,6 +140,18 @@ const KINDS: &[(FaultKind, &str, &[&str], Target)] = &[
         Target::Field,
     ),
     (FaultKind::SensorFrozen, "sensor-frozen", &[], Target::Field),
+    (
+        FaultKind::SensorSpike,
+        "sensor-spike",
+        &["value"],
+        Target::Field,
+    ),
+    (
+        FaultKind::SensorInhibit,
+        "sensor-inhibit",
+        &[],
+        Target::Field,
+    ),
     (FaultKind::CommandDrop, "command-drop", &[], Target::None),
     (
         FaultKind::CommandDelay,
@@ -230,6 +250,24 @@ pub const SENSOR_FIELDS: &[&str] = &[
     "chamber_pressure3_pa",
     "chamber_pressure4_pa",
 ];
+
+/// The parameters a sensor kind takes on a device target (they differ from the
+/// telemetry-field form: noise is a scale of the device's own noise, `factor`), or why
+/// the pair makes no sense.
+fn device_params(
+    kind: FaultKind,
+    target: SensorTarget,
+) -> Result<&'static [&'static str], &'static str> {
+    let two_halves = target == SensorTarget::Imu;
+    match kind {
+        FaultKind::SensorBias | FaultKind::SensorSpike if two_halves => {
+            Err("the IMU's bias and spike act on one half: target imu-gyro (rad/s) or imu-accel (m/s^2)")
+        }
+        FaultKind::SensorBias | FaultKind::SensorSpike => Ok(&["value"]),
+        FaultKind::SensorNoise => Ok(&["factor"]),
+        _ => Ok(&[]),
+    }
+}
 
 /// When a fault fires.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -377,8 +415,17 @@ pub struct FaultSpec {
 impl FaultSpec {
     /// Checks the kind's target and parameters (not yet against a propulsion model).
     pub fn validate(&self) -> Result<(), String> {
-        let (_, name, params, target) = *self.kind.entry();
+        let (_, name, mut params, target) = *self.kind.entry();
         let ctx = |m: String| format!("fault `{self}`: {m}");
+        let device = self.device_target();
+        if let Some(d) = device {
+            params = device_params(self.kind, d).map_err(|m| ctx(m.into()))?;
+        } else if matches!(self.kind, FaultKind::SensorSpike | FaultKind::SensorInhibit) {
+            return Err(ctx(format!(
+                "{name} acts on a device: target one of {}",
+                SensorTarget::NAMES.join(", ")
+            )));
+        }
         match (target, &self.target) {
             (Target::None, Some(t)) => {
                 return Err(ctx(format!("{name} takes no target, got `{t}`")))
@@ -396,9 +443,10 @@ impl FaultSpec {
                 }
             }
             (Target::Field, Some(t)) => {
-                if !SENSOR_FIELDS.contains(&t.as_str()) {
+                if device.is_none() && !SENSOR_FIELDS.contains(&t.as_str()) {
                     return Err(ctx(format!(
-                        "telemetry field `{t}`: one of {}",
+                        "target `{t}`: a device ({}) or a telemetry field ({})",
+                        SensorTarget::NAMES.join(", "),
                         SENSOR_FIELDS.join(", ")
                     )));
                 }
@@ -424,6 +472,7 @@ impl FaultSpec {
             let ok = v.is_finite()
                 && match *key {
                     "factor" if self.kind == FaultKind::ThrustDegraded => (0.0..1.0).contains(&v),
+                    "factor" if self.kind == FaultKind::SensorNoise => v > 0.0 && v <= 1e6,
                     "factor" => v > 0.0 && v < 1.0,
                     "area_mm2" => v > 0.0 && v <= 100.0,
                     "kg_s" => v > 0.0 && v <= 10.0,
@@ -473,6 +522,24 @@ impl FaultSpec {
             ))),
             _ => Ok(()),
         }
+    }
+
+    /// The device a sensor fault targets, if its target names one (not a telemetry
+    /// field).
+    pub fn device_target(&self) -> Option<SensorTarget> {
+        let sensor_kind = matches!(
+            self.kind,
+            FaultKind::SensorBias
+                | FaultKind::SensorNoise
+                | FaultKind::SensorDropout
+                | FaultKind::SensorFrozen
+                | FaultKind::SensorSpike
+                | FaultKind::SensorInhibit
+        );
+        if !sensor_kind {
+            return None;
+        }
+        self.target.as_deref().and_then(SensorTarget::from_name)
     }
 
     /// A parameter (present after `validate`).

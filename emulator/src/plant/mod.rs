@@ -36,7 +36,7 @@ use nalgebra::Vector3;
 use nav_noise::NavNoise;
 use oils_shared::{
     EngineReading, NavState, PacketHeader, PropulsionReadings, Telemetry, ENGINE_COUNT,
-    TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_IDEAL_NAV, TLM_FLAG_NAV_NOISE,
+    TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_IDEAL_NAV, TLM_FLAG_NAV_NOISE, TLM_FLAG_SENSORS,
 };
 use rigid_body::{Dynamics, HeldLoads, MassModel, StateVector};
 use thrusters::ThrusterBank;
@@ -226,6 +226,11 @@ pub struct Plant {
     model_error: Option<model_error::ModelError>,
     /// The attitude thrusters at device level (used when the command asks for them).
     thrusters: ThrusterBank,
+    /// State and time at the start of the last step, for [`Plant::sensor_truth`].
+    step_start: (RigidBodyState, i64),
+    /// The sensors on board, when the telemetry carries them: fed the truth after every
+    /// step, drained into each telemetry's sensor frame.
+    sensors: Option<Box<crate::sensors::SensorSuite>>,
 }
 
 /// An engine fault acting on the command the engine gets.
@@ -321,6 +326,8 @@ impl Plant {
                 .enabled
                 .then(|| model_error::ModelError::new(&cfg.model_error)),
             thrusters: ThrusterBank::from_config(lander),
+            step_start: (state, 0),
+            sensors: None,
         })
     }
 
@@ -365,6 +372,10 @@ impl Plant {
         if self.pads_in_contact > 0 {
             tlm.header.flags |= TLM_FLAG_FOOTPAD_CONTACT;
         }
+        if let Some(sensors) = self.sensors.as_mut() {
+            sensors.fill_frame(header.t_ns, &mut tlm.sensors);
+            tlm.header.flags |= TLM_FLAG_SENSORS;
+        }
         if !self.ideal_nav {
             tlm.nav = NavState::default();
             tlm.accel_body_m_s2 = [0.0; 3];
@@ -379,13 +390,42 @@ impl Plant {
         tlm
     }
 
-    /// Advances one bench step of `dt_ns` with `cmd` held. Once the landing is over the
-    /// state is frozen and every further call returns the same touchdown. No
-    /// allocation, I/O or clock.
+    /// Puts the sensors on board: from now on every step feeds them the truth and every
+    /// telemetry carries their samples (`TLM_FLAG_SENSORS`).
+    pub fn attach_sensors(&mut self, suite: crate::sensors::SensorSuite) {
+        self.sensors = Some(Box::new(suite));
+    }
+
+    /// The sensors on board, if attached (for their faults and their report).
+    pub fn sensors_mut(&mut self) -> Option<&mut crate::sensors::SensorSuite> {
+        self.sensors.as_deref_mut()
+    }
+
+    /// The sensors on board, if attached.
+    pub fn sensors(&self) -> Option<&crate::sensors::SensorSuite> {
+        self.sensors.as_deref()
+    }
+
+    /// Advances one bench step of `dt_ns` with `cmd` held, then feeds the sensors (if
+    /// on board) the step's truth. Once the landing is over the state is frozen and every
+    /// further call returns the same touchdown. No allocation, I/O or clock.
     pub fn step(&mut self, cmd: &ActuatorCommand, dt_ns: u64) -> PlantStatus {
         if let Some(td) = self.touchdown {
             return PlantStatus::Touchdown(td);
         }
+        let status = self.integrate_step(cmd, dt_ns);
+        // Taken out for the call: the truth borrows the plant (a pointer move, no copy
+        // of the suite, no allocation).
+        if let Some(mut sensors) = self.sensors.take() {
+            sensors.after_plant_step(&self.sensor_truth());
+            self.sensors = Some(sensors);
+        }
+        status
+    }
+
+    /// One step of the physics (see [`Plant::step`]).
+    fn integrate_step(&mut self, cmd: &ActuatorCommand, dt_ns: u64) -> PlantStatus {
+        self.step_start = (self.state, self.time_ns);
         let dt_s = dt_ns as f64 * 1e-9;
         let setup = self.setup;
         let dry_mass_kg = setup.dynamics.mass.dry_mass_kg;
@@ -802,6 +842,48 @@ impl Plant {
     /// state is the contact state (see [`TouchdownState::t_s`]) and time stops.
     pub fn time_ns(&self) -> i64 {
         self.time_ns
+    }
+
+    /// The ground the legs meet and the sensor beams are cast on.
+    pub fn ground(&self) -> &Ground {
+        &self.ground
+    }
+
+    /// What the sensor models need after a step ([`crate::sensors::SensorSuite`]): the
+    /// state at its start and end, and the mean specific force over it, from the
+    /// velocity change less gravity (trapezoidal over the step), so every force the step
+    /// integrated (engines, thrusters, legs) is sensed. Call after each [`Plant::step`];
+    /// after touchdown time stops and `dt_ns` is 0.
+    pub fn sensor_truth(&self) -> crate::sensors::SensorTruth<'_> {
+        let (s0, t0_ns) = &self.step_start;
+        let s1 = &self.state;
+        let dt_ns = self.time_ns - t0_ns;
+        let mu = self.setup.dynamics.mu_m3_s2;
+        // The plant's gravity model (rigid_body::Dynamics): a central field.
+        let g = |r: &Vector3<f64>| -r * (mu / (r.norm() * r.norm() * r.norm()));
+        let q0 = s0.q_mci_from_body;
+        let q1 = s1.q_mci_from_body;
+        let f_mci = if dt_ns > 0 {
+            (s1.vel_mci_m_s - s0.vel_mci_m_s) / (dt_ns as f64 * 1e-9)
+                - (g(&s0.pos_mci_m) + g(&s1.pos_mci_m)) * 0.5
+        } else {
+            -g(&s1.pos_mci_m)
+        };
+        let q_mid = q0
+            * nalgebra::UnitQuaternion::from_scaled_axis((q0.inverse() * q1).scaled_axis() * 0.5);
+        let to_arr = |q: &nalgebra::UnitQuaternion<f64>| [q.w, q.i, q.j, q.k];
+        crate::sensors::SensorTruth {
+            t_ns: self.time_ns,
+            dt_ns: dt_ns.max(0) as u64,
+            pos_mci_m: s1.pos_mci_m.into(),
+            vel_mci_m_s: s1.vel_mci_m_s.into(),
+            q_start_mci_from_body: to_arr(&q0),
+            q_mci_from_body: to_arr(&q1),
+            rate_body_rad_s: s1.rate_body_rad_s.into(),
+            specific_force_body_m_s2: (q_mid.inverse() * f_mci).into(),
+            moon_rotation_rate_rad_s: self.setup.rotation.rate_rad_s,
+            ground: &self.ground,
+        }
     }
 
     /// The true rigid-body state.

@@ -1,0 +1,200 @@
+//! Protocol v2's devices through a whole run:
+//! * `regress_*`: a descent with the devices on (`--telemetry both`) has the frozen digest
+//!   of `tests/data/frozen-digests.toml` and the same digest across two processes over
+//!   real iceoryx2 as in process;
+//! * the flight software sees device samples, not the ideal navigation, with
+//!   `--telemetry sensors`, and the CSV export carries them beside the truth;
+//! * a configuration whose devices do not fit the schedule, or a reference GNC asked to
+//!   fly without its navigation source, is refused before tick 0 with the reason.
+
+mod common;
+use common::*;
+use oils_emulator::propulsion::PropulsionKind;
+use oils_emulator::run_config::{LinkKind, RunConfig, TelemetrySource};
+use oils_emulator::session;
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+fn frozen_digest(key: &str) -> String {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/frozen-digests.toml"),
+    )
+    .unwrap();
+    let table: toml::Table = toml::from_str(&text).unwrap();
+    table[key].as_str().unwrap().to_string()
+}
+
+/// The default descent with the devices on beside the ideal navigation, ideal propulsion.
+fn sensors_config() -> RunConfig {
+    let mut cfg = RunConfig {
+        link: LinkKind::Inproc,
+        propulsion: PropulsionKind::Ideal,
+        telemetry: TelemetrySource::Both,
+        dt_ms: 5,
+        ..Default::default()
+    };
+    cfg.log.enabled = false;
+    cfg
+}
+
+#[test]
+fn regress_and_contract_with_sensors_on() {
+    let cfg = sensors_config();
+    let stop = AtomicBool::new(false);
+    let run =
+        oils_lab::onboard::fly_in_process(&cfg, session::fresh_run_id(), &stop, Default::default())
+            .expect("in-process run");
+    assert_eq!(format!("{:?}", run.summary.outcome), "Landed");
+    let inproc = run.summary.digest;
+    assert_eq!(
+        inproc,
+        frozen_digest("ideal_sensors"),
+        "the descent with the devices on moved"
+    );
+
+    let dir = scratch("sensors-contract");
+    let file = dir.join("run.toml");
+    std::fs::write(&file, cfg.to_toml()).unwrap();
+    let rep = dir.join("report.json");
+    let out = run_oils(&[
+        "run",
+        "--config",
+        file.to_str().unwrap(),
+        "--link",
+        "iceoryx2",
+        "--report",
+        rep.to_str().unwrap(),
+        "--no-log",
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let r = report(&rep);
+    assert_eq!(r["digest"].as_str().unwrap(), inproc);
+    assert_eq!(r["config"]["telemetry"], "both");
+}
+
+/// Column index of `name` in a CSV header line.
+fn col(header: &[&str], name: &str) -> usize {
+    header
+        .iter()
+        .position(|c| *c == name)
+        .unwrap_or_else(|| panic!("no column {name}"))
+}
+
+#[test]
+fn sensor_telemetry_carries_device_samples_and_no_ideal_navigation() {
+    let dir = scratch("sensors-only");
+    let log = dir.join("run.oilslog");
+    let csv = dir.join("run.csv");
+    let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("emulator/data/descent-profile.csv");
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--fsw",
+        "playback",
+        "--profile",
+        profile.to_str().unwrap(),
+        "--propulsion",
+        "ideal",
+        "--telemetry",
+        "sensors",
+        "--duration",
+        "3",
+        "--log",
+        log.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let out = run_oils(&[
+        "export",
+        log.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let body = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = body.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    for prefix in [
+        "imu_",
+        "star_tracker_",
+        "laser_altimeter_",
+        "rf_altimeter_",
+        "velocimeter_",
+        "thruster_",
+    ] {
+        assert!(
+            header.iter().any(|c| c.starts_with(prefix)),
+            "no {prefix} column"
+        );
+    }
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    // 3 s at 10 ms cycles, plus the end record.
+    assert!(rows.len() >= 300, "{} rows", rows.len());
+    let flags = col(&header, "telemetry.header.flags");
+    let imu_count = col(&header, "imu_count");
+    let imu_valid = col(&header, "imu_valid[0]");
+    let imu_t = [col(&header, "imu_t_ns[0]"), col(&header, "imu_t_ns[1]")];
+    let dvz = col(&header, "imu_delta_v_z_body_m_s[0]");
+    let alt_count = col(&header, "laser_altimeter_count");
+    let pos = col(&header, "telemetry.nav.pos_mci_m[0]");
+    let mut laser_samples = 0;
+    // From the third cycle on (the first delivers what 1 ms of latency let through).
+    for row in &rows[2..rows.len() - 1] {
+        let f: u32 = row[flags].parse().unwrap();
+        assert_eq!(
+            f & oils_shared::TLM_FLAG_SENSORS,
+            oils_shared::TLM_FLAG_SENSORS
+        );
+        assert_eq!(f & oils_shared::TLM_FLAG_IDEAL_NAV, 0);
+        assert_eq!(
+            row[pos].parse::<f64>().unwrap(),
+            0.0,
+            "ideal navigation off"
+        );
+        // 200 Hz in 10 ms cycles: two IMU samples a cycle, 5 ms apart, both good.
+        assert_eq!(row[imu_count], "2");
+        assert_eq!(row[imu_valid], "1");
+        let t0: i64 = row[imu_t[0]].parse().unwrap();
+        let t1: i64 = row[imu_t[1]].parse().unwrap();
+        assert_eq!(t1 - t0, 5_000_000);
+        // Coasting at first, then braking: the body +Z increment is never negative
+        // beyond the noise, and finite.
+        assert!(row[dvz].parse::<f64>().unwrap().is_finite());
+        laser_samples += row[alt_count].parse::<u32>().unwrap();
+    }
+    // 10 Hz laser altimeter over about 3 s (its range limit may keep it unlocked at
+    // 30 km: the samples come, valid or not).
+    assert!(
+        laser_samples >= 28,
+        "{laser_samples} laser altimeter samples"
+    );
+}
+
+#[test]
+fn devices_that_do_not_fit_the_schedule_are_refused_naming_them() {
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--telemetry",
+        "both",
+        "--dt-ms",
+        "10",
+        "--no-log",
+    ]);
+    assert!(!out.status.success());
+    let e = text(&out);
+    assert!(e.contains("imu") && e.contains("plant step"), "{e}");
+
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--telemetry",
+        "sensors",
+        "--no-log",
+    ]);
+    assert!(!out.status.success());
+    let e = text(&out);
+    assert!(e.contains("reference GNC") && e.contains("both"), "{e}");
+}
