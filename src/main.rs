@@ -193,8 +193,9 @@ fn export(a: &ExportArgs) -> anyhow::Result<()> {
         );
     }
     if let Some(path) = &a.layout {
-        let header: serde_json::Value =
-            serde_json::from_str(&log.header_json).context("log header is not JSON")?;
+        // Every number as written (serde_json's own parser may read a float one ulp off).
+        let header = oils_emulator::exact_json::value_from_str(&log.header_json)
+            .context("log header is not JSON")?;
         let (layout, whose) = match header.get("layout") {
             Some(l) => (l.clone(), "the log's header"),
             None => {
