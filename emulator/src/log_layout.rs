@@ -30,7 +30,7 @@
 
 use crate::log_fields::{self, Access, Field, Kind, Site, Topic, Value, FIELDS};
 use crate::recorder::{
-    self, Record, MAGIC, RECORD_SIZE, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN,
+    self, MAGIC, RECORD_SIZE, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_END_OF_RUN,
     REC_REJECTED_VALUES, TRAILER_SIZE,
 };
 use serde_json::{json, Value as Json};
@@ -117,9 +117,11 @@ fn probe_packets() -> Vec<Vec<usize>> {
         })
         .flatten()
         .collect();
-    let zero = Record::default();
-    let base: Vec<Value> = getters.iter().map(|(g, i)| g(&zero, *i)).collect();
     let mut owners = vec![Vec::new(); getters.len()];
+    let Some(zero) = recorder::decode_unchecked(&mut [0u8; RECORD_SIZE]) else {
+        return owners;
+    };
+    let base: Vec<Value> = getters.iter().map(|(g, i)| g(&zero, *i)).collect();
     // Bytes 4..8 are the record's CRC.
     for at in (0..4).chain(8..recorder::VALUES_START) {
         let mut bytes = [0u8; RECORD_SIZE];

@@ -56,6 +56,14 @@ def site_columns(layout):
     return {c["name"] for c in layout["columns"] if c.get("derive", {}).get("op") == "site"}
 
 
+class DataExtraInstalled(unittest.TestCase):
+    @unittest.skipUnless(os.environ.get("OILS_FSW_EXPECT_INSTALLED"), "run by tools/python-e2e.sh")
+    def test_the_data_tests_run(self):
+        # tools/python-e2e.sh installs ./python[data]: the tests below must not skip there.
+        self.assertEqual(NO_DATA, "")
+        self.assertTrue(OILS)
+
+
 @unittest.skipIf(NO_DATA or not OILS, NO_DATA or NEEDS)
 class LogsEqualTheCsvExport(unittest.TestCase):
     @classmethod
