@@ -55,7 +55,7 @@ struct ExportArgs {
     /// The log file (`.oilslog`, or `.mcap` from `oils run --log-format mcap`).
     log: PathBuf,
     /// Write every step as CSV here.
-    #[arg(long, required_unless_present_any = ["profile", "mcap"])]
+    #[arg(long, required_unless_present_any = ["profile", "mcap", "layout"])]
     csv: Option<PathBuf>,
     /// Write the run as MCAP here (opens in Foxglove; docs/foxglove-layout.json).
     #[arg(long, value_name = "OUT.mcap")]
@@ -64,6 +64,12 @@ struct ExportArgs {
     /// `oils run --fsw playback`, `oils hifi`, `oils validate`).
     #[arg(long)]
     profile: Option<PathBuf>,
+    /// Write the layout of the log's records (CSV column names, byte offsets, dtypes,
+    /// derived columns) as JSON here: the one in the log's header, or, for a log from
+    /// before headers carried it, this build's (the Python package's `read_log(path,
+    /// layout=OUT.json)` reads such a log with it).
+    #[arg(long, value_name = "OUT.json")]
+    layout: Option<PathBuf>,
     /// With --profile: keep one step in N (rows hold until the next).
     #[arg(long, default_value_t = 1)]
     every: usize,
@@ -184,6 +190,31 @@ fn export(a: &ExportArgs) -> anyhow::Result<()> {
             path.display(),
             stats.bytes as f64 / 1e6,
             started.elapsed().as_secs_f64()
+        );
+    }
+    if let Some(path) = &a.layout {
+        // Every number as written (serde_json's own parser may read a float one ulp off).
+        let header = oils_emulator::exact_json::value_from_str(&log.header_json)
+            .context("log header is not JSON")?;
+        let (layout, whose) = match header.get("layout") {
+            Some(l) => (l.clone(), "the log's header"),
+            None => {
+                let site = oils_emulator::log_fields::Site::of_log_header(&log.header_json);
+                (
+                    oils_emulator::log_layout::layout(&site)?,
+                    "this build (the log's header has none)",
+                )
+            }
+        };
+        if let Some(e) = layout.get("error") {
+            bail!("the log's header holds no usable layout: {e}");
+        }
+        let mut text = serde_json::to_string_pretty(&layout)?;
+        text.push('\n');
+        std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))?;
+        eprintln!(
+            "oils export: record layout from {whose} to {}",
+            path.display()
         );
     }
     if let Some(path) = &a.profile {

@@ -1,9 +1,11 @@
 #!/usr/bin/env bash
 # Python flight software, end to end, against the *installed* package: a virtual
-# environment, `pip install ./python` (which brings iceoryx2 pinned to the crate's
-# version), the ctypes mirrors and the domain rules checked against the Rust side, and the
-# example flight software flying the terminal-descent scenario against the real `oils`
-# binary. Nothing is written into the checkout: no __pycache__, no build files, no logs.
+# environment, `pip install './python[data]'` (which brings iceoryx2 pinned to the crate's
+# version, and numpy, pandas and mcap for the data readers), the ctypes mirrors and the
+# domain rules checked against the Rust side, the example flight software flying the
+# terminal-descent scenario against the real `oils` binary, and `oils_fsw.read_log` on a
+# binary and an MCAP log equal to `oils export --csv` of the same log (tests/test_data.py).
+# Nothing is written into the checkout: no __pycache__, no build files, no logs.
 #   tools/python-e2e.sh      (venv in target/python-venv; OILS_VENV=DIR to choose)
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -19,7 +21,7 @@ fi
 venv=$(cd "$venv" && pwd)
 # The package as a user installs it (flit builds the wheel out of tree); reinstalled
 # every time, so the tests see this checkout's code.
-"$venv/bin/python" -m pip install --quiet --disable-pip-version-check ./python
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check './python[data]'
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps ./python
 [ "$("$venv/bin/python" -m pip show iceoryx2 | sed -n 's/^Version: //p')" = "$ICEORYX2_VERSION" ]
 

@@ -27,6 +27,7 @@ pub mod faults;
 pub mod fixed_len;
 pub mod link;
 pub mod log_fields;
+pub mod log_layout;
 pub mod plant;
 pub mod propulsion;
 pub mod recorder;

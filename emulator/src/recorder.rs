@@ -62,6 +62,8 @@ const TLM_SIZE: usize = core::mem::size_of::<Telemetry>();
 const CMD_SIZE: usize = core::mem::size_of::<Command>();
 /// Bytes per record.
 pub const RECORD_SIZE: usize = 8 + TLM_SIZE + CMD_SIZE + 8 * TRUTH_VALUES;
+/// Offset in a record of its first f64 value (after the flags, CRC and packets).
+pub const VALUES_START: usize = 8 + TLM_SIZE + CMD_SIZE;
 /// Record flag: the command field holds a command received from the flight software.
 pub const REC_COMMAND_RECEIVED: u32 = 1 << 0;
 /// Record flag: the command missed its deadline; the miss policy was applied.
@@ -184,6 +186,21 @@ impl Record {
         rec.set_truth_values(&values);
         Some(rec)
     }
+}
+
+/// A record's bytes, CRC included, as the writer writes them.
+pub fn encode_record(r: &Record) -> [u8; RECORD_SIZE] {
+    let mut out = [0u8; RECORD_SIZE];
+    r.encode(&mut out);
+    out
+}
+
+/// Decodes record bytes whatever their CRC says (it is set first): the layout's probe
+/// ([`crate::log_layout`]).
+pub(crate) fn decode_unchecked(bytes: &mut [u8; RECORD_SIZE]) -> Option<Record> {
+    let crc = record_crc(bytes);
+    bytes[4..8].copy_from_slice(&crc.to_le_bytes());
+    Record::decode(bytes)
 }
 
 /// CRC-32 of a record's flags and body (everything but the CRC field itself).

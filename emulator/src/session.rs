@@ -192,12 +192,16 @@ fn step_clock(cfg: &RunConfig) -> Box<dyn StepClock> {
     }
 }
 
-/// The log header: the whole run configuration, so a log can be replayed or re-run.
+/// The log header: the whole run configuration, so a log can be replayed or re-run, and
+/// the layout of its records ([`crate::log_layout`]), so other languages read them
+/// without a copy of any offset.
 pub fn log_header(cfg: &RunConfig, run_id: u64) -> String {
+    let site = crate::log_fields::Site::of_scenario(&cfg.scenario);
     serde_json::json!({
         "protocol_version": PROTOCOL_VERSION,
         "run_id": format!("{run_id:016x}"),
         "config": cfg,
+        "layout": crate::log_layout::layout_or_error(&site),
     })
     .to_string()
 }

@@ -3,6 +3,10 @@
 ``packets`` mirrors the wire packets with ctypes; ``loop.fly`` opens a run's services,
 checks the protocol, and calls your ``step(telemetry) -> Command`` once per step until
 the end of the run. See ``oils_fsw/examples/terminal_descent.py`` and docs/protocol.md.
+
+``read_log``, ``read_log_arrays``, ``read_records`` and ``read_campaign`` (from
+``oils_fsw.data``, imported on first use) read a run's log and a campaign's results into
+numpy and pandas; they need the ``data`` extra: ``pip install './python[data]'``.
 """
 
 from .packets import (
@@ -69,4 +73,19 @@ __all__ = [
     "FlightError",
     "Summary",
     "fly",
+    "read_log",
+    "read_log_arrays",
+    "read_records",
+    "read_campaign",
 ]
+
+_DATA = ("read_log", "read_log_arrays", "read_records", "read_campaign")
+
+
+def __getattr__(name):
+    # The data readers import numpy and pandas: only when asked for.
+    if name in _DATA:
+        from . import data
+
+        return getattr(data, name)
+    raise AttributeError(f"module 'oils_fsw' has no attribute {name!r}")
