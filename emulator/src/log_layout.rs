@@ -14,8 +14,8 @@
 //! description cannot describe makes [`layout`] fail with a typed error (and the tests).
 //!
 //! ```json
-//! {"format":"oils-log-layout-1","byte_order":"little","magic":"OILSLOG4",
-//!  "header_start":16,"record_size":1000,"trailer":{"magic":"OILSEND4","size":20},
+//! {"format":"oils-log-layout-1","byte_order":"little","magic":"OILSLOG5",
+//!  "header_start":16,"record_size":1000,"trailer":{"magic":"OILSEND5","size":20},
 //!  "end_of_run_flag":8,"flags_column":"command.record_flags",
 //!  "columns":[{"name":"telemetry.header.step","kind":"u64","offset":40,"dtype":"<u8"},
 //!             {"name":"telemetry.t_s","kind":"f64",
@@ -289,7 +289,7 @@ pub fn layout(site: &Site) -> Result<Json, LayoutError> {
         "header_start": HEADER_START,
         "record_size": RECORD_SIZE,
         "crc": {"offset": 4, "covers": "bytes 0..4 and 8..record_size (CRC-32, IEEE)"},
-        "trailer": {"magic": "OILSEND4", "size": TRAILER_SIZE},
+        "trailer": {"magic": String::from_utf8_lossy(crate::recorder::TRAILER_MAGIC), "size": TRAILER_SIZE},
         "end_of_run_flag": REC_END_OF_RUN,
         "flags_column": column_of(Topic::Command, "record_flags", 0),
         "columns": columns,

@@ -49,7 +49,7 @@ pub const MAGIC: &[u8; 8] = b"OILSLOG5";
 const MAGIC_V4: &[u8; 8] = b"OILSLOG4";
 const MAGIC_V3: &[u8; 8] = b"OILSLOG3";
 /// Magic of the trailer that closes a log.
-const TRAILER_MAGIC: &[u8; 8] = b"OILSEND5";
+pub const TRAILER_MAGIC: &[u8; 8] = b"OILSEND5";
 /// Bytes of the trailer.
 pub const TRAILER_SIZE: usize = 20;
 /// Magic of the format before per-step timing, refused with a clear message.

@@ -3,7 +3,7 @@
 Needs the ``data`` extra (``pip install './python[data]'``: numpy, pandas, and mcap for
 MCAP logs); the flight-software client (``oils_fsw`` itself) does not.
 
-* :func:`read_log` -- a log (OILSLOG4 binary records, or MCAP) as a DataFrame whose
+* :func:`read_log` -- a log (OILSLOG5 binary records, or MCAP) as a DataFrame whose
   columns are those of ``oils export LOG --csv``, in the same order, with the same values.
 * :func:`read_log_arrays` -- the same columns as a dict of numpy arrays.
 * :func:`read_records` -- the binary log's records as one numpy structured array (the
@@ -41,7 +41,7 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 LAYOUT_FORMAT = "oils-log-layout-1"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-OILSLOG_MAGIC = b"OILSLOG4"
+OILSLOG_MAGIC = b"OILSLOG5"
 
 __all__ = [
     "LogError",
@@ -81,9 +81,9 @@ def _load_layout(layout: Union[PathLike, Dict[str, Any], None], header: Dict[str
 
 
 def _read_header(path: Path, data) -> Dict[str, Any]:
-    """The JSON header of an OILSLOG4 file (its CRC checked), and where the records start."""
+    """The JSON header of an OILSLOG5 file (its CRC checked), and where the records start."""
     if len(data) < 16 or bytes(data[:8]) != OILSLOG_MAGIC:
-        raise LogError(f"{path}: not an OILSLOG4 log (magic {bytes(data[:8])!r})")
+        raise LogError(f"{path}: not an OILSLOG5 log (magic {bytes(data[:8])!r})")
     n = int.from_bytes(bytes(data[8:12]), "little")
     crc = int.from_bytes(bytes(data[12:16]), "little")
     if 16 + n > len(data):
@@ -98,7 +98,7 @@ def _read_header(path: Path, data) -> Dict[str, Any]:
 
 
 def read_layout(path: PathLike) -> Dict[str, Any]:
-    """The record layout an OILSLOG4 or MCAP log carries in its header."""
+    """The record layout an OILSLOG5 or MCAP log carries in its header."""
     path = Path(path)
     header = _mcap_header(path) if _is_mcap(path) else _read_header(path, _map(path))
     return _load_layout(None, header, path)
@@ -391,7 +391,7 @@ def read_log_arrays(path: PathLike, layout=None, verify: bool = True) -> Dict[st
 
 
 def read_log(path: PathLike, layout=None, verify: bool = True) -> pd.DataFrame:
-    """A log (OILSLOG4 or MCAP) as a DataFrame with the CSV export's columns, in order.
+    """A log (OILSLOG5 or MCAP) as a DataFrame with the CSV export's columns, in order.
 
     Integers are integers (ids ``uint64``), flags ``bool``, floats ``float64``; optional
     figures (timing) are ``float64`` with NaN where a step has none, as in the CSV.
