@@ -602,8 +602,8 @@ fn velocimeter_reads_the_projections_of_the_velocity_relative_to_the_turning_gro
     let v_rel = v_head - V3::new(0.0, 0.0, omega_moon).cross(&origin);
     let up_mci = to_mci * site.up_mcmf();
     let height = (to_mci.inverse() * origin - site.origin_mcmf()).dot(&site.up_mcmf());
-    for b in 0..3 {
-        let u = q * beams[b];
+    for (b, beam) in beams.iter().enumerate() {
+        let u = q * beam;
         let want_v = v_rel.dot(&u);
         let want_r = height / -u.dot(&up_mci);
         assert_eq!(s.valid[b], 1);

@@ -16,14 +16,16 @@ static GLOBAL: common::CountingAlloc = common::CountingAlloc;
 
 #[test]
 fn after_plant_step_and_fill_frame_do_not_allocate() {
-    let mut cfg = ScenarioConfig::default();
-    cfg.terrain = TerrainSpec::Synthetic(SyntheticSpec {
-        extent_m: 1000.0,
-        spacing_m: 2.0,
-        crater_min_diameter_m: 8.0,
-        crater_max_diameter_m: 100.0,
-        ..SyntheticSpec::default()
-    });
+    let mut cfg = ScenarioConfig {
+        terrain: TerrainSpec::Synthetic(SyntheticSpec {
+            extent_m: 1000.0,
+            spacing_m: 2.0,
+            crater_min_diameter_m: 8.0,
+            crater_max_diameter_m: 100.0,
+            ..SyntheticSpec::default()
+        }),
+        ..ScenarioConfig::default()
+    };
     cfg.initial.altitude_m = 400.0;
     cfg.initial.horizontal_speed_m_s = 5.0;
     cfg.initial.vertical_speed_m_s = -20.0;

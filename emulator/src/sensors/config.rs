@@ -769,7 +769,7 @@ impl SensorsConfig {
                 continue;
             }
             let period_ns = ms_to_ns(period_ms).max(1) as u64;
-            if plant_step_ns == 0 || period_ns % plant_step_ns != 0 {
+            if plant_step_ns == 0 || !period_ns.is_multiple_of(plant_step_ns) {
                 return Err(ConfigError {
                     field,
                     value: format!(

@@ -247,15 +247,23 @@ impl Altimeter {
         self.name
     }
 
-    /// True slant range: the nearest return among the rays, if any.
+    /// True slant range: the nearest return among the rays, if any. Each ray after a
+    /// return is cast only as far as the best so far (it can only win if shorter).
     fn true_range(&self, t: &SensorTruth<'_>) -> Option<f64> {
         let lim = &self.limits;
-        self.rays_body[..self.ray_count]
-            .iter()
-            .filter_map(|ray| t.cast(&self.lever_body, ray, lim.max_range_m))
-            .filter(|h| h.range_m >= lim.min_range_m && h.incidence_deg <= lim.max_incidence_deg)
-            .map(|h| h.range_m)
-            .reduce(f64::min)
+        let mut best: Option<f64> = None;
+        for ray in &self.rays_body[..self.ray_count] {
+            let reach = best.unwrap_or(lim.max_range_m);
+            if let Some(h) = t.cast(&self.lever_body, ray, reach) {
+                if h.range_m >= lim.min_range_m
+                    && h.incidence_deg <= lim.max_incidence_deg
+                    && best.is_none_or(|b| h.range_m < b)
+                {
+                    best = Some(h.range_m);
+                }
+            }
+        }
+        best
     }
 
     pub fn step(&mut self, t: &SensorTruth<'_>) {

@@ -549,3 +549,30 @@ pub(crate) fn gauss(rng: &mut ChaCha8Rng) -> f64 {
     use rand::Rng;
     rng.sample(rand_distr::StandardNormal)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn streams_differ_per_device_and_from_the_other_streams() {
+        let ids = Device::ALL.map(|d| stream_id(d.name()));
+        for (i, a) in ids.iter().enumerate() {
+            for b in &ids[i + 1..] {
+                assert_ne!(a, b);
+            }
+            assert_ne!(*a, crate::plant::nav_noise::NAV_NOISE_STREAM);
+        }
+    }
+
+    #[test]
+    fn a_sample_falls_due_on_the_step_that_ends_its_period() {
+        let ms = 1_000_000;
+        assert_eq!(due(5 * ms, ms as u64, 5 * ms), Some(5 * ms));
+        assert_eq!(due(6 * ms, ms as u64, 5 * ms), None);
+        assert_eq!(due(4 * ms, ms as u64, 5 * ms), None);
+        // A step longer than the period (refused by check_rates) stamps the last end.
+        assert_eq!(due(10 * ms, 10 * ms as u64, 5 * ms), Some(10 * ms));
+        assert_eq!(due(5 * ms, 0, 5 * ms), None);
+    }
+}
