@@ -198,3 +198,91 @@ fn devices_that_do_not_fit_the_schedule_are_refused_naming_them() {
     let e = text(&out);
     assert!(e.contains("reference GNC") && e.contains("both"), "{e}");
 }
+
+#[test]
+fn a_device_fault_reaches_the_flight_software_through_a_run() {
+    let dir = scratch("sensors-fault");
+    let log = dir.join("run.oilslog");
+    let csv = dir.join("run.csv");
+    let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("emulator/data/descent-profile.csv");
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--fsw",
+        "playback",
+        "--profile",
+        profile.to_str().unwrap(),
+        "--propulsion",
+        "ideal",
+        "--telemetry",
+        "sensors",
+        "--duration",
+        "2",
+        "--fault",
+        "sensor-inhibit:rf-altimeter@t=1",
+        "--log",
+        log.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let out = run_oils(&[
+        "export",
+        log.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let body = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = body.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let (t, n) = (
+        col(&header, "telemetry.t_s"),
+        col(&header, "rf_altimeter_count"),
+    );
+    let (st, valid, flags) = (
+        col(&header, "rf_altimeter_t_ns[0]"),
+        col(&header, "rf_altimeter_valid[0]"),
+        col(&header, "rf_altimeter_flags[0]"),
+    );
+    let (mut before, mut after) = (0, 0);
+    for row in lines.map(|l| l.split(',').collect::<Vec<_>>()) {
+        if row[n] == "0" {
+            continue;
+        }
+        let sampled_s = row[st].parse::<f64>().unwrap() * 1e-9;
+        let f: u32 = row[flags].parse().unwrap();
+        let inhibited = f & oils_shared::SAMPLE_FLAG_INHIBITED != 0;
+        if sampled_s > 1.0 + 1e-9 {
+            assert!(
+                inhibited && row[valid] == "0",
+                "t = {}: {}",
+                row[t],
+                row[flags]
+            );
+            after += 1;
+        } else if sampled_s < 1.0 - 1e-9 {
+            assert!(!inhibited, "t = {}", row[t]);
+            before += 1;
+        }
+    }
+    assert!(
+        before >= 15 && after >= 15,
+        "{before} before, {after} after"
+    );
+
+    // Without the devices on, such a fault is refused, naming why.
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--no-log",
+        "--fault",
+        "sensor-inhibit:rf-altimeter@t=1",
+    ]);
+    assert!(!out.status.success());
+    let e = text(&out);
+    assert!(
+        e.contains("rf-altimeter") && e.contains("--telemetry"),
+        "{e}"
+    );
+}

@@ -494,6 +494,16 @@ impl RunConfig {
             ));
         }
         for f in &self.faults {
+            if let (Some(device), false) = (f.device_target(), self.telemetry.sensors()) {
+                return Err(invalid(
+                    "faults",
+                    f.to_string(),
+                    format!(
+                        "a fault on the {} acts inside the device, which runs only with telemetry = \"sensors\" or \"both\" (--telemetry)",
+                        device.device().name()
+                    ),
+                ));
+            }
             f.validate()
                 .and_then(|()| f.check_can_fire(self.duration_s, self.dt_ns()))
                 .map_err(|why| invalid("faults", f.to_string(), why))?;

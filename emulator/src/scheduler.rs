@@ -310,6 +310,9 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         let (fired, cleared) = faults.advance(k, t_ns, plant.altitude_m());
         let mut fault_flags = 0u32;
         if fired | cleared != 0 {
+            if let Some(sensors) = plant.sensors_mut() {
+                faults.apply_device_faults(fired, cleared, sensors);
+            }
             for (i, f) in plant_faults.iter().enumerate().take(faults.len()) {
                 let bit = 1u64 << i;
                 if let (true, Some(f)) = ((fired | cleared) & bit != 0, f) {
