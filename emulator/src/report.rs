@@ -117,6 +117,7 @@ impl RunReport {
             log_records: 0,
             faults: Vec::new(),
             propulsion_diagnostics: None,
+            sensors_dropped: None,
         };
         Self::new(cfg, run_id, wait, None, summary)
     }

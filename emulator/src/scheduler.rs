@@ -183,6 +183,10 @@ pub struct RunSummary {
     /// What the propulsion model reported at the end (surrogate envelope exits, shadow
     /// divergence); `None` for models with nothing to report.
     pub propulsion_diagnostics: Option<crate::propulsion::PropulsionDiagnostics>,
+    /// With the devices on: samples per device that were lost (a full frame or queue);
+    /// zero when every sample reached the flight software.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sensors_dropped: Option<crate::sensors::DroppedSamples>,
 }
 
 /// Overruns of one rate group.
@@ -570,5 +574,6 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         log_records: 0,
         faults: faults.report(),
         propulsion_diagnostics: plant.propulsion_diagnostics(),
+        sensors_dropped: plant.sensors().map(|s| s.dropped()),
     })
 }
