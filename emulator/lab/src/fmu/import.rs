@@ -8,7 +8,9 @@
 //! bench's [`Propulsion`] over one instance. Everything here is safe Rust.
 
 use oils_emulator::propulsion::held::Held;
+use oils_emulator::propulsion::BuildError;
 use oils_emulator::propulsion::{EngineCommand, Propulsion, PropulsionOutput};
+use oils_emulator::run_config::RunConfig;
 use oils_fmi::{FmiError, Fmu, Instance, ModelDescription, VarType};
 use oils_shared::ENGINE_COUNT;
 use serde::{Deserialize, Serialize};
@@ -269,13 +271,8 @@ impl FmuModel {
         } else {
             (Mapping::oils(), String::new(), given.clone())
         };
-        let bytes = std::fs::read(&fmu_path).map_err(|source| ImportError::Fmi {
-            path: fmu_path.clone(),
-            source: FmiError::Io {
-                path: fmu_path.clone(),
-                source,
-            },
-        })?;
+        let bytes = std::fs::read(&fmu_path)
+            .map_err(|e| ImportError::Source(format!("{}: {e}", fmu_path.display())))?;
         let mut h = blake3::Hasher::new();
         h.update(&bytes);
         h.update(mapping_text.as_bytes());
@@ -387,9 +384,20 @@ impl FmuModel {
         dt_ns: u64,
         caller: &str,
     ) -> Result<Box<dyn Propulsion>, ImportError> {
+        self.instantiate_reporting(dt_ns, caller, true)
+    }
+
+    /// [`FmuModel::instantiate`]; a failure goes to [`FmuModel::take_error`] when
+    /// `keep_error`, else to stderr (the loop has no one to ask).
+    fn instantiate_reporting(
+        &self,
+        dt_ns: u64,
+        caller: &str,
+        keep_error: bool,
+    ) -> Result<Box<dyn Propulsion>, ImportError> {
         let step = self.check_step(dt_ns, caller)?;
         let mut p = FmuPropulsion::new(self, step)?;
-        p.errors = Some(self.errors.clone());
+        p.errors = keep_error.then(|| self.errors.clone());
         Ok(if step > dt_ns {
             Box::new(Held::new(p, step))
         } else {
@@ -677,8 +685,13 @@ impl FmuPropulsion {
             None => why.to_string(),
         };
         let text = format!("at t = {} s: {text}", self.inst.time_s());
-        if let Some(slot) = self.errors.as_ref().and_then(|s| s.lock().ok()).as_mut() {
-            slot.get_or_insert(text.clone());
+        match self.errors.as_ref().and_then(|s| s.lock().ok()).as_mut() {
+            Some(slot) => {
+                slot.get_or_insert(text.clone());
+            }
+            // In the loop: the run ends aborted with `failure()`; the FMU's own words go
+            // to stderr, once (the only output of this model, at its end).
+            None => eprintln!("oils: FMU propulsion model failed {text}"),
         }
         self.error = Some(text);
     }
@@ -782,6 +795,25 @@ impl Propulsion for FmuPropulsion {
     fn failure(&self) -> Option<&'static str> {
         self.failure
     }
+}
+
+/// Builds the FMU a run configuration names (`propulsion = "fmu"`,
+/// `propulsion_fmu = PATH`), stepped at the plant step: the session's
+/// `Extras::propulsion` in `oils run --propulsion fmu:PATH`.
+pub fn build_for_run(cfg: &RunConfig) -> Result<Box<dyn Propulsion>, BuildError> {
+    let Some(path) = &cfg.propulsion_fmu else {
+        return Err(BuildError::External(
+            "propulsion = \"fmu\" without propulsion_fmu = PATH".into(),
+        ));
+    };
+    let err = |e: ImportError| BuildError::External(e.to_string());
+    let model = FmuModel::load(&FmuSource {
+        given: path.clone(),
+    })
+    .map_err(err)?;
+    model
+        .instantiate_reporting(cfg.dt_ns(), "the plant step", false)
+        .map_err(err)
 }
 
 /// Stands in for an FMU instance that could not be made (see [`FmuModel::factory`]):
