@@ -834,3 +834,66 @@ impl Propulsion for Unavailable {
         Some("the FMU could not be instantiated")
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use oils_fmu::{Causality, VARIABLES};
+
+    #[test]
+    fn the_default_mapping_names_what_export_fmu_declares() {
+        // Every name of the default mapping is a variable of the packed binary, with the
+        // causality its place needs, and every input and output of it is mapped.
+        let m = Mapping::oils();
+        let ins: Vec<&String> = m
+            .inputs
+            .thrust_cmd_n
+            .iter()
+            .chain(m.inputs.on.iter().flatten())
+            .collect();
+        let o = &m.outputs;
+        let outs: Vec<&String> = o
+            .thrust_n
+            .iter()
+            .chain([&o.gas_pressure_pa, &o.ejected_fuel_kg, &o.ejected_ox_kg])
+            .chain(o.mean_thrust_n.iter().flatten())
+            .chain(o.chamber_pressure_pa.iter().flatten())
+            .chain(
+                [
+                    &o.fuel_tank_pa,
+                    &o.ox_tank_pa,
+                    &o.fuel_flow_kg_s,
+                    &o.ox_flow_kg_s,
+                ]
+                .into_iter()
+                .flatten(),
+            )
+            .collect();
+        for (names, causality) in [(&ins, Causality::Input), (&outs, Causality::Output)] {
+            let declared: Vec<&str> = VARIABLES
+                .iter()
+                .filter(|v| v.causality == causality)
+                .map(|v| v.name)
+                .collect();
+            let mut mapped: Vec<&str> = names.iter().map(|s| s.as_str()).collect();
+            mapped.sort_unstable();
+            let mut declared = declared;
+            declared.sort_unstable();
+            assert_eq!(mapped, declared, "{causality:?}");
+        }
+        // The mapping file form reads back.
+        let text = toml::to_string(&m).unwrap();
+        assert_eq!(Mapping::from_toml(&text).unwrap(), m);
+        assert!(Mapping::from_toml("[inputs]\nthrust_cmd_n = []\nbogus = 1\n").is_err());
+    }
+
+    #[test]
+    fn fmu_sources_need_a_path() {
+        assert!(FmuSource::parse("hifi").is_none());
+        assert!(matches!(FmuSource::parse("fmu:"), Some(Err(_))));
+        assert_eq!(
+            FmuSource::parse("fmu:a/b.fmu").unwrap().unwrap().given,
+            PathBuf::from("a/b.fmu")
+        );
+    }
+}
