@@ -754,8 +754,8 @@ impl FmuPropulsion {
                 };
             }
         }
-        for e in 0..ENGINE_COUNT {
-            self.out.mean_thrust_n[e] = mean_sum[e] / n as f64;
+        for (mean, sum) in self.out.mean_thrust_n.iter_mut().zip(mean_sum) {
+            *mean = sum / n as f64;
         }
         let dt_s = dt_ns as f64 / 1e9;
         if self.map.fuel_flow.is_none() {
