@@ -232,6 +232,11 @@ pub struct RunConfig {
     pub seed: u64,
     /// Propulsion model.
     pub propulsion: PropulsionKind,
+    /// The user's FMU, or its variable mapping TOML (`propulsion = "fmu"`, from
+    /// `--propulsion fmu:PATH`): the program running the bench builds it (see
+    /// [`crate::session::Extras::propulsion`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub propulsion_fmu: Option<PathBuf>,
     /// Surrogate model file (`surrogate`, `shadow`); none: the committed model.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<PathBuf>,
@@ -290,6 +295,7 @@ impl Default for RunConfig {
             telemetry: TelemetrySource::Nav,
             seed: 0,
             propulsion: PropulsionKind::Surrogate,
+            propulsion_fmu: None,
             model: None,
             hifi: None,
             fsw: FswSpec::Gnc,
@@ -507,6 +513,21 @@ impl RunConfig {
             f.validate()
                 .and_then(|()| f.check_can_fire(self.duration_s, self.dt_ns()))
                 .map_err(|why| invalid("faults", f.to_string(), why))?;
+        }
+        match (self.propulsion, &self.propulsion_fmu) {
+            (PropulsionKind::Fmu, None) => return Err(invalid(
+                "propulsion",
+                "fmu",
+                "needs propulsion_fmu = \"MODEL.fmu\" (or its mapping TOML): --propulsion fmu:PATH",
+            )),
+            (kind, Some(p)) if kind != PropulsionKind::Fmu => {
+                return Err(invalid(
+                    "propulsion_fmu",
+                    p.display(),
+                    format!("only read with propulsion = \"fmu\", not {}", kind.as_str()),
+                ))
+            }
+            _ => {}
         }
         self.scenario.validate()?;
         if let Some(h) = &self.hifi {

@@ -111,7 +111,14 @@ pub struct Extras<'a> {
     pub observer: Option<scheduler::StepObserver<'a>>,
     /// Writers for log formats other than OILSLOG3 (the lab's MCAP sink).
     pub sinks: Option<&'a dyn SinkOpener>,
+    /// Builds the propulsion models the core does not ([`propulsion::PropulsionKind::Fmu`]:
+    /// the lab imports the user's FMU), from the run configuration, before tick 0.
+    pub propulsion: Option<PropulsionBuilder<'a>>,
 }
+
+/// A builder of propulsion models the core does not build (see [`Extras::propulsion`]).
+pub type PropulsionBuilder<'a> =
+    &'a dyn Fn(&RunConfig) -> Result<Box<dyn propulsion::Propulsion>, propulsion::BuildError>;
 
 /// A fresh run id: process id and monotonic time mixed (naming only; never enters the
 /// plant, and the digest ignores it).
@@ -277,7 +284,12 @@ pub fn run(
             onboard.link().as_str()
         )));
     }
-    let mut plant = build_plant(cfg)?;
+    let mut plant = match (cfg.propulsion, extras.propulsion) {
+        (propulsion::PropulsionKind::Fmu, Some(build)) => {
+            Plant::new(&cfg.scenario, build(cfg)?, cfg.seed)?
+        }
+        _ => build_plant(cfg)?,
+    };
     let mut faults = fault_plan(cfg, &plant)?;
     let sched = scheduler_config(cfg, run_id);
     let mut clock = step_clock(cfg);

@@ -19,6 +19,34 @@ use oils_shared::service::RunServices;
 use std::path::PathBuf;
 use std::time::Duration;
 
+/// `--propulsion`: a model the core builds, or `fmu:PATH`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PropulsionArg {
+    /// The model.
+    pub kind: PropulsionKind,
+    /// The FMU or its mapping (`fmu:PATH`).
+    pub fmu: Option<PathBuf>,
+}
+
+impl std::str::FromStr for PropulsionArg {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match oils_lab::fmu::import::FmuSource::parse(s) {
+            Some(src) => Ok(Self {
+                kind: PropulsionKind::Fmu,
+                fmu: Some(src.map_err(|e| e.to_string())?.given),
+            }),
+            None if s == "fmu" => {
+                Err("fmu needs its file: fmu:MODEL.fmu or fmu:MAPPING.toml".into())
+            }
+            None => Ok(Self {
+                kind: s.parse()?,
+                fmu: None,
+            }),
+        }
+    }
+}
+
 /// Arguments of a bench run. Every flag is optional: what is not given comes from
 /// `--config` / `--config-from`, else from `RunConfig::default()`.
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -66,8 +94,10 @@ pub struct RunArgs {
     /// Propulsion model: surrogate (the learned model of the seed paper), hifi
     /// (physics, the truth model), ideal (first-order lag) or shadow (hifi drives, the
     /// surrogate runs beside it). [default: surrogate]
+    /// fmu:PATH: the user's FMU (FMI 2.0/3.0 co-simulation) or its variable-mapping
+    /// TOML (docs/fmu.md) as the truth in the loop.
     #[arg(long, value_name = "MODEL")]
-    pub propulsion: Option<PropulsionKind>,
+    pub propulsion: Option<PropulsionArg>,
     /// Hifi parameter TOML for hifi|shadow (any subset of emulator/config/hifi.toml).
     #[arg(long, value_name = "TOML")]
     pub hifi_params: Option<PathBuf>,
@@ -184,7 +214,7 @@ impl RunArgs {
             };
         }
         set!(link => link, mode => mode, speed => speed, dt_ms => dt_ms,
-             duration => duration_s, propulsion => propulsion, fsw => fsw, seed => seed,
+             duration => duration_s, fsw => fsw, seed => seed,
              miss_policy => miss_policy, deadline_frac => deadline_frac,
              wake_spin_us => wake_spin_us, link_timeout_ms => link_timeout_ms,
              startup_timeout_ms => startup_timeout_ms);
@@ -194,6 +224,10 @@ impl RunArgs {
             if t.sensors() && self.dt_ms.is_none() && cfg.dt_ms == 10 {
                 cfg.dt_ms = 5;
             }
+        }
+        if let Some(p) = &self.propulsion {
+            cfg.propulsion = p.kind;
+            cfg.propulsion_fmu = p.fmu.clone();
         }
         if let Some(p) = self.fsw_period_ms {
             cfg.fsw_period_ms = Some(p);
@@ -376,6 +410,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 Onboard::Peer(&mut launch),
                 Extras {
                     sinks: Some(&McapOpener),
+                    propulsion: Some(&oils_lab::fmu::import::build_for_run),
                     ..Default::default()
                 },
             );
@@ -519,6 +554,7 @@ fn fly_in_process(
     let extras = |observer| Extras {
         sinks: Some(&McapOpener),
         observer,
+        propulsion: Some(&oils_lab::fmu::import::build_for_run),
     };
     let Some(lib) = fsw_library else {
         return session::run(cfg, run_id, stop, Onboard::InProcess(fsw), extras(None));

@@ -2,6 +2,7 @@
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
+use oils_lab::fmu::import::{FmuModel, FmuSource};
 use oils_lab::training::fit::Variant;
 use oils_lab::training::{recorded, report, train_configured, user, Progress, TrainConfig};
 use std::path::PathBuf;
@@ -57,6 +58,8 @@ enum Source {
     Configured,
     /// Recorded files.
     Data(Vec<PathBuf>),
+    /// The user's FMU (or its variable mapping).
+    Fmu(FmuSource),
 }
 
 impl Source {
@@ -66,7 +69,10 @@ impl Source {
         }
         match args.truth.as_deref() {
             None | Some("hifi") => Ok(Source::Configured),
-            Some(other) => bail!("--truth {other}: expected hifi or fmu:PATH"),
+            Some(other) => match FmuSource::parse(other) {
+                Some(src) => Ok(Source::Fmu(src.context("--truth")?)),
+                None => bail!("--truth {other}: expected hifi or fmu:PATH"),
+            },
         }
     }
 
@@ -74,7 +80,7 @@ impl Source {
     fn default_config(&self) -> &'static str {
         match self {
             Source::Configured => COMMITTED_CONFIG,
-            Source::Data(_) => oils_lab::training::user::USER_CONFIG,
+            Source::Data(_) | Source::Fmu(_) => oils_lab::training::user::USER_CONFIG,
         }
     }
 }
@@ -129,9 +135,30 @@ pub fn run(args: &TrainArgs) -> Result<()> {
         quiet: args.quiet,
         bar: Mutex::new(None),
     };
+    let fmu = match &source {
+        Source::Fmu(src) => Some(load_fmu(src, cfg.sample_time_ns)?),
+        _ => None,
+    };
     let t0 = Instant::now();
     let outcome = match &source {
         Source::Configured => train_configured(&cfg, &bars).context("training")?,
+        Source::Fmu(_) => {
+            let Some(fmu) = &fmu else {
+                bail!("--truth fmu: the FMU was not loaded");
+            };
+            let mut model = fmu
+                .instantiate(cfg.sample_time_ns, SAMPLE_TIME)
+                .with_context(|| format!("instantiating {}", fmu.path.display()))?;
+            let info = oils_lab::training::ReferenceInfo {
+                name: format!("{}{}", oils_lab::fmu::import::PREFIX, fmu.path.display()),
+                param_hash: fmu.hash.clone(),
+            };
+            let trained = user::train_on_model(&cfg, model.as_mut(), &info, &bars);
+            if let Some(e) = fmu.take_error() {
+                bail!("training on {}: {e}", fmu.path.display());
+            }
+            trained.context("training on the FMU")?
+        }
         Source::Data(paths) => {
             let mut runs = Vec::new();
             for p in paths {
@@ -218,8 +245,10 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     let mut holdout_pngs = Vec::new();
     if matches!(source, Source::Data(_)) && !args.no_holdout {
         summary.push_str("\n(held-out free runs skipped: recorded data have no model to run them on; judge the model with `oils validate --model M --data FILE`)\n");
+    } else if fmu.as_ref().is_some_and(FmuModel::single_instance) && !args.no_holdout {
+        summary.push_str("\n(held-out free runs skipped: the FMU can be instantiated only once per process; judge the model with `oils validate --model M --truth fmu:PATH`)\n");
     } else if !args.no_holdout {
-        let (text, pngs) = holdout(&cfg, &outcome, args)?;
+        let (text, pngs) = holdout(&cfg, &outcome, args, fmu.as_ref())?;
         summary.push_str(&text);
         holdout_pngs = pngs;
     }
@@ -236,12 +265,32 @@ pub fn run(args: &TrainArgs) -> Result<()> {
     Ok(())
 }
 
+/// How an FMU's error names the step it must fit.
+const SAMPLE_TIME: &str = "the surrogate's sample time";
+
+/// The FMU `--truth fmu:` names, checked against the sample time.
+fn load_fmu(src: &FmuSource, sample_time_ns: u64) -> Result<FmuModel> {
+    let fmu = FmuModel::load(src).context("--truth")?;
+    fmu.check_step(sample_time_ns, SAMPLE_TIME)
+        .context("--truth")?;
+    let d = fmu.description();
+    println!(
+        "truth: {} (FMI {} co-simulation, `{}`), step {} s",
+        fmu.path.display(),
+        d.version.as_str(),
+        d.model_name,
+        fmu.check_step(sample_time_ns, SAMPLE_TIME)? as f64 / 1e9
+    );
+    Ok(fmu)
+}
+
 /// Free runs of every trained model against the reference on the held-out cases (sine,
 /// stair, descent profile); returns the summary section and the figures written.
 fn holdout(
     cfg: &TrainConfig,
     outcome: &oils_lab::training::TrainOutcome,
     args: &TrainArgs,
+    fmu: Option<&FmuModel>,
 ) -> Result<(String, Vec<PathBuf>)> {
     use oils_lab::training::holdout::{run_cases, table, Case};
     let dt = cfg.sample_time_ns;
@@ -251,19 +300,32 @@ fn holdout(
         Ok(p) => cases.push(Case::from_profile("descent", &p, dt)),
         Err(e) => note = format!("(descent case skipped: {e})\n"),
     }
-    let hifi = oils_lab::training::hifi_params_of(cfg)?;
-    let spec = oils_lab::training::reference_spec(cfg, &hifi);
-    let reference = || {
-        oils_emulator::propulsion::build(&spec)
-            .unwrap_or_else(|e| unreachable!("the reference was built for training: {e}"))
-    };
     let models: Vec<_> = outcome.models.iter().map(|m| &m.model).collect();
     let names: Vec<&str> = outcome.models.iter().map(|m| m.variant.as_str()).collect();
     let t0 = Instant::now();
-    let results = run_cases(cases, &reference, &models, dt);
+    let (results, against) = match fmu {
+        Some(fmu) => {
+            let results = run_cases(cases, &fmu.factory(dt, SAMPLE_TIME), &models, dt);
+            if let Some(e) = fmu.take_error() {
+                bail!("held-out free runs on {}: {e}", fmu.path.display());
+            }
+            (results, format!("the FMU {}", fmu.path.display()))
+        }
+        None => {
+            let hifi = oils_lab::training::hifi_params_of(cfg)?;
+            let spec = oils_lab::training::reference_spec(cfg, &hifi);
+            let reference = || {
+                oils_emulator::propulsion::build(&spec)
+                    .unwrap_or_else(|e| unreachable!("the reference was built for training: {e}"))
+            };
+            (
+                run_cases(cases, &reference, &models, dt),
+                cfg.reference.as_str().to_string(),
+            )
+        }
+    };
     let mut text = format!(
-        "\n## Held-out free runs against {} ({:.1} s)\n\n{note}",
-        cfg.reference.as_str(),
+        "\n## Held-out free runs against {against} ({:.1} s)\n\n{note}",
         t0.elapsed().as_secs_f64()
     );
     text.push_str(&table(&results, &names));

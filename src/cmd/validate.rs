@@ -11,12 +11,16 @@ use oils_emulator::propulsion::surrogate::DEFAULT_MODEL_JSON;
 use oils_emulator::propulsion::{
     build_hifi, build_surrogate, BuildError, Propulsion, PropulsionKind, PropulsionSpec,
 };
+use oils_lab::fmu::import::{FmuModel, FmuSource};
 use oils_lab::validation::cases::{self, CaseKind};
 use oils_lab::validation::report::{Bounds, ValidationReport};
 use oils_lab::validation::uncertainty::ModelUncertainty;
 use oils_lab::validation::{plots, recorded, run_cases};
 use oils_shared::profile::ThrustProfile;
 use std::path::{Path, PathBuf};
+
+/// How an FMU's error names the step it must fit.
+const SAMPLE_TIME: &str = "the surrogate's sample time";
 
 /// The committed descent profile, read at run time (the file may be replaced).
 const DESCENT_PATH: &str = "emulator/data/descent-profile.csv";
@@ -61,8 +65,12 @@ pub struct ValidateArgs {
     /// Judge the model on these recorded runs instead (CSV, the layout of
     /// docs/recorded-data.md): the recording is the truth, the surrogate runs free on
     /// its commands, each run is judged as a whole against the descent bounds.
-    #[arg(long, value_name = "CSV", num_args = 1.., conflicts_with_all = ["profile", "only", "descent"])]
+    #[arg(long, value_name = "CSV", num_args = 1.., conflicts_with_all = ["profile", "only", "descent", "truth"])]
     pub data: Vec<PathBuf>,
+    /// The truth the surrogate is judged against: `hifi` (default) or `fmu:PATH`, the
+    /// user's FMU or its variable-mapping TOML (docs/fmu.md), run on the same cases.
+    #[arg(long, value_name = "MODEL", conflicts_with = "hifi_params")]
+    pub truth: Option<String>,
 }
 
 /// Runs `oils validate`.
@@ -109,7 +117,36 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
             }
         )
     };
-    let (reports, traces, truth_name) = if args.data.is_empty() {
+    let fmu = match args.truth.as_deref() {
+        None | Some("hifi") => None,
+        Some(other) => {
+            let src = FmuSource::parse(other)
+                .with_context(|| format!("--truth {other}: expected hifi or fmu:PATH"))?
+                .context("--truth")?;
+            let fmu = FmuModel::load(&src).context("--truth")?;
+            fmu.check_step(dt_ns, SAMPLE_TIME).context("--truth")?;
+            Some(fmu)
+        }
+    };
+    let (reports, traces, truth_name) = if let Some(fmu) = &fmu {
+        let all = cases_of(args, &cfg)?;
+        let make = fmu.factory(dt_ns, SAMPLE_TIME);
+        let truth = || -> Result<Box<dyn Propulsion>, BuildError> { Ok(make()) };
+        let ran = run_cases(
+            &all,
+            &truth,
+            &model,
+            dt_ns,
+            scenario.wet_mass_kg(),
+            &bounds,
+            print,
+        );
+        if let Some(e) = fmu.take_error() {
+            bail!("running {}: {e}", fmu.path.display());
+        }
+        let (r, t) = ran?;
+        (r, t, "fmu")
+    } else if args.data.is_empty() {
         let all = cases_of(args, &cfg)?;
         let truth =
             || -> Result<Box<dyn Propulsion>, BuildError> { Ok(Box::new(build_hifi(&spec)?)) };
@@ -151,8 +188,13 @@ pub fn run(args: &ValidateArgs) -> Result<()> {
         model_name(args),
         model_file.provenance.reference.clone(),
         format!("{:?}", model_file.variant),
-        match truth_name {
-            "data" => format!("recorded data: {}", list(&args.data)),
+        match (truth_name, &fmu) {
+            ("data", _) => format!("recorded data: {}", list(&args.data)),
+            (_, Some(fmu)) => format!(
+                "FMU {} (BLAKE3 with its mapping {})",
+                fmu.path.display(),
+                fmu.hash
+            ),
             _ => args
                 .hifi_params
                 .as_ref()

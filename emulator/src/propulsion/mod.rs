@@ -184,6 +184,10 @@ pub enum PropulsionKind {
     /// Hifi drives the plant; the surrogate runs beside it on the same commands and its
     /// per-output divergence is reported.
     Shadow,
+    /// The user's model as an FMU (`propulsion_fmu` in the run configuration): built by
+    /// the program that runs the bench (the `oils` binary, through the lab's FMU
+    /// import) and handed to the session, never by [`build`]: the core has no FMU loader.
+    Fmu,
 }
 
 impl PropulsionKind {
@@ -194,6 +198,7 @@ impl PropulsionKind {
             PropulsionKind::Hifi => "hifi",
             PropulsionKind::Surrogate => "surrogate",
             PropulsionKind::Shadow => "shadow",
+            PropulsionKind::Fmu => "fmu",
         }
     }
 }
@@ -206,8 +211,9 @@ impl std::str::FromStr for PropulsionKind {
             "hifi" => Ok(PropulsionKind::Hifi),
             "surrogate" => Ok(PropulsionKind::Surrogate),
             "shadow" => Ok(PropulsionKind::Shadow),
+            "fmu" => Ok(PropulsionKind::Fmu),
             other => Err(format!(
-                "unknown propulsion model `{other}` (expected ideal, hifi, surrogate or shadow)"
+                "unknown propulsion model `{other}` (expected ideal, hifi, surrogate, shadow or fmu:PATH)"
             )),
         }
     }
@@ -254,6 +260,10 @@ pub enum BuildError {
     /// The hifi parameters were refused.
     #[error(transparent)]
     Hifi(#[from] hifi::HifiError),
+    /// A model the core does not build ([`PropulsionKind::Fmu`]): the caller's builder
+    /// refused it, or none was handed in.
+    #[error("{0}")]
+    External(String),
 }
 
 /// Builds the model `spec` names. Allocation happens here, once, before tick 0.
@@ -266,6 +276,11 @@ pub fn build(spec: &PropulsionSpec) -> Result<Box<dyn Propulsion>, BuildError> {
             build_hifi(spec)?,
             build_surrogate(spec)?,
         )),
+        PropulsionKind::Fmu => {
+            return Err(BuildError::External(
+                "an FMU (propulsion = \"fmu\") is built by the program that runs the bench: `oils run --propulsion fmu:PATH` imports it; the run core has no FMU loader".into(),
+            ))
+        }
     })
 }
 
@@ -310,7 +325,7 @@ pub fn model_period_ns(spec: &PropulsionSpec) -> Result<u64, BuildError> {
             }
             None => surrogate::SurrogatePropulsion::default_sample_time_ns(),
         },
-        PropulsionKind::Ideal | PropulsionKind::Hifi => step,
+        PropulsionKind::Ideal | PropulsionKind::Hifi | PropulsionKind::Fmu => step,
     })
 }
 

@@ -6,6 +6,7 @@
 
 pub mod describe;
 pub mod export;
+pub mod import;
 
 /// An FMU could not be written or read.
 #[derive(Debug, thiserror::Error)]
