@@ -304,11 +304,18 @@ def _mcap_header(path: Path) -> Dict[str, Any]:
     raise LogError(f"{path}: no `oils` metadata record (not an oils MCAP log)")
 
 
+def _topic_of(name: str) -> str:
+    """The MCAP topic (after `/oils/`) of a CSV column: its first dotted part; the device
+    columns (`imu_t_ns[0]`, no dot) are the `devices` message's."""
+    return name.split(".", 1)[0] if "." in name else "devices"
+
+
 def _path_keys(name: str) -> List[Union[str, int]]:
     """`topic.a.b[2].c` (a CSV column) as the keys into the topic's JSON message:
-    ['a', 'b', 2, 'c']."""
+    ['a', 'b', 2, 'c']; a device column `imu_t_ns[3]` as ['imu_t_ns', 3]."""
     keys: List[Union[str, int]] = []
-    for part in name.split(".")[1:]:
+    parts = name.split(".")[1:] if "." in name else [name]
+    for part in parts:
         while "[" in part:
             head, rest = part.split("[", 1)
             if head:
@@ -335,7 +342,7 @@ def _pick(messages: List[Any], keys: List[Union[str, int]]) -> Optional[List[Any
 def _mcap_columns(path: Path, layout) -> Dict[str, np.ndarray]:
     header = _mcap_header(path)
     layout = _load_layout(layout, header, path)
-    topics = sorted({c["name"].split(".", 1)[0] for c in layout["columns"]})
+    topics = sorted({_topic_of(c["name"]) for c in layout["columns"]})
     raw: Dict[str, List[bytes]] = {t: [] for t in topics}
     with open(path, "rb") as f:
         reader = _mcap_reader(f)
@@ -351,7 +358,7 @@ def _mcap_columns(path: Path, layout) -> Dict[str, np.ndarray]:
     out: Dict[str, np.ndarray] = {}
     for c in layout["columns"]:
         name, kind = c["name"], c["kind"]
-        vals = _pick(messages[name.split(".", 1)[0]], _path_keys(name))
+        vals = _pick(messages[_topic_of(name)], _path_keys(name))
         if vals is None:
             vals = [None] * n
         if kind == "hex":
