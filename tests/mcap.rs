@@ -382,7 +382,8 @@ fn every_message_of_a_run_fits_its_channels_schema() {
         }
         *checked.entry(m.channel.topic.clone()).or_default() += 1;
     }
-    assert_eq!(checked.len(), 9, "{checked:?}");
+    assert_eq!(checked.len(), 10, "{checked:?}");
+    assert!(checked[topic::DEVICES] > 2000, "{checked:?}");
     assert!(checked[topic::TRUTH] > 2000, "{checked:?}");
     assert_eq!(checked[topic::SCENE], 1);
     assert_eq!(
