@@ -278,7 +278,7 @@ impl Default for GncConfig {
             final_upright_altitude_m: 10.0,
             final_max_tilt_deg: 4.0,
 
-            two_engine_enabled: true,
+            two_engine_enabled: false,
             two_engine_pair: [0, 2],
             two_engine_margin: 0.12,
             two_engine_saturation_s: 1.0,
