@@ -42,7 +42,6 @@ fn exported_rows(log: &std::path::Path) -> Vec<String> {
         .collect()
 }
 
-
 /// The schema hash of protocol v1 (docs/protocol.md of that version): what a v1 peer
 /// stamps in its headers and announces.
 const V1_SCHEMA_HASH: u64 = 0xa8f0_da5f_8f0a_ee6e;
@@ -314,7 +313,10 @@ fn a_peer_speaking_another_protocol_is_refused_by_name() {
     let r = report(&rep);
     assert_eq!(r["outcome"], "aborted");
     let e = r["error"].as_str().unwrap();
-    assert!(e.contains("v2") && e.contains("v1 (schema 0xa8f0da5f8f0aee6e)"), "{e}");
+    assert!(
+        e.contains("v2") && e.contains("v1 (schema 0xa8f0da5f8f0aee6e)"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -832,167 +832,337 @@ pub static FIELDS: &[Field] = &[
     },
     Field {
         since: 3,
-        ..packet!(Devices, "imu_t_ns", I64, IMU_N, |r, i| r.telemetry.sensors.imu[i].t_ns)
+        ..packet!(Devices, "imu_t_ns", I64, IMU_N, |r, i| r
+            .telemetry
+            .sensors
+            .imu[i]
+            .t_ns)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "imu_delta_v_x_body_m_s", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_v_body_m_s[0])
+        ..packet!(Devices, "imu_delta_v_x_body_m_s", F64, IMU_N, |r, i| r
+            .telemetry
+            .sensors
+            .imu[i]
+            .delta_v_body_m_s[0])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "imu_delta_v_y_body_m_s", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_v_body_m_s[1])
+        ..packet!(Devices, "imu_delta_v_y_body_m_s", F64, IMU_N, |r, i| r
+            .telemetry
+            .sensors
+            .imu[i]
+            .delta_v_body_m_s[1])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "imu_delta_v_z_body_m_s", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_v_body_m_s[2])
+        ..packet!(Devices, "imu_delta_v_z_body_m_s", F64, IMU_N, |r, i| r
+            .telemetry
+            .sensors
+            .imu[i]
+            .delta_v_body_m_s[2])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "imu_delta_theta_x_body_rad", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_theta_body_rad[0])
+        ..packet!(Devices, "imu_delta_theta_x_body_rad", F64, IMU_N, |r, i| r
+            .telemetry
+            .sensors
+            .imu[i]
+            .delta_theta_body_rad[0])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "imu_delta_theta_y_body_rad", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_theta_body_rad[1])
+        ..packet!(Devices, "imu_delta_theta_y_body_rad", F64, IMU_N, |r, i| r
+            .telemetry
+            .sensors
+            .imu[i]
+            .delta_theta_body_rad[1])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "imu_delta_theta_z_body_rad", F64, IMU_N, |r, i| r.telemetry.sensors.imu[i].delta_theta_body_rad[2])
+        ..packet!(Devices, "imu_delta_theta_z_body_rad", F64, IMU_N, |r, i| r
+            .telemetry
+            .sensors
+            .imu[i]
+            .delta_theta_body_rad[2])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "imu_valid", U32, IMU_N, |r, i| r.telemetry.sensors.imu[i].valid)
+        ..packet!(Devices, "imu_valid", U32, IMU_N, |r, i| r
+            .telemetry
+            .sensors
+            .imu[i]
+            .valid)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "imu_flags", U32, IMU_N, |r, i| r.telemetry.sensors.imu[i].flags)
+        ..packet!(Devices, "imu_flags", U32, IMU_N, |r, i| r
+            .telemetry
+            .sensors
+            .imu[i]
+            .flags)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "star_tracker_count", U32, |r| r.telemetry.sensors.star_tracker_count)
+        ..packet!(Devices, "star_tracker_count", U32, |r| r
+            .telemetry
+            .sensors
+            .star_tracker_count)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "star_tracker_t_ns", I64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].t_ns)
+        ..packet!(Devices, "star_tracker_t_ns", I64, ST_N, |r, i| r
+            .telemetry
+            .sensors
+            .star_tracker[i]
+            .t_ns)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "star_tracker_q_w_mci_from_body", F64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[0])
+        ..packet!(
+            Devices,
+            "star_tracker_q_w_mci_from_body",
+            F64,
+            ST_N,
+            |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[0]
+        )
     },
     Field {
         since: 3,
-        ..packet!(Devices, "star_tracker_q_x_mci_from_body", F64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[1])
+        ..packet!(
+            Devices,
+            "star_tracker_q_x_mci_from_body",
+            F64,
+            ST_N,
+            |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[1]
+        )
     },
     Field {
         since: 3,
-        ..packet!(Devices, "star_tracker_q_y_mci_from_body", F64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[2])
+        ..packet!(
+            Devices,
+            "star_tracker_q_y_mci_from_body",
+            F64,
+            ST_N,
+            |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[2]
+        )
     },
     Field {
         since: 3,
-        ..packet!(Devices, "star_tracker_q_z_mci_from_body", F64, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[3])
+        ..packet!(
+            Devices,
+            "star_tracker_q_z_mci_from_body",
+            F64,
+            ST_N,
+            |r, i| r.telemetry.sensors.star_tracker[i].q_mci_from_body[3]
+        )
     },
     Field {
         since: 3,
-        ..packet!(Devices, "star_tracker_valid", U32, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].valid)
+        ..packet!(Devices, "star_tracker_valid", U32, ST_N, |r, i| r
+            .telemetry
+            .sensors
+            .star_tracker[i]
+            .valid)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "star_tracker_flags", U32, ST_N, |r, i| r.telemetry.sensors.star_tracker[i].flags)
+        ..packet!(Devices, "star_tracker_flags", U32, ST_N, |r, i| r
+            .telemetry
+            .sensors
+            .star_tracker[i]
+            .flags)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "laser_altimeter_count", U32, |r| r.telemetry.sensors.laser_altimeter_count)
+        ..packet!(Devices, "laser_altimeter_count", U32, |r| r
+            .telemetry
+            .sensors
+            .laser_altimeter_count)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "laser_altimeter_t_ns", I64, ALT_N, |r, i| r.telemetry.sensors.laser_altimeter[i].t_ns)
+        ..packet!(Devices, "laser_altimeter_t_ns", I64, ALT_N, |r, i| r
+            .telemetry
+            .sensors
+            .laser_altimeter[i]
+            .t_ns)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "laser_altimeter_range_m", F64, ALT_N, |r, i| r.telemetry.sensors.laser_altimeter[i].range_m)
+        ..packet!(Devices, "laser_altimeter_range_m", F64, ALT_N, |r, i| r
+            .telemetry
+            .sensors
+            .laser_altimeter[i]
+            .range_m)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "laser_altimeter_valid", U32, ALT_N, |r, i| r.telemetry.sensors.laser_altimeter[i].valid)
+        ..packet!(Devices, "laser_altimeter_valid", U32, ALT_N, |r, i| r
+            .telemetry
+            .sensors
+            .laser_altimeter[i]
+            .valid)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "laser_altimeter_flags", U32, ALT_N, |r, i| r.telemetry.sensors.laser_altimeter[i].flags)
+        ..packet!(Devices, "laser_altimeter_flags", U32, ALT_N, |r, i| r
+            .telemetry
+            .sensors
+            .laser_altimeter[i]
+            .flags)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "rf_altimeter_count", U32, |r| r.telemetry.sensors.rf_altimeter_count)
+        ..packet!(Devices, "rf_altimeter_count", U32, |r| r
+            .telemetry
+            .sensors
+            .rf_altimeter_count)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "rf_altimeter_t_ns", I64, ALT_N, |r, i| r.telemetry.sensors.rf_altimeter[i].t_ns)
+        ..packet!(Devices, "rf_altimeter_t_ns", I64, ALT_N, |r, i| r
+            .telemetry
+            .sensors
+            .rf_altimeter[i]
+            .t_ns)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "rf_altimeter_range_m", F64, ALT_N, |r, i| r.telemetry.sensors.rf_altimeter[i].range_m)
+        ..packet!(Devices, "rf_altimeter_range_m", F64, ALT_N, |r, i| r
+            .telemetry
+            .sensors
+            .rf_altimeter[i]
+            .range_m)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "rf_altimeter_valid", U32, ALT_N, |r, i| r.telemetry.sensors.rf_altimeter[i].valid)
+        ..packet!(Devices, "rf_altimeter_valid", U32, ALT_N, |r, i| r
+            .telemetry
+            .sensors
+            .rf_altimeter[i]
+            .valid)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "rf_altimeter_flags", U32, ALT_N, |r, i| r.telemetry.sensors.rf_altimeter[i].flags)
+        ..packet!(Devices, "rf_altimeter_flags", U32, ALT_N, |r, i| r
+            .telemetry
+            .sensors
+            .rf_altimeter[i]
+            .flags)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_count", U32, |r| r.telemetry.sensors.velocimeter_count)
+        ..packet!(Devices, "velocimeter_count", U32, |r| r
+            .telemetry
+            .sensors
+            .velocimeter_count)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_t_ns", I64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].t_ns)
+        ..packet!(Devices, "velocimeter_t_ns", I64, VEL_N, |r, i| r
+            .telemetry
+            .sensors
+            .velocimeter[i]
+            .t_ns)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_beam0_los_velocity_m_s", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].los_velocity_m_s[0])
+        ..packet!(
+            Devices,
+            "velocimeter_beam0_los_velocity_m_s",
+            F64,
+            VEL_N,
+            |r, i| r.telemetry.sensors.velocimeter[i].los_velocity_m_s[0]
+        )
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_beam0_range_m", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].range_m[0])
+        ..packet!(Devices, "velocimeter_beam0_range_m", F64, VEL_N, |r, i| r
+            .telemetry
+            .sensors
+            .velocimeter[i]
+            .range_m[0])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_beam0_valid", U32, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].valid[0])
+        ..packet!(Devices, "velocimeter_beam0_valid", U32, VEL_N, |r, i| r
+            .telemetry
+            .sensors
+            .velocimeter[i]
+            .valid[0])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_beam1_los_velocity_m_s", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].los_velocity_m_s[1])
+        ..packet!(
+            Devices,
+            "velocimeter_beam1_los_velocity_m_s",
+            F64,
+            VEL_N,
+            |r, i| r.telemetry.sensors.velocimeter[i].los_velocity_m_s[1]
+        )
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_beam1_range_m", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].range_m[1])
+        ..packet!(Devices, "velocimeter_beam1_range_m", F64, VEL_N, |r, i| r
+            .telemetry
+            .sensors
+            .velocimeter[i]
+            .range_m[1])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_beam1_valid", U32, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].valid[1])
+        ..packet!(Devices, "velocimeter_beam1_valid", U32, VEL_N, |r, i| r
+            .telemetry
+            .sensors
+            .velocimeter[i]
+            .valid[1])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_beam2_los_velocity_m_s", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].los_velocity_m_s[2])
+        ..packet!(
+            Devices,
+            "velocimeter_beam2_los_velocity_m_s",
+            F64,
+            VEL_N,
+            |r, i| r.telemetry.sensors.velocimeter[i].los_velocity_m_s[2]
+        )
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_beam2_range_m", F64, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].range_m[2])
+        ..packet!(Devices, "velocimeter_beam2_range_m", F64, VEL_N, |r, i| r
+            .telemetry
+            .sensors
+            .velocimeter[i]
+            .range_m[2])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_beam2_valid", U32, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].valid[2])
+        ..packet!(Devices, "velocimeter_beam2_valid", U32, VEL_N, |r, i| r
+            .telemetry
+            .sensors
+            .velocimeter[i]
+            .valid[2])
     },
     Field {
         since: 3,
-        ..packet!(Devices, "velocimeter_flags", U32, VEL_N, |r, i| r.telemetry.sensors.velocimeter[i].flags)
+        ..packet!(Devices, "velocimeter_flags", U32, VEL_N, |r, i| r
+            .telemetry
+            .sensors
+            .velocimeter[i]
+            .flags)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "thruster_attitude_mode", U32, |r| r.command.attitude_mode)
+        ..packet!(Devices, "thruster_attitude_mode", U32, |r| r
+            .command
+            .attitude_mode)
     },
     Field {
         since: 3,
-        ..packet!(Devices, "thruster_on_time_ns", U64, THR_N, |r, i| r.command.thruster_on_time_ns[i])
+        ..packet!(Devices, "thruster_on_time_ns", U64, THR_N, |r, i| r
+            .command
+            .thruster_on_time_ns[i])
     },
     Field {
         since: 3,

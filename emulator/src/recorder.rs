@@ -680,7 +680,9 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
     }
     let v3 = false;
     if bytes.len() < 12 || &bytes[..8] != MAGIC {
-        return Err(not_log("missing OILSLOG5 magic (this program reads OILSLOG5)"));
+        return Err(not_log(
+            "missing OILSLOG5 magic (this program reads OILSLOG5)",
+        ));
     }
     let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
     let header_start: usize = if v3 { 12 } else { 16 };
@@ -870,7 +872,11 @@ pub(crate) mod tests {
         // Protocol v2: every device sample slot and the thruster command.
         let f = &mut r.telemetry.sensors;
         (f.imu_count, f.star_tracker_count) = (8, 2);
-        (f.laser_altimeter_count, f.rf_altimeter_count, f.velocimeter_count) = (1, 2, 1);
+        (
+            f.laser_altimeter_count,
+            f.rf_altimeter_count,
+            f.velocimeter_count,
+        ) = (1, 2, 1);
         for (k, s) in f.imu.iter_mut().enumerate() {
             s.t_ns = 5_000_000 + k as i64;
             s.delta_v_body_m_s = [next(), next(), next()];
@@ -882,7 +888,12 @@ pub(crate) mod tests {
             s.q_mci_from_body = [next(), next(), next(), next()];
             (s.valid, s.flags) = (1, k as u32 + 20);
         }
-        for (k, s) in f.laser_altimeter.iter_mut().chain(&mut f.rf_altimeter).enumerate() {
+        for (k, s) in f
+            .laser_altimeter
+            .iter_mut()
+            .chain(&mut f.rf_altimeter)
+            .enumerate()
+        {
             s.t_ns = 7_000_000 + k as i64;
             s.range_m = next();
             (s.valid, s.flags) = (k as u32 % 2, k as u32 + 30);

@@ -329,7 +329,8 @@ impl Guidance {
             let frac = ((v - v_end) / span).clamp(0.0, 1.0);
             let r = radius + h_end + (h0 - h_end) * frac;
             let a_t = force / m;
-            let a_up = (c.moon_mu_m3_s2 / (r * r) - v * v / r).clamp(0.0, c.rough_max_up_frac * a_t);
+            let a_up =
+                (c.moon_mu_m3_s2 / (r * r) - v * v / r).clamp(0.0, c.rough_max_up_frac * a_t);
             ((a_t * a_t - a_up * a_up).max(0.0).sqrt(), r)
         };
         // At most an hour of braking is predicted (the loop must end).
@@ -412,7 +413,8 @@ impl Guidance {
         if let Some(geo) = self.site_range(nav) {
             if nav.t_s - self.rough_solved_t_s >= self.cfg.rough_solve_period_s {
                 let mass = nav.mass_kg.max(self.cfg.dry_mass_kg);
-                self.rough_throttle = self.solve_rough_throttle(nav, accel_avail * mass, geo.range_m);
+                self.rough_throttle =
+                    self.solve_rough_throttle(nav, accel_avail * mass, geo.range_m);
                 self.rough_solved_t_s = nav.t_s;
             }
             throttle = self.rough_throttle;

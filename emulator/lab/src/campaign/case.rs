@@ -538,3 +538,34 @@ fn sample(trace: &mut Trace, plant: &Plant) {
     trace.horizontal_speed_m_s.push(horizontal as f32);
     trace.vertical_speed_m_s.push(vertical as f32);
 }
+
+#[cfg(test)]
+mod tests {
+    use super::site_position_m;
+    use oils_emulator::config::ScenarioConfig;
+    use oils_emulator::log_fields::Site;
+
+    /// A point a known distance from the site, in the site frame, comes back as that
+    /// distance along and across the approach azimuth, also once the Moon has turned.
+    #[test]
+    fn site_position_is_along_and_across_the_approach() {
+        let mut scenario = ScenarioConfig::default();
+        for (azimuth, east, north, down, cross) in [
+            // Southbound (the default): past the site is south, up x track is east.
+            (180.0, 300.0, -1_000.0, 1_000.0, 300.0),
+            // Eastbound: past the site is east, up x track is north.
+            (90.0, 1_000.0, 300.0, 1_000.0, 300.0),
+        ] {
+            scenario.site.approach_azimuth_deg = azimuth;
+            let site = Site::of_scenario(&scenario);
+            for t_s in [0.0, 900.0] {
+                let p_site = nalgebra::Vector3::new(east, north, 0.0);
+                let p_mci =
+                    site.rotation.mcmf_from_mci(t_s).inverse() * site.frame.mcmf_from_site(&p_site);
+                let (d, c) = site_position_m(&scenario, &p_mci, t_s);
+                assert!((d - down).abs() < 1e-6, "az {azimuth} t {t_s}: {d}");
+                assert!((c - cross).abs() < 1e-6, "az {azimuth} t {t_s}: {c}");
+            }
+        }
+    }
+}

@@ -295,10 +295,7 @@ fn footprint(
     let err = backend_err(path);
     let at = |r: &CaseResult| -> Option<(f64, f64)> {
         r.touchdown?;
-        let p = (
-            r.downrange_m?,
-            r.crossrange_m?,
-        );
+        let p = (r.downrange_m?, r.crossrange_m?);
         (p.0.is_finite() && p.1.is_finite()).then_some(p)
     };
     let landed_pts: Vec<(f64, f64)> = merged
