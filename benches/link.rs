@@ -124,7 +124,11 @@ fn bench_bare(c: &mut Criterion) {
     let mut seq = 0u64;
     let mut round_trip = || {
         seq += 1;
-        publ.send_copy(Ping { seq, body: [0; 146] }).unwrap();
+        publ.send_copy(Ping {
+            seq,
+            body: [0; 146],
+        })
+        .unwrap();
         loop {
             if let Some(s) = sub.receive().unwrap() {
                 if s.seq == seq {
