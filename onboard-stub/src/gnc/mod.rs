@@ -365,7 +365,7 @@ impl GncConfig {
                 return err("site", "latitude within (-90, 90) deg, finite longitude");
             }
         }
-        if !(self.rough_gain_cross_speed_1_s >= 0.0) {
+        if self.rough_gain_cross_speed_1_s.is_nan() || self.rough_gain_cross_speed_1_s < 0.0 {
             return err("rough_gain_cross_speed_1_s", ">= 0");
         }
         if self.fine_max_tgo_s < self.fine_min_tgo_s {
