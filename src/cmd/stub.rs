@@ -34,7 +34,7 @@ pub struct StubArgs {
     pub fsw_blake3: Option<String>,
     /// The scenario's landing site the reference GNC flies to, `LAT,LON` in degrees
     /// (`oils run` passes its scenario's `[site]`; default: the default scenario's).
-    #[arg(long, value_name = "LAT,LON", value_parser = parse_site)]
+    #[arg(long, value_name = "LAT,LON", value_parser = parse_site, allow_hyphen_values = true)]
     pub site: Option<oils_onboard_stub::gnc::SiteTarget>,
     /// Write how the stub ended to FILE as JSON (`error`, `fsw_failure` with the step and
     /// the status a failed step returned, `commands`, `last_step`); `oils run` reads it

@@ -104,8 +104,8 @@ pub fn spawn(
     }
     // The reference GNC flies to the scenario's site (exact: Rust prints the shortest
     // representation that reads back to the same f64).
-    p.arg("--site").arg(format!(
-        "{},{}",
+    p.arg(format!(
+        "--site={},{}",
         cfg.scenario.site.latitude_deg, cfg.scenario.site.longitude_deg
     ));
     if let Some(params) = &cfg.fsw_params {
