@@ -469,6 +469,13 @@ impl Guidance {
                 c.fine_min_tgo_s
             }
             .clamp(c.fine_min_tgo_s, c.fine_max_tgo_s);
+            // Out of reach (rough braking arrived too close: a thrust shortfall beyond
+            // the range control's margin): no arc within the thrust limits ends there.
+            // Safety first: land long, on the shortest feasible arc along the track.
+            if v > 1e-3 && tgo < self.shortest_feasible_tgo(nav, max_accel, min_accel) {
+                self.choose_site_on_track(nav, max_accel, min_accel);
+                return;
+            }
             let surface_r = nav.pos_mci_m.norm() - nav.altitude_m;
             self.site = Some(LandingSite {
                 surface_mci_m: up_site * surface_r,
@@ -479,6 +486,12 @@ impl Guidance {
             });
             return;
         }
+        self.choose_site_on_track(nav, max_accel, min_accel);
+    }
+
+    /// The shortest fine-braking time-to-go (1 s grid) whose nominal E-guidance arc
+    /// stays within `fine_accel_fraction` of the maximum and above the throttle floor.
+    fn shortest_feasible_tgo(&self, nav: &NavSolution, max_accel: f64, min_accel: f64) -> f64 {
         let c = &self.cfg;
         let v = nav.horizontal_velocity_mci_m_s().norm();
         let v_up = nav.vertical_speed_m_s();
@@ -509,6 +522,14 @@ impl Guidance {
             }
             candidate += 1.0;
         }
+        tgo
+    }
+
+    /// Without a reachable scenario site: a site on the ground track `V T / 2` ahead.
+    fn choose_site_on_track(&mut self, nav: &NavSolution, max_accel: f64, min_accel: f64) {
+        let c = &self.cfg;
+        let v = nav.horizontal_velocity_mci_m_s().norm();
+        let tgo = self.shortest_feasible_tgo(nav, max_accel, min_accel);
         let down = downrange_unit(nav);
         let ground = nav.pos_mci_m + down * (0.5 * v * tgo);
         let up_site = ground.normalize();
