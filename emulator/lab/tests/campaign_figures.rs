@@ -42,7 +42,7 @@ fn case(index: Option<u64>, landed: bool, at_m: (f64, f64), applied: &[(&str, f6
             tilt_deg: 0.2,
         }),
         propellant_used_kg: 890.0 + at_m.0 / 1000.0,
-        downrange_m: Some(1.0e6 + at_m.0),
+        downrange_m: Some(at_m.0),
         crossrange_m: Some(at_m.1),
         fault_events: 0,
         faults: vec![],
