@@ -72,6 +72,11 @@ pub struct NavFilterConfig {
     pub rf_beam_body: [f64; 3],
     /// See `rf_beam_body`.
     pub rf_position_body_m: [f64; 3],
+    /// RF altimeter cone: half angle (rad) and ring rays around the axis; the device
+    /// returns the nearest of the axis and the ring rays (`docs/sensors.md`).
+    pub rf_half_cone_rad: f64,
+    /// See `rf_half_cone_rad`.
+    pub rf_ring_rays: usize,
     /// RF altimeter noise `c + k range`.
     pub rf_noise_m: f64,
     /// See `rf_noise_m`.
@@ -144,6 +149,8 @@ impl Default for NavFilterConfig {
             laser_noise_frac: 0.001,
             rf_beam_body: [0.0, 0.0, -1.0],
             rf_position_body_m: [0.0, 0.0, -0.8],
+            rf_half_cone_rad: 10f64.to_radians(),
+            rf_ring_rays: 6,
             rf_noise_m: 1.0,
             rf_noise_frac: 0.005,
             velo_beams_body: default_velo_beams(),
@@ -247,6 +254,10 @@ struct Gate {
     rej_sigma: [f64; GATE_WINDOW],
     /// Ground-height offset attributed to this channel's beam by a re-accepted step, m.
     ground_offset_m: f64,
+    /// Variance of that offset (the mean of `reaccept_after` innovations), m^2.
+    ground_offset_var: f64,
+    /// Variance of the last re-accepted mean innovation.
+    reaccept_var: f64,
 }
 
 /// The error-state Kalman filter.
@@ -271,6 +282,24 @@ pub struct NavFilter {
 
 fn v3(a: [f64; 3]) -> Vector3<f64> {
     Vector3::new(a[0], a[1], a[2])
+}
+
+/// Largest RF ring used.
+const MAX_RING: usize = 16;
+
+/// The device's frame about a beam axis (as `emulator/src/sensors/devices.rs`).
+fn frame_about(axis: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+    let z = axis.normalize();
+    let seed = if z.x.abs() <= z.y.abs() && z.x.abs() <= z.z.abs() {
+        Vector3::x()
+    } else if z.y.abs() <= z.z.abs() {
+        Vector3::y()
+    } else {
+        Vector3::z()
+    };
+    let x = seed.cross(&z).normalize();
+    let y = z.cross(&x);
+    (x, y, z)
 }
 
 fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
@@ -549,6 +578,7 @@ impl NavFilter {
                 sum += g.rej[i];
             }
             if hi - lo <= spread_max * sig {
+                g.reaccept_var = sig * sig / k as f64;
                 g.stats.reaccepted += 1;
                 g.stats.accepted += 1;
                 g.stats.consecutive_rejected = 0;
@@ -592,28 +622,59 @@ impl NavFilter {
         };
         let hs = self.at(a.t_ns);
         let rot = hs.q.to_rotation_matrix().into_inner();
-        let ub = v3(beam).normalize();
         let pb = v3(pos);
-        let d = rot * ub;
         let o = hs.r + rot * pb;
-        let on = o.norm();
-        let n = o / on;
-        let cosi = -n.dot(&d);
-        if cosi < 0.2 {
-            return; // beam near the horizon: the flat-ground model does not hold
-        }
         let ground = c.moon_radius_m + c.terrain_height_m + self.gates[ch as usize].ground_offset_m;
-        let h = on - ground;
-        let pred = h / cosi;
-        // d(range)/dr = n^T / cos; d/dθ = n^T(-R[p]x)/cos - (h/cos^2) n^T R [u]x.
+        // The rays: the beam, and for the RF altimeter its ring (the nearest return wins).
+        let (fx, fy, fz) = frame_about(&v3(beam));
+        let (ring, half) = match ch {
+            Channel::Laser => (0, 0.0),
+            _ => (c.rf_ring_rays.min(MAX_RING), c.rf_half_cone_rad),
+        };
+        let (sh, chc) = half.sin_cos();
+        // (range, ray body, normal at the hit, cos incidence)
+        let mut best: Option<(f64, Vector3<f64>, Vector3<f64>, f64)> = None;
+        let oo = o.norm_squared() - ground * ground;
+        for k in 0..=ring {
+            let ub = if k == 0 {
+                fz
+            } else {
+                let phi = std::f64::consts::TAU * (k - 1) as f64 / ring as f64;
+                fz * chc + (fx * phi.cos() + fy * phi.sin()) * sh
+            };
+            let d = rot * ub;
+            // Ray-sphere: |o + ρ d| = ground, nearest root.
+            let od = o.dot(&d);
+            let disc = od * od - oo;
+            if disc <= 0.0 || od >= 0.0 {
+                continue;
+            }
+            let range = -od - disc.sqrt();
+            if range <= 0.0 {
+                continue;
+            }
+            let nh = (o + d * range) / ground;
+            let cosi = -nh.dot(&d);
+            if cosi < 0.2 {
+                continue; // near grazing: the model is too sensitive to trust
+            }
+            if best.is_none_or(|b| range < b.0) {
+                best = Some((range, ub, nh, cosi));
+            }
+        }
+        let Some((pred, ub, nh, cosi)) = best else {
+            return;
+        };
+        // d(range)/dr = nh^T / cos; d/dθ = nh^T (-R[p]x - range R[u]x) / cos, with nh the
+        // normal at the hit point and cos the incidence cosine.
         let mut hrow = Row::zeros();
-        let dr = n.transpose() / cosi;
-        let dth = (n.transpose() * (-rot * skew(&pb))) / cosi
-            - (n.transpose() * rot * skew(&ub)) * (h / (cosi * cosi));
+        let dr = nh.transpose() / cosi;
+        let dth = (nh.transpose() * (-rot * (skew(&pb) + skew(&ub) * pred))) / cosi;
         hrow.fixed_view_mut::<1, 3>(0, I_R).copy_from(&dr);
         hrow.fixed_view_mut::<1, 3>(0, I_TH).copy_from(&dth);
         let sig = n0 + nk * a.range_m;
-        let r = sig * sig + c.ground_model_sigma_m.powi(2);
+        let r =
+            sig * sig + c.ground_model_sigma_m.powi(2) + self.gates[ch as usize].ground_offset_var;
         let mut y = a.range_m - pred;
         let s = (hrow * self.p * hrow.transpose())[(0, 0)] + r;
         let (ok, shift) = self.gate_scalar(ch, y, s);
@@ -622,7 +683,9 @@ impl NavFilter {
         }
         if shift != 0.0 {
             // A consistent step: the ground under this beam moved by -shift * cos.
-            self.gates[ch as usize].ground_offset_m -= shift * cosi;
+            let g = &mut self.gates[ch as usize];
+            g.ground_offset_m -= shift * cosi;
+            g.ground_offset_var += g.reaccept_var * cosi * cosi;
             y -= shift;
         }
         self.update_scalar(&hrow, y, r);
@@ -654,8 +717,15 @@ impl NavFilter {
             1 => Channel::Velo1,
             _ => Channel::Velo2,
         };
-        let (ok, _) = self.gate_scalar(ch, y, s);
+        let (ok, shift) = self.gate_scalar(ch, y, s);
         if ok {
+            if shift != 0.0 {
+                // A genuine, consistent offset: open the velocity covariance along the
+                // beam to it before the update.
+                let dd = d * d.transpose() * (shift * shift);
+                let mut pv = self.p.fixed_view_mut::<3, 3>(I_V, I_V);
+                pv += dd;
+            }
             self.update_scalar(&hrow, y, r);
         }
     }
