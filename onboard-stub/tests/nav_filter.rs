@@ -315,3 +315,37 @@ fn nav_filter_step_does_not_allocate() {
     std::hint::black_box(sum);
     assert_eq!(after - before, 0, "step allocated {} times", after - before);
 }
+
+/// A sustained offset on one velocimeter beam (+0.3 m/s from 3 km on, 30 sigma) is not
+/// locked out: rejected `reaccept_after - 1` times, then re-accepted and used again.
+#[test]
+fn nav_filter_never_locks_out_a_velocimeter_beam() {
+    let recs = recording();
+    let k0 = laser_record_below(recs, 3000.0);
+    let n = NavFilterConfig::default().reaccept_after;
+    let clean = fly(recs, &mut filter(1), |_, _| {});
+    let off = fly(recs, &mut filter(1), |k, t| {
+        if k >= k0 {
+            for v in t.sensors.velocimeter.iter_mut() {
+                v.los_velocity_m_s[0] += 0.3;
+            }
+        }
+    });
+    let c = clean.est[k0 - 1].channels[Channel::Velo0 as usize];
+    let first = off.est[k0..]
+        .iter()
+        .position(|e| e.channels[Channel::Velo0 as usize].reaccepted > c.reaccepted)
+        .map(|i| i + k0)
+        .expect("never re-accepted");
+    let at = off.est[first].channels[Channel::Velo0 as usize];
+    let end = off.est.last().unwrap().channels[Channel::Velo0 as usize];
+    let used_after = end.accepted - at.accepted;
+    eprintln!(
+        "velocimeter offset at record {k0}: re-accepted at record {first} {at:?}; end {end:?}"
+    );
+    assert_eq!(at.rejected - c.rejected, u64::from(n - 1));
+    assert!(
+        used_after > 500,
+        "beam 0 used {used_after} times after the re-accept"
+    );
+}
