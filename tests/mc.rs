@@ -289,7 +289,9 @@ fn results_hold_one_row_per_case_the_summary_and_the_plots() {
         "outcome",
         "digest",
         "vertical_speed_mps",
-        "position_error_m",
+        "site_error_m",
+        "downrange_error_m",
+        "crossrange_error_m",
         "propellant_used_kg",
         "applied_altitude_m",
     ] {

@@ -4,7 +4,7 @@
 
 use crate::c_library::{CLibraryError, CLibraryFsw};
 use crate::fsw::{FlightSoftware, FswSpec};
-use crate::gnc::{GncConfig, GncConfigError, ReferenceGnc};
+use crate::gnc::{GncConfig, GncConfigError, ReferenceGnc, SiteTarget};
 use crate::playback::ProfilePlayback;
 use oils_shared::profile::{ProfileError, ProfileRules, ThrustProfile};
 use std::path::Path;
@@ -33,26 +33,39 @@ pub const MAX_FSW_PARAMS_BYTES: u64 = 1 << 20;
 /// `profile` is for playback (the file and the rules it is read with, see
 /// `oils_shared::profile`); `fsw_params` (a text file of at most
 /// [`MAX_FSW_PARAMS_BYTES`]) and `run_id` are handed to a C library's `oils_fsw_init`.
+/// `site`: the scenario's landing site, which the reference GNC flies to (`None`: the
+/// default scenario's, [`SiteTarget::CHANDRAYAAN_3`]); a C library is not told it.
 pub fn build_fsw(
     spec: &FswSpec,
     profile: Option<(&Path, &ProfileRules)>,
     fsw_params: Option<&Path>,
     run_id: u64,
+    site: Option<SiteTarget>,
 ) -> Result<Box<dyn FlightSoftware>, FswBuildError> {
-    build_fsw_expecting(spec, profile, fsw_params, run_id, None)
+    build_fsw_expecting(spec, profile, fsw_params, run_id, None, site)
+}
+
+/// The reference GNC's configuration for a run whose scenario names `site`.
+pub fn gnc_config(site: Option<SiteTarget>) -> GncConfig {
+    let mut cfg = GncConfig::default();
+    if let Some(site) = site {
+        cfg.site = Some(site);
+    }
+    cfg
 }
 
 /// [`build_fsw`]; a C library must also have the BLAKE3 `c_blake3` when given (see
-/// [`CLibraryFsw::load_expecting`]).
+/// [`CLibraryFsw::load_expecting`]); `site` as for [`build_fsw`].
 pub fn build_fsw_expecting(
     spec: &FswSpec,
     profile: Option<(&Path, &ProfileRules)>,
     fsw_params: Option<&Path>,
     run_id: u64,
     c_blake3: Option<&str>,
+    site: Option<SiteTarget>,
 ) -> Result<Box<dyn FlightSoftware>, FswBuildError> {
     match spec {
-        FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(GncConfig::default())?)),
+        FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(gnc_config(site))?)),
         FswSpec::CLibrary(path) => {
             let params = match fsw_params {
                 Some(p) => read_params(p)?,

@@ -26,6 +26,9 @@ pub struct StubOptions {
     /// For a C library: refuse the file unless its BLAKE3 is this (`oils run` passes the
     /// hash it puts in the report).
     pub fsw_blake3: Option<String>,
+    /// The scenario's landing site the reference GNC flies to (`None`: the default
+    /// scenario's).
+    pub site: Option<crate::gnc::SiteTarget>,
     /// busy, event or hybrid; `None`: what the emulator announces.
     pub wait: Option<String>,
     /// Give up after this long without telemetry, milliseconds.
@@ -46,6 +49,7 @@ impl StubOptions {
             max_thrust_n: RATED_THRUST_N,
             fsw_params: None,
             fsw_blake3: None,
+            site: None,
             wait: None,
             timeout_ms: 5000,
             rt_priority: None,
@@ -111,6 +115,7 @@ pub fn run_stub(args: &StubOptions, stop: &AtomicBool) -> Result<StubSummary, Jo
         args.fsw_params.as_deref(),
         run_id,
         args.fsw_blake3.as_deref(),
+        args.site,
     )?;
     let node = create_node("oils-onboard-stub")?;
     let link = StubLink::open(&node, run_id, wait, args.startup_timeout_ms, stop)?;

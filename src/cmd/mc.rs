@@ -438,7 +438,7 @@ fn print_summary(merged: &Merged, dir: &Path) {
         ("vertical_speed_mps", "m/s"),
         ("horizontal_speed_mps", "m/s"),
         ("tilt_deg", "deg"),
-        ("position_error_m", "m"),
+        ("site_error_m", "m"),
         ("propellant_used_kg", "kg"),
     ] {
         println!("{}", fmt_stat(merged, name, unit));

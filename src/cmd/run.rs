@@ -549,6 +549,7 @@ fn fly_in_process(
         cfg.fsw_params.as_deref(),
         run_id,
         fsw_library.map(|l| l.blake3.as_str()),
+        Some(oils_lab::onboard::site_target(&cfg.scenario)),
     )
     .map_err(|e| SessionError::Onboard(format!("building the flight software: {e}")))?;
     let extras = |observer| Extras {

@@ -32,6 +32,10 @@ pub struct StubArgs {
     /// (`oils run` passes the hash it records in the report).
     #[arg(long, value_name = "HEX")]
     pub fsw_blake3: Option<String>,
+    /// The scenario's landing site the reference GNC flies to, `LAT,LON` in degrees
+    /// (`oils run` passes its scenario's `[site]`; default: the default scenario's).
+    #[arg(long, value_name = "LAT,LON", value_parser = parse_site, allow_hyphen_values = true)]
+    pub site: Option<oils_onboard_stub::gnc::SiteTarget>,
     /// Write how the stub ended to FILE as JSON (`error`, `fsw_failure` with the step and
     /// the status a failed step returned, `commands`, `last_step`); `oils run` reads it
     /// into its report.
@@ -61,12 +65,28 @@ impl From<&StubArgs> for StubOptions {
             max_thrust_n: a.max_thrust_n,
             fsw_params: a.fsw_params.clone(),
             fsw_blake3: a.fsw_blake3.clone(),
+            site: a.site,
             wait: a.wait.clone(),
             timeout_ms: a.timeout_ms,
             rt_priority: a.rt_priority,
             startup_timeout_ms: a.startup_timeout_ms,
         }
     }
+}
+
+/// `LAT,LON` in degrees.
+fn parse_site(s: &str) -> Result<oils_onboard_stub::gnc::SiteTarget, String> {
+    let bad = || format!("{s}: expected LAT,LON in degrees");
+    let (lat, lon) = s.split_once(',').ok_or_else(bad)?;
+    let lat: f64 = lat.trim().parse().map_err(|_| bad())?;
+    let lon: f64 = lon.trim().parse().map_err(|_| bad())?;
+    if !(lat.abs() < 90.0 && lon.is_finite()) {
+        return Err(bad());
+    }
+    Ok(oils_onboard_stub::gnc::SiteTarget {
+        latitude_deg: lat,
+        longitude_deg: lon,
+    })
 }
 
 /// Runs `oils stub`: joins the run and serves it; with `--outcome`, writes how it ended.

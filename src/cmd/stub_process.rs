@@ -102,6 +102,12 @@ pub fn spawn(
             .arg("--max-thrust-n")
             .arg(cfg.scenario.propulsion.max_thrust_n.to_string());
     }
+    // The reference GNC flies to the scenario's site (exact: Rust prints the shortest
+    // representation that reads back to the same f64).
+    p.arg(format!(
+        "--site={},{}",
+        cfg.scenario.site.latitude_deg, cfg.scenario.site.longitude_deg
+    ));
     if let Some(params) = &cfg.fsw_params {
         p.arg("--fsw-params").arg(params);
     }

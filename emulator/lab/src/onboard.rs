@@ -32,7 +32,18 @@ pub fn flight_software(
         cfg.profile.as_deref().map(|p| (p, &rules)),
         cfg.fsw_params.as_deref(),
         run_id,
+        Some(site_target(&cfg.scenario)),
     )
+}
+
+/// The scenario's landing site as the reference GNC is told it.
+pub fn site_target(
+    scenario: &oils_emulator::config::ScenarioConfig,
+) -> oils_onboard_stub::gnc::SiteTarget {
+    oils_onboard_stub::gnc::SiteTarget {
+        latitude_deg: scenario.site.latitude_deg,
+        longitude_deg: scenario.site.longitude_deg,
+    }
 }
 
 /// Flies `cfg` in this process (its link must be `inproc`) with the flight software it

@@ -310,14 +310,13 @@ pub fn write_campaign(
         );
     }
     if let Some([a, b]) = spec.requirements.and_then(|r| r.footprint_m) {
-        let nominal = &merged.nominal;
         let inside = merged
             .results
             .iter()
             .filter(|r| r.outcome == "landed")
             .filter_map(|r| {
-                let dx = r.downrange_m? - nominal.downrange_m?;
-                let dy = r.crossrange_m? - nominal.crossrange_m?;
+                let dx = r.downrange_m?;
+                let dy = r.crossrange_m?;
                 Some((dx / (0.5 * a)).powi(2) + (dy / (0.5 * b)).powi(2) <= 1.0)
             })
             .collect::<Vec<_>>();

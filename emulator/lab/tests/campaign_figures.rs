@@ -112,7 +112,7 @@ fn the_drivers_in_the_summary_name_the_cause_of_the_failures_first() {
     assert!(d[0].failure_rho.unwrap() > 0.3, "{:?}", d[0]);
     let json = serde_json::to_value(&m.summary).unwrap();
     assert_eq!(json["drivers"][0]["name"], "cause");
-    assert!(json["drivers"][0]["figures"]["position_error_m"].is_number());
+    assert!(json["drivers"][0]["figures"]["site_error_m"].is_number());
 }
 
 #[test]

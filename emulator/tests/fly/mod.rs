@@ -9,7 +9,17 @@ use std::sync::atomic::AtomicBool;
 /// Flies `cfg` in process with a fresh run id.
 pub fn try_fly(cfg: &RunConfig) -> Result<RunReport, session::SessionError> {
     let run_id = session::fresh_run_id();
-    let fsw = oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id).unwrap();
+    let fsw = oils_onboard_stub::build::build_fsw(
+        &cfg.fsw,
+        None,
+        None,
+        run_id,
+        Some(oils_onboard_stub::gnc::SiteTarget {
+            latitude_deg: cfg.scenario.site.latitude_deg,
+            longitude_deg: cfg.scenario.site.longitude_deg,
+        }),
+    )
+    .unwrap();
     session::run(
         cfg,
         run_id,

@@ -72,6 +72,19 @@ impl LandingSite {
     }
 }
 
+/// The scenario's site seen from the vehicle, along the surface.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SiteRange {
+    /// Great-circle arc from below the vehicle to the site on the reference sphere, m.
+    pub range_m: f64,
+    /// Horizontal unit vector towards the site along that great circle, `mci`.
+    pub to_site_mci: Vector3<f64>,
+    /// `up x to_site`: the normal of that great circle, `mci`.
+    pub normal_mci: Vector3<f64>,
+    /// Ground-relative velocity across that great circle, m/s.
+    pub cross_speed_m_s: f64,
+}
+
 /// What guidance asks for this step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GuidanceCommand {
@@ -95,6 +108,12 @@ pub struct Guidance {
     rough_accel_h_m_s2: f64,
     /// Attitude hold: (up, downrange) components of the held unit thrust direction.
     hold_dir: (f64, f64),
+    /// Rough braking: the throttle (fraction of the thrust available now) that the
+    /// range predictor last found, and when.
+    rough_throttle: f64,
+    rough_solved_t_s: f64,
+    /// The scenario's landing site, Moon-fixed unit vector (None: chosen on the track).
+    target_mcmf_unit: Option<Vector3<f64>>,
     site: Option<LandingSite>,
     held_accel_mci_m_s2: Vector3<f64>,
     vertical_integral_m_s2: f64,
@@ -128,6 +147,9 @@ impl Guidance {
             rough_start: (0.0, 0.0),
             rough_accel_h_m_s2: 0.0,
             hold_dir: (0.0, 1.0),
+            rough_throttle: cfg.rough_throttle_frac,
+            rough_solved_t_s: f64::NEG_INFINITY,
+            target_mcmf_unit: cfg.site.map(|s| s.unit_mcmf()),
             site: None,
             held_accel_mci_m_s2: Vector3::zeros(),
             vertical_integral_m_s2: 0.0,
@@ -213,7 +235,7 @@ impl Guidance {
                 let dir = nav.up_mci * self.hold_dir.0 - downrange_unit(nav) * self.hold_dir.1;
                 GuidanceCommand {
                     accel_mci_m_s2: dir * max_accel_m_s2,
-                    throttle_frac: Some(self.cfg.rough_throttle_frac),
+                    throttle_frac: Some(self.rough_throttle),
                 }
             }
             Phase::FineBraking => self.fine_braking(nav, max_accel_m_s2, min_accel_m_s2),
@@ -250,7 +272,156 @@ impl Guidance {
         }
     }
 
+    /// The site's unit vector (`mci`) at `t_s`: the Moon has turned it since `t = 0`.
+    fn site_unit_mci(&self, t_s: f64) -> Option<Vector3<f64>> {
+        let p = self.target_mcmf_unit?;
+        let (s, c) = (self.cfg.moon_rotation_rad_s * t_s).sin_cos();
+        Some(Vector3::new(c * p.x - s * p.y, s * p.x + c * p.y, p.z))
+    }
+
+    /// Where the scenario's site is seen from the vehicle (see [`SiteRange`]).
+    pub fn site_range(&self, nav: &NavSolution) -> Option<SiteRange> {
+        let site = self.site_unit_mci(nav.t_s)?;
+        let up = nav.up_mci;
+        let d = site - up * site.dot(&up);
+        let dn = d.norm();
+        let to_site = if dn > 1e-12 {
+            d / dn
+        } else {
+            downrange_unit(nav)
+        };
+        let normal = up.cross(&to_site);
+        Some(SiteRange {
+            range_m: self.cfg.moon_radius_m * dn.atan2(site.dot(&up)),
+            to_site_mci: to_site,
+            normal_mci: normal,
+            cross_speed_m_s: nav.horizontal_velocity_mci_m_s().dot(&normal),
+        })
+    }
+
+    /// Range control: predicted overshoot (metres, > 0: the braking arc would carry the
+    /// vehicle past its aim) of rough braking at a constant `throttle` (a fraction of
+    /// `thrust_n`, the thrust available now), then the attitude hold, then fine braking
+    /// covering `V T / 2` in its planned time `T`. Planar point mass: horizontal speed
+    /// relative to the ground, altitude on the reference profile (the vertical channel
+    /// tracks it, so the vertical thrust is `g - V^2/r`), mass falling with the flow of
+    /// the commanded thrust. Allocation-free: a fixed-step loop.
+    fn rough_overshoot_m(
+        &self,
+        throttle: f64,
+        nav: &NavSolution,
+        thrust_n: f64,
+        range_go_m: f64,
+    ) -> f64 {
+        let c = &self.cfg;
+        let (h0, v0) = self.rough_start;
+        let (h_end, v_end) = (c.rough_end_altitude_m, c.rough_end_speed_m_s);
+        let span = (v0 - v_end).max(1.0);
+        let radius = c.moon_radius_m;
+        let dt = c.rough_predict_step_s;
+        let force = throttle * thrust_n;
+        let mdot = force / (c.isp_s * 9.806_65);
+        let mut v = nav.horizontal_velocity_mci_m_s().norm();
+        let mut m = nav.mass_kg.max(c.dry_mass_kg);
+        let mut s = 0.0;
+        let mut a_h = 0.0;
+        let accel_h = |v: f64, m: f64| {
+            let frac = ((v - v_end) / span).clamp(0.0, 1.0);
+            let r = radius + h_end + (h0 - h_end) * frac;
+            let a_t = force / m;
+            let a_up =
+                (c.moon_mu_m3_s2 / (r * r) - v * v / r).clamp(0.0, c.rough_max_up_frac * a_t);
+            ((a_t * a_t - a_up * a_up).max(0.0).sqrt(), r)
+        };
+        // At most an hour of braking is predicted (the loop must end).
+        for _ in 0..(3600.0 / dt) as usize {
+            if v <= v_end {
+                break;
+            }
+            let (ah, r) = accel_h(v, m);
+            a_h = ah;
+            if a_h <= 1e-6 {
+                return f64::INFINITY;
+            }
+            let v_next = v - a_h * dt;
+            let scale = radius / r;
+            if v_next <= v_end {
+                let tau = (v - v_end) / a_h;
+                s += 0.5 * (v + v_end) * tau * scale;
+                v = v_end;
+                break;
+            }
+            s += 0.5 * (v + v_next) * dt * scale;
+            v = v_next;
+            m = (m - mdot * dt).max(c.dry_mass_kg);
+        }
+        // The attitude hold flies on at the same deceleration.
+        let hold = c.attitude_hold_s;
+        let v_fine = (v - a_h * hold).max(0.0);
+        s += 0.5 * (v + v_fine) * hold;
+        s + 0.5 * v_fine * c.fine_plan_tgo_s - range_go_m
+    }
+
+    /// The rough-braking throttle that puts fine braking's start `V T / 2` before the
+    /// site (regula falsi on the predictor, within the throttle limits).
+    fn solve_rough_throttle(&self, nav: &NavSolution, thrust_n: f64, range_go_m: f64) -> f64 {
+        let c = &self.cfg;
+        let (mut lo, mut hi) = (c.rough_min_throttle_frac, c.rough_max_throttle_frac);
+        let mut f_lo = self.rough_overshoot_m(lo, nav, thrust_n, range_go_m);
+        let mut f_hi = self.rough_overshoot_m(hi, nav, thrust_n, range_go_m);
+        if f_hi >= 0.0 {
+            return hi; // even full thrust arrives long: brake as hard as allowed
+        }
+        if f_lo <= 0.0 {
+            return lo;
+        }
+        let mut k = self.rough_throttle.clamp(lo, hi);
+        let mut side = 0;
+        for _ in 0..12 {
+            k = if f_lo.is_finite() {
+                (lo * f_hi - hi * f_lo) / (f_hi - f_lo)
+            } else {
+                0.5 * (lo + hi)
+            };
+            let f = self.rough_overshoot_m(k, nav, thrust_n, range_go_m);
+            if f.abs() < 10.0 || hi - lo < 1e-4 {
+                break;
+            }
+            if f > 0.0 {
+                lo = k;
+                f_lo = f;
+                if side == 1 {
+                    f_hi *= 0.5; // Illinois: keep the bracket shrinking from both ends
+                }
+                side = 1;
+            } else {
+                hi = k;
+                f_hi = f;
+                if side == -1 {
+                    f_lo *= 0.5;
+                }
+                side = -1;
+            }
+        }
+        k
+    }
+
     fn rough_braking(&mut self, nav: &NavSolution, accel_avail: f64) -> GuidanceCommand {
+        let mut throttle = self.cfg.rough_throttle_frac;
+        let mut cross_normal = Vector3::zeros();
+        let mut cross_speed = 0.0;
+        if let Some(geo) = self.site_range(nav) {
+            if nav.t_s - self.rough_solved_t_s >= self.cfg.rough_solve_period_s {
+                let mass = nav.mass_kg.max(self.cfg.dry_mass_kg);
+                self.rough_throttle =
+                    self.solve_rough_throttle(nav, accel_avail * mass, geo.range_m);
+                self.rough_solved_t_s = nav.t_s;
+            }
+            throttle = self.rough_throttle;
+            cross_normal = geo.normal_mci;
+            cross_speed = geo.cross_speed_m_s;
+        }
+        let accel_avail = accel_avail * throttle;
         let c = &self.cfg;
         let (h0, v0) = self.rough_start;
         let (h_end, v_end) = (c.rough_end_altitude_m, c.rough_end_speed_m_s);
@@ -269,19 +440,58 @@ impl Guidance {
             -c.rough_max_down_frac * accel_avail,
             c.rough_max_up_frac * accel_avail,
         );
-        let a_h = (accel_avail * accel_avail - a_up * a_up).max(0.0).sqrt();
+        // Across the great circle to the site: null the velocity across it.
+        let cross_max = c.rough_max_cross_frac * accel_avail;
+        let a_cross = (-c.rough_gain_cross_speed_1_s * cross_speed).clamp(-cross_max, cross_max);
+        let a_h = (accel_avail * accel_avail - a_up * a_up - a_cross * a_cross)
+            .max(0.0)
+            .sqrt();
         self.rough_accel_h_m_s2 = a_h;
         if accel_avail > 0.0 {
             self.hold_dir = (a_up / accel_avail, a_h / accel_avail);
         }
         GuidanceCommand {
-            accel_mci_m_s2: nav.up_mci * a_up - downrange_unit(nav) * a_h,
-            throttle_frac: Some(c.rough_throttle_frac),
+            accel_mci_m_s2: nav.up_mci * a_up - downrange_unit(nav) * a_h + cross_normal * a_cross,
+            throttle_frac: Some(throttle),
         }
     }
 
     /// Picks the landing site and the fine-braking time-to-go (see [`LandingSite`]).
     fn choose_site(&mut self, nav: &NavSolution, max_accel: f64, min_accel: f64) {
+        if let (Some(geo), Some(up_site)) = (self.site_range(nav), self.site_unit_mci(nav.t_s)) {
+            // The scenario's site: the time-to-go that makes the nominal horizontal
+            // deceleration constant (`T = 2 D / V`), within the time-to-go limits.
+            let c = &self.cfg;
+            let v = nav.horizontal_velocity_mci_m_s().norm();
+            let tgo = if v > 1e-3 {
+                2.0 * geo.range_m / v
+            } else {
+                c.fine_min_tgo_s
+            }
+            .clamp(c.fine_min_tgo_s, c.fine_max_tgo_s);
+            // Out of reach (rough braking arrived too close: a thrust shortfall beyond
+            // the range control's margin): no arc within the thrust limits ends there.
+            // Safety first: land long, on the shortest feasible arc along the track.
+            if v > 1e-3 && tgo < self.shortest_feasible_tgo(nav, max_accel, min_accel) {
+                self.choose_site_on_track(nav, max_accel, min_accel);
+                return;
+            }
+            let surface_r = nav.pos_mci_m.norm() - nav.altitude_m;
+            self.site = Some(LandingSite {
+                surface_mci_m: up_site * surface_r,
+                target_mci_m: up_site * (surface_r + c.fine_target_altitude_m),
+                target_vel_mci_m_s: up_site * c.fine_target_vertical_speed_m_s,
+                arrival_t_s: nav.t_s + tgo,
+                chosen_t_s: nav.t_s,
+            });
+            return;
+        }
+        self.choose_site_on_track(nav, max_accel, min_accel);
+    }
+
+    /// The shortest fine-braking time-to-go (1 s grid) whose nominal E-guidance arc
+    /// stays within `fine_accel_fraction` of the maximum and above the throttle floor.
+    fn shortest_feasible_tgo(&self, nav: &NavSolution, max_accel: f64, min_accel: f64) -> f64 {
         let c = &self.cfg;
         let v = nav.horizontal_velocity_mci_m_s().norm();
         let v_up = nav.vertical_speed_m_s();
@@ -312,6 +522,14 @@ impl Guidance {
             }
             candidate += 1.0;
         }
+        tgo
+    }
+
+    /// Without a reachable scenario site: a site on the ground track `V T / 2` ahead.
+    fn choose_site_on_track(&mut self, nav: &NavSolution, max_accel: f64, min_accel: f64) {
+        let c = &self.cfg;
+        let v = nav.horizontal_velocity_mci_m_s().norm();
+        let tgo = self.shortest_feasible_tgo(nav, max_accel, min_accel);
         let down = downrange_unit(nav);
         let ground = nav.pos_mci_m + down * (0.5 * v * tgo);
         let up_site = ground.normalize();
@@ -452,7 +670,11 @@ mod tests {
     /// E-guidance must deliver the target state, within the planned acceleration.
     #[test]
     fn fine_braking_reaches_its_target_state_within_the_acceleration_limit() {
-        let cfg = GncConfig::default();
+        // No scenario site: the site is chosen on the track at fine-braking start.
+        let cfg = GncConfig {
+            site: None,
+            ..GncConfig::default()
+        };
         let mut g = Guidance::new(&cfg);
         let radius = 1_737_400.0 + 1.2;
         let mut r = Vector3::new(radius + 6_800.0, 0.0, 0.0);

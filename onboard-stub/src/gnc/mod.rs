@@ -21,6 +21,31 @@ use navigation::NavFilter;
 use oils_shared::{Command, Telemetry, ENGINE_COUNT, TLM_FLAG_FOOTPAD_CONTACT};
 use thrust_loop::ThrustLoop;
 
+/// The landing site the descent is aimed at, Moon-fixed (the scenario's `[site]`, handed
+/// to the flight software when it is built: see [`crate::build`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SiteTarget {
+    /// Selenographic latitude, degrees, north positive.
+    pub latitude_deg: f64,
+    /// East longitude, degrees.
+    pub longitude_deg: f64,
+}
+
+impl SiteTarget {
+    /// The default scenario's site (Chandrayaan-3: 69.373 S, 32.319 E).
+    pub const CHANDRAYAAN_3: Self = Self {
+        latitude_deg: -69.373,
+        longitude_deg: 32.319,
+    };
+
+    /// Unit vector to the site, Moon-fixed (= `mci` at `t = 0`).
+    pub fn unit_mcmf(&self) -> Vector3<f64> {
+        let (sl, cl) = self.latitude_deg.to_radians().sin_cos();
+        let (so, co) = self.longitude_deg.to_radians().sin_cos();
+        Vector3::new(cl * co, cl * so, sl)
+    }
+}
+
 /// Everything the onboard software assumes about the vehicle, the Moon and its own
 /// gains. Plain numbers with defaults; `validate` before use.
 #[derive(Debug, Clone, PartialEq)]
@@ -30,6 +55,13 @@ pub struct GncConfig {
     /// Moon rotation rate about the inertial +Z (its pole), rad/s: the ground the
     /// vehicle lands on moves at `omega x r`.
     pub moon_rotation_rad_s: f64,
+    /// Moon reference radius, metres (ranges along the surface).
+    pub moon_radius_m: f64,
+    /// The landing site to fly to; `None`: guidance picks a site on the ground track
+    /// when fine braking starts (no targeting).
+    pub site: Option<SiteTarget>,
+    /// Specific impulse of the main engines, seconds (the range predictor's mass flow).
+    pub isp_s: f64,
     /// Main engine positions relative to the centre of mass, body axes, metres.
     pub engine_positions_body_m: [[f64; 3]; ENGINE_COUNT],
     /// Rated thrust per engine, newtons.
@@ -54,8 +86,22 @@ pub struct GncConfig {
     /// Navigation filter gain on the altimeter (per step).
     pub nav_gain_altitude: f64,
 
-    /// Rough braking throttle (leaves headroom for differential-throttle torque).
+    /// Rough braking throttle without a site (leaves headroom for differential-throttle
+    /// torque); with a site, the throttle the range predictor starts from.
     pub rough_throttle_frac: f64,
+    /// Range control: lowest throttle the range predictor may choose.
+    pub rough_min_throttle_frac: f64,
+    /// Range control: highest throttle the range predictor may choose (the margin above
+    /// the nominal is what absorbs a thrust shortfall).
+    pub rough_max_throttle_frac: f64,
+    /// Range control: the predictor is solved again this often, seconds.
+    pub rough_solve_period_s: f64,
+    /// Range control: integration step of the predictor, seconds.
+    pub rough_predict_step_s: f64,
+    /// Rough braking: gain nulling the velocity across the great circle to the site, 1/s.
+    pub rough_gain_cross_speed_1_s: f64,
+    /// Rough braking: largest share of the thrust acceleration steering across track.
+    pub rough_max_cross_frac: f64,
     /// Rough braking ends at this horizontal speed, m/s (sourced: ~358 m/s).
     pub rough_end_speed_m_s: f64,
     /// Altitude the rough-braking profile reaches at its end, metres (sourced: 7.42 km).
@@ -77,6 +123,9 @@ pub struct GncConfig {
     pub fine_target_altitude_m: f64,
     /// Vertical speed at the fine-braking target, m/s (negative: descending).
     pub fine_target_vertical_speed_m_s: f64,
+    /// Planned fine-braking duration at its start (with a site), seconds: the rough
+    /// braking aims to start fine braking `V T / 2` before the target.
+    pub fine_plan_tgo_s: f64,
     /// Fine braking may not plan more than this share of the maximum acceleration.
     pub fine_accel_fraction: f64,
     /// Fine braking must plan at least this multiple of the throttle-floor acceleration.
@@ -162,6 +211,9 @@ impl Default for GncConfig {
         Self {
             moon_mu_m3_s2: 4.9028e12,
             moon_rotation_rad_s: 2.6617e-6,
+            moon_radius_m: 1_737_400.0,
+            site: Some(SiteTarget::CHANDRAYAAN_3),
+            isp_s: 310.0,
             engine_positions_body_m: [
                 [0.6, 0.6, -0.8],
                 [-0.6, 0.6, -0.8],
@@ -181,6 +233,12 @@ impl Default for GncConfig {
             nav_gain_altitude: 0.05,
 
             rough_throttle_frac: 0.98,
+            rough_min_throttle_frac: 0.6,
+            rough_max_throttle_frac: 1.0,
+            rough_solve_period_s: 1.0,
+            rough_predict_step_s: 2.0,
+            rough_gain_cross_speed_1_s: 0.02,
+            rough_max_cross_frac: 0.1,
             rough_end_speed_m_s: 358.0,
             rough_end_altitude_m: 7_400.0,
             rough_floor_altitude_m: 5_000.0,
@@ -192,6 +250,7 @@ impl Default for GncConfig {
 
             fine_target_altitude_m: 800.0,
             fine_target_vertical_speed_m_s: -15.0,
+            fine_plan_tgo_s: 175.0,
             fine_accel_fraction: 0.95,
             fine_min_accel_margin: 1.1,
             fine_min_tgo_s: 20.0,
@@ -220,7 +279,7 @@ impl Default for GncConfig {
             final_upright_altitude_m: 10.0,
             final_max_tilt_deg: 4.0,
 
-            two_engine_enabled: true,
+            two_engine_enabled: false,
             two_engine_pair: [0, 2],
             two_engine_margin: 0.12,
             two_engine_saturation_s: 1.0,
@@ -253,6 +312,11 @@ impl GncConfig {
         let err = |field, why| Err(GncConfigError { field, why });
         let positive = [
             (self.moon_mu_m3_s2, "moon_mu_m3_s2"),
+            (self.moon_radius_m, "moon_radius_m"),
+            (self.isp_s, "isp_s"),
+            (self.rough_solve_period_s, "rough_solve_period_s"),
+            (self.rough_predict_step_s, "rough_predict_step_s"),
+            (self.fine_plan_tgo_s, "fine_plan_tgo_s"),
             (self.max_thrust_n, "max_thrust_n"),
             (self.dry_mass_kg, "dry_mass_kg"),
             (self.rough_end_speed_m_s, "rough_end_speed_m_s"),
@@ -285,11 +349,25 @@ impl GncConfig {
             (self.nav_gain_velocity, "nav_gain_velocity"),
             (self.nav_gain_altitude, "nav_gain_altitude"),
             (self.rough_throttle_frac, "rough_throttle_frac"),
+            (self.rough_min_throttle_frac, "rough_min_throttle_frac"),
+            (self.rough_max_throttle_frac, "rough_max_throttle_frac"),
+            (self.rough_max_cross_frac, "rough_max_cross_frac"),
             (self.fine_accel_fraction, "fine_accel_fraction"),
         ] {
             if !(v > 0.0 && v <= 1.0) {
                 return err(name, "in (0, 1]");
             }
+        }
+        if self.rough_max_throttle_frac < self.rough_min_throttle_frac {
+            return err("rough_max_throttle_frac", ">= rough_min_throttle_frac");
+        }
+        if let Some(site) = self.site {
+            if !(site.latitude_deg.abs() < 90.0 && site.longitude_deg.is_finite()) {
+                return err("site", "latitude within (-90, 90) deg, finite longitude");
+            }
+        }
+        if self.rough_gain_cross_speed_1_s.is_nan() || self.rough_gain_cross_speed_1_s < 0.0 {
+            return err("rough_gain_cross_speed_1_s", ">= 0");
         }
         if self.fine_max_tgo_s < self.fine_min_tgo_s {
             return err("fine_max_tgo_s", ">= fine_min_tgo_s");

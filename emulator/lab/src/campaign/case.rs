@@ -351,15 +351,20 @@ pub struct Trace {
     pub vertical_speed_m_s: Vec<f32>,
 }
 
-/// Position over the surface in the start frame: arc along the nominal ground track
-/// and across it, metres.
-pub fn surface_position_m(pos_mci_m: &nalgebra::Vector3<f64>, radius_m: f64) -> (f64, f64) {
-    let p = pos_mci_m;
-    let r = p.norm();
-    (
-        radius_m * p.y.atan2(p.x),
-        radius_m * (p.z / r).clamp(-1.0, 1.0).asin(),
-    )
+/// Position of `pos_mci_m` at `t_s` about the scenario's landing site, in the site frame
+/// (East-North-Up, Moon-fixed): along the approach azimuth (downrange, positive past the
+/// site) and across it (crossrange, positive towards `up x track`, the orbit normal of
+/// the approach: the side `initial.crossrange_m` moves the start to), metres.
+pub fn site_position_m(
+    scenario: &oils_emulator::config::ScenarioConfig,
+    pos_mci_m: &nalgebra::Vector3<f64>,
+    t_s: f64,
+) -> (f64, f64) {
+    let site = oils_emulator::log_fields::Site::of_scenario(scenario);
+    let p = site.site_of(pos_mci_m, t_s);
+    let (s, c) = scenario.site.approach_azimuth_deg.to_radians().sin_cos();
+    // Track (east, north) = (sin az, cos az); up x track = (-cos az, sin az).
+    (p.x * s + p.y * c, -p.x * c + p.y * s)
 }
 
 /// What one case gave: the row of `cases.csv` and more.
@@ -385,10 +390,10 @@ pub struct CaseResult {
     pub touchdown: Option<Touchdown>,
     /// Propellant used by the end, kilograms.
     pub propellant_used_kg: f64,
-    /// Final position along the nominal ground track, metres of arc (absent when the
-    /// case did not run).
+    /// Final position about the scenario's landing site along the approach azimuth,
+    /// site frame, metres (absent when the case did not run; see [`site_position_m`]).
     pub downrange_m: Option<f64>,
-    /// Final position across the ground track, metres of arc.
+    /// Final position about the site across the approach azimuth, metres.
     pub crossrange_m: Option<f64>,
     /// Fault firings.
     pub fault_events: u64,
@@ -462,7 +467,7 @@ pub fn run_case(
             sample(&mut trace, plant);
         }
         touched |= down;
-        last_pos_mci_m = Some(plant.state().pos_mci_m);
+        last_pos_mci_m = Some((plant.state().pos_mci_m, plant.time_ns() as f64 * 1e-9));
     };
     let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         crate::onboard::fly_in_process(
@@ -476,8 +481,8 @@ pub fn run_case(
         )
     }));
     result.trace = trace;
-    if let Some(p) = last_pos_mci_m {
-        let (down, across) = surface_position_m(&p, setup.config.scenario.moon.radius_m);
+    if let Some((p, t_s)) = last_pos_mci_m {
+        let (down, across) = site_position_m(&setup.config.scenario, &p, t_s);
         result.downrange_m = Some(down).filter(|x| x.is_finite());
         result.crossrange_m = Some(across).filter(|x| x.is_finite());
     }
@@ -532,4 +537,35 @@ fn sample(trace: &mut Trace, plant: &Plant) {
     trace.altitude_m.push(plant.altitude_m() as f32);
     trace.horizontal_speed_m_s.push(horizontal as f32);
     trace.vertical_speed_m_s.push(vertical as f32);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::site_position_m;
+    use oils_emulator::config::ScenarioConfig;
+    use oils_emulator::log_fields::Site;
+
+    /// A point a known distance from the site, in the site frame, comes back as that
+    /// distance along and across the approach azimuth, also once the Moon has turned.
+    #[test]
+    fn site_position_is_along_and_across_the_approach() {
+        let mut scenario = ScenarioConfig::default();
+        for (azimuth, east, north, down, cross) in [
+            // Southbound (the default): past the site is south, up x track is east.
+            (180.0, 300.0, -1_000.0, 1_000.0, 300.0),
+            // Eastbound: past the site is east, up x track is north.
+            (90.0, 1_000.0, 300.0, 1_000.0, 300.0),
+        ] {
+            scenario.site.approach_azimuth_deg = azimuth;
+            let site = Site::of_scenario(&scenario);
+            for t_s in [0.0, 900.0] {
+                let p_site = nalgebra::Vector3::new(east, north, 0.0);
+                let p_mci =
+                    site.rotation.mcmf_from_mci(t_s).inverse() * site.frame.mcmf_from_site(&p_site);
+                let (d, c) = site_position_m(&scenario, &p_mci, t_s);
+                assert!((d - down).abs() < 1e-6, "az {azimuth} t {t_s}: {d}");
+                assert!((c - cross).abs() < 1e-6, "az {azimuth} t {t_s}: {c}");
+            }
+        }
+    }
 }

@@ -14,7 +14,7 @@ pub const FIGURES: [&str; 5] = [
     "vertical_speed_mps",
     "horizontal_speed_mps",
     "tilt_deg",
-    "position_error_m",
+    "site_error_m",
     "propellant_used_kg",
 ];
 
@@ -64,18 +64,14 @@ pub fn value(r: &CaseResult, name: &str, fault: bool) -> Option<f64> {
     }
 }
 
-/// A touchdown figure of `r` (position error from the `nominal` touchdown).
-pub fn figure(r: &CaseResult, nominal: &CaseResult, name: &str) -> Option<f64> {
+/// A touchdown figure of `r` (`site_error_m`: distance from the scenario's site).
+pub fn figure(r: &CaseResult, _nominal: &CaseResult, name: &str) -> Option<f64> {
     let td = r.touchdown?;
     let v = match name {
         "vertical_speed_mps" => td.vertical_speed_mps,
         "horizontal_speed_mps" => td.horizontal_speed_mps,
         "tilt_deg" => td.tilt_deg,
-        "position_error_m" => {
-            let dx = r.downrange_m? - nominal.downrange_m?;
-            let dy = r.crossrange_m? - nominal.crossrange_m?;
-            dx.hypot(dy)
-        }
+        "site_error_m" => r.downrange_m?.hypot(r.crossrange_m?),
         "propellant_used_kg" => r.propellant_used_kg,
         _ => return None,
     };

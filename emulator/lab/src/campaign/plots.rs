@@ -6,8 +6,8 @@
 //! the failures (rank correlations, the outcome against the two strongest drivers).
 //! Drawn with plotters and the bundled font of [`crate::plot`].
 //!
-//! The reference point is the nominal case's touchdown: the scenario has no landing
-//! site yet, and every figure says so.
+//! The reference point is the scenario's landing site (downrange along the approach
+//! azimuth, crossrange across it), and every figure says so.
 
 use super::case::CaseResult;
 use super::compare::Comparison;
@@ -36,8 +36,7 @@ pub const FIGURES: [&str; 7] = [
 pub const COMPARE_FIGURE: &str = "compare-cdf.png";
 
 /// What names the reference point of the footprint, wherever it is drawn.
-pub const REFERENCE_POINT: &str =
-    "nominal case's touchdown (reference point, not a target site: the scenario has none yet)";
+pub const REFERENCE_POINT: &str = "the scenario's landing site";
 
 const BLUE: RGBColor = RGBColor(31, 119, 180);
 const RED: RGBColor = RGBColor(214, 39, 40);
@@ -294,13 +293,9 @@ fn footprint(
     title: &str,
 ) -> Result<(), PlotError> {
     let err = backend_err(path);
-    let nominal = &merged.nominal;
     let at = |r: &CaseResult| -> Option<(f64, f64)> {
         r.touchdown?;
-        let p = (
-            r.downrange_m? - nominal.downrange_m?,
-            r.crossrange_m? - nominal.crossrange_m?,
-        );
+        let p = (r.downrange_m?, r.crossrange_m?);
         (p.0.is_finite() && p.1.is_finite()).then_some(p)
     };
     let landed_pts: Vec<(f64, f64)> = merged
@@ -476,7 +471,7 @@ fn footprint(
     chart
         .draw_series([Cross::new((0.0, 0.0), 9, BLACK.stroke_width(3))])
         .map_err(|e| err(&e))?
-        .label("reference point: nominal case's touchdown")
+        .label("the landing site")
         .legend(|(x, y)| Cross::new((x + 10, y), 5, BLACK.stroke_width(2)));
     legend(&mut chart, SeriesLabelPosition::UpperRight, 14).map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))

@@ -73,7 +73,7 @@ impl FigureStats {
 /// The 3-sigma ellipse of the touchdown footprint about its mean.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Ellipse {
-    /// Centre, downrange and crossrange from the nominal touchdown, metres.
+    /// Centre, downrange and crossrange from the landing site, metres.
     pub centre_m: [f64; 2],
     /// Semi-major axis (3 sigma), metres.
     pub semi_major_m: f64,
@@ -162,8 +162,8 @@ pub struct Summary {
     pub nominal: NominalSummary,
     /// Statistics per figure (touchdown figures over the cases that touched down).
     pub figures: BTreeMap<String, FigureStats>,
-    /// The landed cases' touchdown footprint's 3-sigma ellipse, relative to the nominal
-    /// touchdown.
+    /// The landed cases' touchdown footprint's 3-sigma ellipse, about the scenario's
+    /// landing site (downrange, crossrange).
     pub footprint_3sigma: Option<Ellipse>,
     /// Worst cases by figure: indices, worst first (5 each).
     pub worst: BTreeMap<String, Vec<u64>>,
@@ -191,21 +191,21 @@ pub struct NominalSummary {
     pub propellant_used_kg: f64,
 }
 
-/// Per-case figures derived at merge time (relative to the nominal run).
+/// Per-case figures derived at merge time: the end point about the scenario's site.
 struct Derived {
     downrange_error_m: f64,
     crossrange_error_m: f64,
-    position_error_m: f64,
+    site_error_m: f64,
 }
 
-fn derived(r: &CaseResult, nominal: &CaseResult) -> Derived {
+fn derived(r: &CaseResult, _nominal: &CaseResult) -> Derived {
     let nan = |x: Option<f64>| x.unwrap_or(f64::NAN);
-    let dx = nan(r.downrange_m) - nan(nominal.downrange_m);
-    let dy = nan(r.crossrange_m) - nan(nominal.crossrange_m);
+    let dx = nan(r.downrange_m);
+    let dy = nan(r.crossrange_m);
     Derived {
         downrange_error_m: dx,
         crossrange_error_m: dy,
-        position_error_m: dx.hypot(dy),
+        site_error_m: dx.hypot(dy),
     }
 }
 
@@ -242,7 +242,7 @@ pub const CSV_COLUMNS: [&str; 16] = [
     "crossrange_m",
     "downrange_error_m",
     "crossrange_error_m",
-    "position_error_m",
+    "site_error_m",
     "propellant_used_kg",
     "fault_events",
     "faults",
@@ -278,7 +278,7 @@ pub fn cases_csv(results: &[CaseResult], nominal: &CaseResult) -> String {
             opt(r.crossrange_m),
             num(d.downrange_error_m),
             num(d.crossrange_error_m),
-            num(d.position_error_m),
+            num(d.site_error_m),
             num(r.propellant_used_kg),
             r.fault_events,
             text(&r.faults.join(";")),
@@ -333,8 +333,8 @@ pub fn summarise(
     put("tilt_deg", td(|t| t.tilt_deg));
     put("touchdown_t_s", td(|t| t.t_s));
     put(
-        "position_error_m",
-        FigureStats::of(touched.iter().map(|(_, d)| d.position_error_m)),
+        "site_error_m",
+        FigureStats::of(touched.iter().map(|(_, d)| d.site_error_m)),
     );
     put(
         "downrange_error_m",
@@ -379,7 +379,7 @@ pub fn summarise(
     rank("tilt_deg", &|c| {
         c.0.touchdown.map_or(f64::NAN, |t| t.tilt_deg)
     });
-    rank("position_error_m", &|c| c.1.position_error_m);
+    rank("site_error_m", &|c| c.1.site_error_m);
     let failures: Vec<Failure> = results
         .iter()
         .filter(|r| r.outcome != "landed")
