@@ -65,7 +65,17 @@ fn recording() -> &'static [Record] {
         cfg.log.enabled = true;
         cfg.log.path = Some(path.clone());
         let run_id = session::fresh_run_id();
-        let fsw = oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id).unwrap();
+        let fsw = oils_onboard_stub::build::build_fsw(
+            &cfg.fsw,
+            None,
+            None,
+            run_id,
+            Some(oils_onboard_stub::gnc::SiteTarget {
+                latitude_deg: cfg.scenario.site.latitude_deg,
+                longitude_deg: cfg.scenario.site.longitude_deg,
+            }),
+        )
+        .unwrap();
         session::run(
             &cfg,
             run_id,
