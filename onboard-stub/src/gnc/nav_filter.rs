@@ -230,7 +230,8 @@ pub struct NavEstimate {
     pub sigma_vel_m_s: [f64; 3],
     /// 1-sigma of attitude per body axis, rad.
     pub sigma_att_rad: [f64; 3],
-    /// Altitude above the sphere plus `terrain_height_m`, m.
+    /// Altitude of the centre of mass above the sphere plus `terrain_height_m`, m (not
+    /// the footpads': they are ~1.2 m below it on the reference lander).
     pub altitude_m: f64,
     /// Per channel counters (index: [`Channel`]).
     pub channels: [ChannelStats; CHANNELS],
@@ -546,9 +547,9 @@ impl NavFilter {
         }
     }
 
-    /// Gate test for a scalar innovation; returns whether to update. On a re-accept of
-    /// an altimeter channel the consistent offset is attributed to the ground first and
-    /// `*y` is corrected (returned through `ground_shift`).
+    /// Gate test for a scalar innovation `y` with variance `s`: returns whether to update,
+    /// and on a re-accept the mean of the consistent rejected innovations (else 0), which
+    /// the caller attributes (altimeters: the ground; velocimeter: the covariance).
     fn gate_scalar(&mut self, ch: Channel, y: f64, s: f64) -> (bool, f64) {
         let gate = self.cfg.gate_chi2_1dof;
         let k = self.cfg.reaccept_after.clamp(1, GATE_WINDOW as u32) as usize;
