@@ -273,6 +273,9 @@ pub struct NavFilter {
     bg: Vector3<f64>,
     ba: Vector3<f64>,
     w_body: Vector3<f64>,
+    /// The last valid IMU sample's increments per second (angle, velocity), held over a
+    /// lost sample.
+    held_rates: (Vector3<f64>, Vector3<f64>),
     p: Mat,
     hist: [Hist; HISTORY],
     hist_len: usize,
@@ -337,6 +340,7 @@ impl NavFilter {
             bg: Vector3::zeros(),
             ba: Vector3::zeros(),
             w_body: Vector3::zeros(),
+            held_rates: (Vector3::zeros(), Vector3::zeros()),
             p: Mat::zeros(),
             hist: [Hist::default(); HISTORY],
             hist_len: 0,
@@ -365,11 +369,21 @@ impl NavFilter {
         }
         let s = &tlm.sensors;
         for imu in s.imu.iter().take(s.imu_count as usize) {
-            if imu.valid == 0 || imu.t_ns <= self.t_ns {
+            if imu.t_ns <= self.t_ns {
                 continue;
             }
             let dt = (imu.t_ns - self.t_ns) as f64 * 1e-9;
-            self.propagate(dt, &v3(imu.delta_theta_body_rad), &v3(imu.delta_v_body_m_s));
+            if imu.valid == 0 {
+                // A lost IMU sample: hold the last valid sample's rates over its period.
+                let (dth, dv) = (self.held_rates.0 * dt, self.held_rates.1 * dt);
+                self.propagate(dt, &dth, &dv);
+            } else {
+                let (dth, dv) = (v3(imu.delta_theta_body_rad), v3(imu.delta_v_body_m_s));
+                if dt > 0.0 {
+                    self.held_rates = (dth / dt, dv / dt);
+                }
+                self.propagate(dt, &dth, &dv);
+            }
             self.t_ns = imu.t_ns;
             self.push_hist();
         }
@@ -823,9 +837,10 @@ mod tests {
             t.sensors.imu_count = 4;
             for i in 0..4 {
                 tn += dt;
+                // Every 7th sample lost: held (zero) increments keep the coast.
                 t.sensors.imu[i] = ImuSample {
                     t_ns: tn,
-                    valid: 1,
+                    valid: u32::from(tn % 7 != 0),
                     ..Default::default()
                 };
             }
@@ -870,5 +885,38 @@ mod tests {
         let e = f.estimate();
         assert_eq!(e.channels[0].reaccepted, 1, "{:?}", e.channels[0]);
         assert!((2.0 * e.q_mci_from_body[1] - 0.01).abs() < 1e-3);
+    }
+
+    /// Under a constant specific force and rate, losing every 7th IMU sample changes
+    /// nothing: the lost samples are bridged with the held increments.
+    #[test]
+    fn nav_lost_imu_samples_are_bridged_with_held_increments() {
+        let run = |lose: bool| {
+            let c = NavFilterConfig::default();
+            let r0 = c.moon_radius_m + 10_000.0;
+            let mut f = NavFilter::new(c);
+            let mut t = tlm_at(0, [r0, 0.0, 0.0], [0.0, 1600.0, 0.0]);
+            f.step(&t);
+            let dt = 5_000_000i64;
+            let mut tn = 0;
+            for _ in 0..2000 {
+                tn += dt;
+                t.sensors.imu_count = 1;
+                t.sensors.imu[0] = ImuSample {
+                    t_ns: tn,
+                    delta_v_body_m_s: [0.02, 0.0, 0.005],
+                    delta_theta_body_rad: [0.0, 1e-4, 0.0],
+                    valid: u32::from(!(lose && (tn / dt) % 7 == 0)),
+                    flags: 0,
+                };
+                t.header.t_ns = tn;
+                f.step(&t);
+            }
+            f.estimate()
+        };
+        let (a, b) = (run(false), run(true));
+        let dp = (v3(a.pos_mci_m) - v3(b.pos_mci_m)).norm();
+        let dv = (v3(a.vel_mci_m_s) - v3(b.vel_mci_m_s)).norm();
+        assert!(dp < 1e-6 && dv < 1e-9, "position {dp} m, velocity {dv} m/s");
     }
 }
