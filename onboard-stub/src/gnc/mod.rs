@@ -8,6 +8,7 @@
 pub mod allocation;
 pub mod attitude;
 pub mod guidance;
+pub mod nav_filter;
 pub mod navigation;
 pub mod thrust_loop;
 
