@@ -11,17 +11,7 @@ use common::*;
 use oils_emulator::propulsion::PropulsionKind;
 use oils_emulator::run_config::{LinkKind, RunConfig};
 use oils_emulator::session;
-use std::path::Path;
 use std::sync::atomic::AtomicBool;
-
-fn frozen_digest(model: &str) -> String {
-    let text = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/frozen-digests.toml"),
-    )
-    .unwrap();
-    let table: toml::Table = toml::from_str(&text).unwrap();
-    table[model].as_str().unwrap().to_string()
-}
 
 /// The default run configuration for `model`, in process, without a log.
 fn inproc_config(model: PropulsionKind) -> RunConfig {
@@ -42,26 +32,6 @@ fn digest_in_process(cfg: &RunConfig) -> String {
     report.summary.digest
 }
 
-/// Runs `oils run --config FILE --link iceoryx2` on `cfg` and returns its report.
-fn report_across_processes(name: &str, cfg: &RunConfig) -> serde_json::Value {
-    let dir = scratch(name);
-    let file = dir.join("run.toml");
-    std::fs::write(&file, cfg.to_toml()).unwrap();
-    let rep = dir.join("report.json");
-    let out = run_oils(&[
-        "run",
-        "--config",
-        file.to_str().unwrap(),
-        "--link",
-        "iceoryx2",
-        "--report",
-        rep.to_str().unwrap(),
-        "--no-log",
-    ]);
-    assert!(out.status.success(), "{}", text(&out));
-    report(&rep)
-}
-
 fn regress_and_contract(model: PropulsionKind) {
     let cfg = inproc_config(model);
     let inproc = digest_in_process(&cfg);
@@ -71,7 +41,7 @@ fn regress_and_contract(model: PropulsionKind) {
         "{}: the default descent's digest moved",
         model.as_str()
     );
-    let r = report_across_processes(&format!("contract-{}", model.as_str()), &cfg);
+    let r = report_across_processes(&format!("contract-{}", model.as_str()), &cfg.to_toml());
     assert_eq!(r["digest"].as_str().unwrap(), inproc);
     assert_eq!(r["link"], "iceoryx2");
     assert_eq!(r["propulsion"], model.as_str());
@@ -346,7 +316,7 @@ fn contract_multi_rate_in_process_equals_across_processes() {
     cfg.fsw_period_ms = Some(20);
     cfg.duration_s = 60.0;
     let inproc = digest_in_process(&cfg);
-    let r = report_across_processes("contract-multi-rate", &cfg);
+    let r = report_across_processes("contract-multi-rate", &cfg.to_toml());
     assert_eq!(r["digest"].as_str().unwrap(), inproc);
     assert_eq!(r["outcome"], "completed");
     assert_eq!(r["steps"], 3000);

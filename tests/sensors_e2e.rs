@@ -15,15 +15,6 @@ use oils_emulator::session;
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 
-fn frozen_digest(key: &str) -> String {
-    let text = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/frozen-digests.toml"),
-    )
-    .unwrap();
-    let table: toml::Table = toml::from_str(&text).unwrap();
-    table[key].as_str().unwrap().to_string()
-}
-
 /// The default descent with the devices on beside the ideal navigation, ideal propulsion.
 fn sensors_config() -> RunConfig {
     let mut cfg = RunConfig {
@@ -52,41 +43,24 @@ fn regress_and_contract_with_sensors_on() {
         "the descent with the devices on moved"
     );
 
-    let dir = scratch("sensors-contract");
-    let file = dir.join("run.toml");
-    std::fs::write(&file, cfg.to_toml()).unwrap();
-    let rep = dir.join("report.json");
-    let out = run_oils(&[
-        "run",
-        "--config",
-        file.to_str().unwrap(),
-        "--link",
-        "iceoryx2",
-        "--report",
-        rep.to_str().unwrap(),
-        "--no-log",
-    ]);
-    assert!(out.status.success(), "{}", text(&out));
-    let r = report(&rep);
+    let r = report_across_processes("sensors-contract", &cfg.to_toml());
     assert_eq!(r["digest"].as_str().unwrap(), inproc);
     assert_eq!(r["config"]["telemetry"], "both");
 }
 
-/// Column index of `name` in a CSV header line.
-fn col(header: &[&str], name: &str) -> usize {
-    header
-        .iter()
-        .position(|c| *c == name)
-        .unwrap_or_else(|| panic!("no column {name}"))
-}
-
-#[test]
-fn sensor_telemetry_carries_device_samples_and_no_ideal_navigation() {
-    let dir = scratch("sensors-only");
+/// Flies the descent profile open loop (`--fsw playback`, ideal propulsion) with
+/// `--telemetry sensors` for `duration` seconds plus `extra` flags, exports the log as
+/// CSV and returns its header and rows.
+fn fly_sensors_to_csv(
+    name: &str,
+    duration: &str,
+    extra: &[&str],
+) -> (Vec<String>, Vec<Vec<String>>) {
+    let dir = scratch(name);
     let log = dir.join("run.oilslog");
     let csv = dir.join("run.csv");
     let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("emulator/data/descent-profile.csv");
-    let out = run_oils(&[
+    let mut args = vec![
         "run",
         "--link",
         "inproc",
@@ -99,10 +73,12 @@ fn sensor_telemetry_carries_device_samples_and_no_ideal_navigation() {
         "--telemetry",
         "sensors",
         "--duration",
-        "3",
+        duration,
         "--log",
         log.to_str().unwrap(),
-    ]);
+    ];
+    args.extend_from_slice(extra);
+    let out = run_oils(&args);
     assert!(out.status.success(), "{}", text(&out));
     let out = run_oils(&[
         "export",
@@ -113,7 +89,24 @@ fn sensor_telemetry_carries_device_samples_and_no_ideal_navigation() {
     assert!(out.status.success(), "{}", text(&out));
     let body = std::fs::read_to_string(&csv).unwrap();
     let mut lines = body.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let header = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows = lines
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    (header, rows)
+}
+
+/// Column index of `name` in a CSV header.
+fn col(header: &[String], name: &str) -> usize {
+    header
+        .iter()
+        .position(|c| c == name)
+        .unwrap_or_else(|| panic!("no column {name}"))
+}
+
+#[test]
+fn sensor_telemetry_carries_device_samples_and_no_ideal_navigation() {
+    let (header, rows) = fly_sensors_to_csv("sensors-only", "3", &[]);
     for prefix in [
         "imu_",
         "star_tracker_",
@@ -127,7 +120,6 @@ fn sensor_telemetry_carries_device_samples_and_no_ideal_navigation() {
             "no {prefix} column"
         );
     }
-    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
     // 3 s at 10 ms cycles, plus the end record.
     assert!(rows.len() >= 300, "{} rows", rows.len());
     let flags = col(&header, "telemetry.header.flags");
@@ -201,40 +193,11 @@ fn devices_that_do_not_fit_the_schedule_are_refused_naming_them() {
 
 #[test]
 fn a_device_fault_reaches_the_flight_software_through_a_run() {
-    let dir = scratch("sensors-fault");
-    let log = dir.join("run.oilslog");
-    let csv = dir.join("run.csv");
-    let profile = Path::new(env!("CARGO_MANIFEST_DIR")).join("emulator/data/descent-profile.csv");
-    let out = run_oils(&[
-        "run",
-        "--link",
-        "inproc",
-        "--fsw",
-        "playback",
-        "--profile",
-        profile.to_str().unwrap(),
-        "--propulsion",
-        "ideal",
-        "--telemetry",
-        "sensors",
-        "--duration",
+    let (header, rows) = fly_sensors_to_csv(
+        "sensors-fault",
         "2",
-        "--fault",
-        "sensor-inhibit:rf-altimeter@t=1",
-        "--log",
-        log.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", text(&out));
-    let out = run_oils(&[
-        "export",
-        log.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", text(&out));
-    let body = std::fs::read_to_string(&csv).unwrap();
-    let mut lines = body.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+        &["--fault", "sensor-inhibit:rf-altimeter@t=1"],
+    );
     let (t, n) = (
         col(&header, "telemetry.t_s"),
         col(&header, "rf_altimeter_count"),
@@ -245,7 +208,7 @@ fn a_device_fault_reaches_the_flight_software_through_a_run() {
         col(&header, "rf_altimeter_flags[0]"),
     );
     let (mut before, mut after) = (0, 0);
-    for row in lines.map(|l| l.split(',').collect::<Vec<_>>()) {
+    for row in &rows {
         if row[n] == "0" {
             continue;
         }

@@ -7,15 +7,7 @@
 use serde::{Deserialize, Deserializer, Serialize};
 use thiserror::Error;
 
-/// One reader per fixed-size array field, refusing another length by the field's
-/// dotted name (toml drops extra elements unread; issue #36).
-macro_rules! fixed_len {
-    ($($name:ident: $ty:ty => $key:literal),* $(,)?) => {$(
-        fn $name<'de, D: Deserializer<'de>>(d: D) -> Result<$ty, D::Error> {
-            crate::fixed_len::deserialize(d, $key)
-        }
-    )*};
-}
+use crate::fixed_len::fixed_len;
 
 fixed_len! {
     inertia_wet: [f64; 3] => "lander.inertia_wet_kg_m2",

@@ -5,6 +5,18 @@
 //! lengths, in TOML and JSON alike; nested arrays (`[[f64; 3]; 4]`) are checked at
 //! every level.
 
+/// One reader per fixed-size array field, refusing another length by the field's
+/// dotted name: `fixed_len! { name: [f64; 3] => "table.key", ... }` defines `fn name`
+/// for `#[serde(deserialize_with = "name")]`. The caller imports `serde::Deserializer`.
+macro_rules! fixed_len {
+    ($($name:ident: $ty:ty => $key:literal),* $(,)?) => {$(
+        fn $name<'de, D: Deserializer<'de>>(d: D) -> Result<$ty, D::Error> {
+            crate::fixed_len::deserialize(d, $key)
+        }
+    )*};
+}
+pub(crate) use fixed_len;
+
 use serde::de::{DeserializeSeed, Error as _, IgnoredAny, SeqAccess, Visitor};
 use serde::{Deserialize, Deserializer};
 use std::marker::PhantomData;

@@ -88,3 +88,35 @@ pub fn assert_soft_touchdown(r: &serde_json::Value, scenario: &Path) {
     );
     assert!(td["tilt_deg"].as_f64().unwrap() <= limits.tilt_deg, "{td}");
 }
+
+/// A frozen digest of `tests/data/frozen-digests.toml` (`key` = propulsion model, or
+/// `ideal_sensors`).
+pub fn frozen_digest(key: &str) -> String {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/frozen-digests.toml"),
+    )
+    .unwrap();
+    let table: toml::Table = toml::from_str(&text).unwrap();
+    table[key].as_str().unwrap().to_string()
+}
+
+/// Runs `oils run --config FILE --link iceoryx2` on the run configuration `config_toml`
+/// (across two processes) and returns its report.
+pub fn report_across_processes(name: &str, config_toml: &str) -> serde_json::Value {
+    let dir = scratch(name);
+    let file = dir.join("run.toml");
+    std::fs::write(&file, config_toml).unwrap();
+    let rep = dir.join("report.json");
+    let out = run_oils(&[
+        "run",
+        "--config",
+        file.to_str().unwrap(),
+        "--link",
+        "iceoryx2",
+        "--report",
+        rep.to_str().unwrap(),
+        "--no-log",
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    report(&rep)
+}

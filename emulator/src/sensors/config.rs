@@ -7,13 +7,7 @@ use oils_shared::{
 };
 use serde::{Deserialize, Deserializer, Serialize};
 
-macro_rules! fixed_len {
-    ($($name:ident: $ty:ty => $key:literal),* $(,)?) => {$(
-        fn $name<'de, D: Deserializer<'de>>(d: D) -> Result<$ty, D::Error> {
-            crate::fixed_len::deserialize(d, $key)
-        }
-    )*};
-}
+use crate::fixed_len::fixed_len;
 
 fixed_len! {
     gyro_bias: [f64; 3] => "sensors.imu.gyro_bias_deg_h",
