@@ -30,7 +30,7 @@ struct Ping {
 #[type_name("oils.bench.Pong")]
 struct Pong {
     seq: u64,
-    body: [u64; 23],
+    body: [u64; 41],
 }
 
 const _: () = assert!(core::mem::size_of::<Ping>() == core::mem::size_of::<Telemetry>());
@@ -66,7 +66,7 @@ fn bare_echo(id: u64) {
             if seq == STOP {
                 return;
             }
-            publ.send_copy(Pong { seq, body: [0; 23] }).unwrap();
+            publ.send_copy(Pong { seq, body: [0; 41] }).unwrap();
         } else {
             core::hint::spin_loop();
         }

@@ -28,7 +28,7 @@ enum Cmd {
     Replay(cmd::run::ReplayArgs),
     /// Turn a run log into CSV, a thrust profile or MCAP (Foxglove).
     Export(ExportArgs),
-    /// Draw a run's figures (PNG) from its log (OILSLOG5 or MCAP).
+    /// Draw a run's figures (PNG) from its log (OILSLOG6 or MCAP).
     Plot(PlotArgs),
     /// Drive the high-fidelity propulsion model open loop with a profile, or draw its figures.
     Hifi(cmd::hifi::HifiArgs),

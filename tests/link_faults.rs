@@ -42,9 +42,9 @@ fn exported_rows(log: &std::path::Path) -> Vec<String> {
         .collect()
 }
 
-/// The schema hash of protocol v1 (docs/protocol.md of that version): what a v1 peer
+/// The schema hash of protocol v2 (docs/protocol.md of that version): what a v2 peer
 /// stamps in its headers and announces.
-const V1_SCHEMA_HASH: u64 = 0xa8f0_da5f_8f0a_ee6e;
+const V2_SCHEMA_HASH: u64 = 0x6b7a_ac81_9410_d7f5;
 
 #[test]
 fn killed_stub_is_noticed_log_is_intact_and_the_next_run_starts_clean() {
@@ -300,9 +300,9 @@ fn a_peer_speaking_another_protocol_is_refused_by_name() {
         .unwrap();
     foreign_stub(&id, |tlm| {
         let mut header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
-        // A protocol v1 flight software (its schema hash).
-        header.protocol_version = 1;
-        header.schema_hash = V1_SCHEMA_HASH;
+        // A protocol v2 flight software (its schema hash).
+        header.protocol_version = 2;
+        header.schema_hash = V2_SCHEMA_HASH;
         Command {
             header,
             ..Default::default()
@@ -314,7 +314,7 @@ fn a_peer_speaking_another_protocol_is_refused_by_name() {
     assert_eq!(r["outcome"], "aborted");
     let e = r["error"].as_str().unwrap();
     assert!(
-        e.contains("v2") && e.contains("v1 (schema 0xa8f0da5f8f0aee6e)"),
+        e.contains("v3") && e.contains("v2 (schema 0x6b7aac819410d7f5)"),
         "{e}"
     );
 }
@@ -326,17 +326,17 @@ fn a_stub_refuses_an_emulator_announcing_another_protocol() {
     use oils_shared::link::attribute_keys;
     let id = run_id(4);
     let run = u64::from_str_radix(&id, 16).unwrap();
-    // Play an emulator built from protocol v1: announce it on the telemetry-ready event.
+    // Play an emulator built from protocol v2: announce it on the telemetry-ready event.
     let node = create_node("fake-emulator").unwrap();
     let attrs = AttributeSpecifier::new()
         .define(
             &AttributeKey::new(attribute_keys::PROTOCOL_VERSION.as_bytes()).unwrap(),
-            &AttributeValue::new(b"1").unwrap(),
+            &AttributeValue::new(b"2").unwrap(),
         )
         .unwrap()
         .define(
             &AttributeKey::new(attribute_keys::SCHEMA_HASH.as_bytes()).unwrap(),
-            &AttributeValue::new(b"0xa8f0da5f8f0aee6e").unwrap(),
+            &AttributeValue::new(b"0x6b7aac819410d7f5").unwrap(),
         )
         .unwrap();
     let name = oils_shared::service::RunServices::new(run).telemetry_event();
@@ -349,7 +349,7 @@ fn a_stub_refuses_an_emulator_announcing_another_protocol() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("v2") && err.contains("v1") && err.contains("0xa8f0da5f8f0aee6e"),
+        err.contains("v3") && err.contains("v2") && err.contains("0x6b7aac819410d7f5"),
         "{err}"
     );
 }

@@ -693,6 +693,55 @@ impl InitialStateConfig {
     }
 }
 
+/// The ground's orbit determination uplinked to the flight software before the descent
+/// (and again after a computer reset): the true position and velocity plus a seeded
+/// Gaussian error of these one-sigma sizes per `mci` axis, sent in `nav` on the first
+/// cycle with `TLM_FLAG_STATE_VECTOR` when the devices are on. Defaults assumed: a few
+/// hundred metres and decimetres per second is the usual class of a lunar-orbit
+/// determination from ground tracking; `docs/sensors.md`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct StateVectorConfig {
+    /// Position error, metres (1-sigma per axis).
+    pub position_sigma_m: f64,
+    /// Velocity error, m/s (1-sigma per axis).
+    pub velocity_sigma_m_s: f64,
+}
+
+impl Default for StateVectorConfig {
+    fn default() -> Self {
+        Self {
+            position_sigma_m: 200.0,
+            velocity_sigma_m_s: 0.5,
+        }
+    }
+}
+
+impl StateVectorConfig {
+    /// At the defaults (omitted when a configuration is written).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Finite, not negative, and not absurd.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        within(
+            "state_vector.position_sigma_m",
+            self.position_sigma_m,
+            0.0,
+            1e5,
+            "in [0, 1e5] m",
+        )?;
+        within(
+            "state_vector.velocity_sigma_m_s",
+            self.velocity_sigma_m_s,
+            0.0,
+            100.0,
+            "in [0, 100] m/s",
+        )
+    }
+}
+
 /// One-sigma navigation noise added to telemetry when enabled (seeded).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -866,6 +915,9 @@ pub struct ScenarioConfig {
     pub initial: InitialStateConfig,
     /// Navigation noise.
     pub nav_noise: NavNoiseConfig,
+    /// The ground's state vector a `sensors` run starts the flight software from.
+    #[serde(skip_serializing_if = "StateVectorConfig::is_default")]
+    pub state_vector: StateVectorConfig,
     /// Touchdown limits.
     pub touchdown: TouchdownLimits,
     /// Injected propulsion model error (the seed paper's Monte Carlo use of the
@@ -977,6 +1029,7 @@ impl ScenarioConfig {
         self.initial.validate()?;
         self.model_error.validate()?;
         self.nav_noise.validate()?;
+        self.state_vector.validate()?;
         self.touchdown.validate()?;
         self.sensors.validate()?;
         Ok(())

@@ -25,6 +25,7 @@ pub mod digest;
 pub mod exact_json;
 pub mod faults;
 pub mod fixed_len;
+pub mod fsw_monitor;
 pub mod link;
 pub mod log_fields;
 pub mod log_layout;

@@ -576,6 +576,15 @@ const ALT_N: usize = oils_shared::ALTIMETER_SAMPLES_MAX;
 const VEL_N: usize = oils_shared::VELOCIMETER_SAMPLES_MAX;
 const THR_N: usize = oils_shared::THRUSTER_COUNT;
 
+/// `estimate - truth` when the flight software's report holds an estimate, else NaN.
+fn nav_error(r: &Record, estimate: f64, truth: f64) -> f64 {
+    if r.command.fsw.nav_flags & oils_shared::NAV_FLAG_VALID != 0 {
+        estimate - truth
+    } else {
+        f64::NAN
+    }
+}
+
 /// Simulated time of a record, seconds.
 fn t_s(r: &Record) -> f64 {
     r.telemetry.header.t_ns as f64 * 1e-9
@@ -695,6 +704,73 @@ pub static FIELDS: &[Field] = &[
     packet!(Command, "stub_compute_ns", U64, |r| r
         .command
         .stub_compute_ns),
+    // What the flight software says of itself (protocol v3): its navigation estimate
+    // with its own sigma, phase, boots and rate groups.
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.nav_pos_mci_m", F64, 3, |r, i| r
+            .command
+            .fsw
+            .nav_pos_mci_m[i])
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.nav_vel_mci_m_s", F64, 3, |r, i| r
+            .command
+            .fsw
+            .nav_vel_mci_m_s[i])
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.nav_pos_sigma_m", F64, 3, |r, i| r
+            .command
+            .fsw
+            .nav_pos_sigma_m[i])
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.nav_vel_sigma_m_s", F64, 3, |r, i| r
+            .command
+            .fsw
+            .nav_vel_sigma_m_s[i])
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.nav_altitude_m", F64, |r| r
+            .command
+            .fsw
+            .nav_altitude_m)
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.nav_altitude_sigma_m", F64, |r| r
+            .command
+            .fsw
+            .nav_altitude_sigma_m)
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.group_compute_ns", U32, oils_shared::RATE_GROUPS, |r, i| r
+            .command
+            .fsw
+            .group_compute_ns[i])
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.nav_flags", Hex, |r| r.command.fsw.nav_flags)
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.phase", U32, |r| r.command.fsw.phase)
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.boot_count", U32, |r| r.command.fsw.boot_count)
+    },
+    Field {
+        since: 4,
+        ..packet!(Command, "fsw.cycle_slips", U32, |r| r.command.fsw.cycle_slips)
+    },
     slot!(Command, "applied.thrust_cmd_n", F64, E, 0, 1, |r, i| r
         .applied
         .engines
@@ -742,6 +818,32 @@ pub static FIELDS: &[Field] = &[
     Field {
         since: 2,
         ..slot!(Truth, "faults_active", U64, 57, |r| r.faults_active)
+    },
+    // Navigation error: the flight software's estimate minus the truth at t_k (NaN when
+    // it reports none), `mci` and height above the ground.
+    Field {
+        since: 4,
+        ..derived!(Truth, "nav_error.pos_mci_m", F64, 3, |r, _d, i| nav_error(
+            r,
+            r.command.fsw.nav_pos_mci_m[i],
+            r.truth.pos_mci_m[i]
+        ))
+    },
+    Field {
+        since: 4,
+        ..derived!(Truth, "nav_error.vel_mci_m_s", F64, 3, |r, _d, i| nav_error(
+            r,
+            r.command.fsw.nav_vel_mci_m_s[i],
+            r.truth.vel_mci_m_s[i]
+        ))
+    },
+    Field {
+        since: 4,
+        ..derived!(Truth, "nav_error.altitude_m", F64, |r, _d| nav_error(
+            r,
+            r.command.fsw.nav_altitude_m,
+            r.truth.altitude_m
+        ))
     },
     // The propulsion model's outputs and internals (NaN where a model has no such state).
     echo!(Propulsion, "t_s", F64, |r| t_s(r)),
@@ -1185,8 +1287,10 @@ pub static FIELDS: &[Field] = &[
 ];
 
 /// The newest MCAP message format: `oils-mcap-2` added `truth.faults_active`,
-/// `oils-mcap-3` the `devices` message (protocol v2's sensor samples and thrusters).
-pub const MESSAGE_FORMAT: u32 = 3;
+/// `oils-mcap-3` the `devices` message (protocol v2's sensor samples and thrusters),
+/// `oils-mcap-4` the flight software's report (`command.fsw.*`) and the navigation
+/// error (`truth.nav_error.*`).
+pub const MESSAGE_FORMAT: u32 = 4;
 
 /// The CSV header: one column per value of every field the CSV has.
 pub fn csv_columns() -> Vec<String> {

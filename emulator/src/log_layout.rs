@@ -14,8 +14,8 @@
 //! description cannot describe makes [`layout`] fail with a typed error (and the tests).
 //!
 //! ```json
-//! {"format":"oils-log-layout-1","byte_order":"little","magic":"OILSLOG5",
-//!  "header_start":16,"record_size":1000,"trailer":{"magic":"OILSEND5","size":20},
+//! {"format":"oils-log-layout-1","byte_order":"little","magic":"OILSLOG6",
+//!  "header_start":16,"record_size":1000,"trailer":{"magic":"OILSEND6","size":20},
 //!  "end_of_run_flag":8,"flags_column":"command.record_flags",
 //!  "columns":[{"name":"telemetry.header.step","kind":"u64","offset":40,"dtype":"<u8"},
 //!             {"name":"telemetry.t_s","kind":"f64",
@@ -212,6 +212,20 @@ fn derivation(f: &Field, i: usize) -> Option<Json> {
         }
         (Topic::Truth, q @ ("pos_site_m" | "vel_site_m_s")) => {
             Some(json!({"op": "site", "quantity": q, "index": i}))
+        }
+        (Topic::Truth, q @ ("nav_error.pos_mci_m" | "nav_error.vel_mci_m_s" | "nav_error.altitude_m")) => {
+            let (estimate, truth, index) = match q {
+                "nav_error.pos_mci_m" => ("fsw.nav_pos_mci_m", "pos_mci_m", i),
+                "nav_error.vel_mci_m_s" => ("fsw.nav_vel_mci_m_s", "vel_mci_m_s", i),
+                _ => ("fsw.nav_altitude_m", "altitude_m", 0),
+            };
+            Some(json!({
+                "op": "nav_error",
+                "estimate": column_of(Topic::Command, estimate, index)?,
+                "truth": column_of(Topic::Truth, truth, index)?,
+                "flags": column_of(Topic::Command, "fsw.nav_flags", 0)?,
+                "mask": oils_shared::NAV_FLAG_VALID,
+            }))
         }
         _ => None,
     }

@@ -4,7 +4,7 @@
 //!
 //! File layout (little-endian):
 //! ```text
-//! magic      8 bytes  "OILSLOG5"
+//! magic      8 bytes  "OILSLOG6"
 //! header_len u32      length of the JSON header that follows
 //! header_crc u32      CRC-32 of the header bytes (an edited header is refused)
 //! header     JSON     the run's whole configuration (RunConfig), run id, protocol version
@@ -14,7 +14,7 @@
 //!              TRUTH_VALUES f64s, the slots of `log_fields::FIELDS` (a timing figure
 //!              the step has not is NaN)
 //! trailer    TRAILER_SIZE bytes, written when the log is closed:
-//!            "OILSEND5" | records u64 | crc32 u32 (of the 16 bytes before it)
+//!            "OILSEND6" | records u64 | crc32 u32 (of the 16 bytes before it)
 //! ```
 //! The CRC-32 covers the flags and everything after the CRC, so a damaged record is
 //! found and named by its position, never read as data. A log without its trailer (or
@@ -43,13 +43,15 @@ use std::thread::JoinHandle;
 use thiserror::Error;
 
 /// File magic of this format.
-pub const MAGIC: &[u8; 8] = b"OILSLOG5";
+pub const MAGIC: &[u8; 8] = b"OILSLOG6";
 /// Magic of the formats with protocol v1 packets (OILSLOG4; OILSLOG3 before the header
 /// CRC and the trailer): refused with a clear message.
 const MAGIC_V4: &[u8; 8] = b"OILSLOG4";
+/// Magic of the format with protocol v2 packets.
+const MAGIC_V5: &[u8; 8] = b"OILSLOG5";
 const MAGIC_V3: &[u8; 8] = b"OILSLOG3";
 /// Magic of the trailer that closes a log.
-pub const TRAILER_MAGIC: &[u8; 8] = b"OILSEND5";
+pub const TRAILER_MAGIC: &[u8; 8] = b"OILSEND6";
 /// Bytes of the trailer.
 pub const TRAILER_SIZE: usize = 20;
 /// Magic of the format before per-step timing, refused with a clear message.
@@ -375,7 +377,7 @@ impl Recorder {
         Self::over(path, Box::new(file), header_json)
     }
 
-    /// A recorder writing OILSLOG5 to `out` (a file; in tests, a writer that fails);
+    /// A recorder writing OILSLOG6 to `out` (a file; in tests, a writer that fails);
     /// `path` names it in errors.
     pub fn over(
         path: &Path,
@@ -488,7 +490,7 @@ impl Drop for Recorder {
     }
 }
 
-/// Where the OILSLOG5 writer puts its bytes: a file (synced at the end), or a test's
+/// Where the OILSLOG6 writer puts its bytes: a file (synced at the end), or a test's
 /// writer.
 pub trait Sink: Write + Send {
     /// Makes what was written durable (`fsync` for a file).
@@ -591,7 +593,7 @@ pub struct Log {
     pub damaged_records: Vec<u64>,
     /// Bytes after the last whole record (a crash mid-write leaves some).
     pub trailing_bytes: usize,
-    /// Whether the log holds its run's end: the end-of-run record, and (OILSLOG5) the
+    /// Whether the log holds its run's end: the end-of-run record, and (OILSLOG6) the
     /// trailer counting every record. `false`: the run was interrupted (kill -9, a full
     /// disk) or the file cut; every record before is still read.
     pub complete: bool,
@@ -682,23 +684,28 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
     };
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V1 {
         return Err(not_log(
-            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG5 log",
+            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG6 log",
         ));
     }
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V2 {
         return Err(not_log(
-            "an OILSLOG2 log, the format before per-step timing was recorded; run again (`oils run --config-from` its report) to get an OILSLOG5 log",
+            "an OILSLOG2 log, the format before per-step timing was recorded; run again (`oils run --config-from` its report) to get an OILSLOG6 log",
         ));
     }
     if bytes.len() >= 8 && (&bytes[..8] == MAGIC_V3 || &bytes[..8] == MAGIC_V4) {
         return Err(not_log(
-            "an OILSLOG3/OILSLOG4 log, with protocol v1 packets; run again (`oils run --config-from` its report) to get an OILSLOG5 log",
+            "an OILSLOG3/OILSLOG4 log, with protocol v1 packets; run again (`oils run --config-from` its report) to get an OILSLOG6 log",
+        ));
+    }
+    if bytes.len() >= 8 && &bytes[..8] == MAGIC_V5 {
+        return Err(not_log(
+            "an OILSLOG5 log, with protocol v2 packets; run again (`oils run --config-from` its report) to get an OILSLOG6 log",
         ));
     }
     let v3 = false;
     if bytes.len() < 12 || &bytes[..8] != MAGIC {
         return Err(not_log(
-            "missing OILSLOG5 magic (this program reads OILSLOG5)",
+            "missing OILSLOG6 magic (this program reads OILSLOG6)",
         ));
     }
     let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
@@ -883,6 +890,20 @@ pub(crate) mod tests {
         }
         r.command.engine_on = [1, 0, 1, 1];
         r.command.stub_compute_ns = 4321;
+        // Protocol v3: the flight software's report.
+        let fr = &mut r.command.fsw;
+        for v in fr
+            .nav_pos_mci_m
+            .iter_mut()
+            .chain(&mut fr.nav_vel_mci_m_s)
+            .chain(&mut fr.nav_pos_sigma_m)
+            .chain(&mut fr.nav_vel_sigma_m_s)
+        {
+            *v = next();
+        }
+        (fr.nav_altitude_m, fr.nav_altitude_sigma_m) = (next(), next());
+        fr.group_compute_ns = [11, 12, 13, 14];
+        (fr.nav_flags, fr.phase, fr.boot_count, fr.cycle_slips) = (0x2b, 3, 2, 1);
         r.applied.engines.thrust_cmd_n = [next(), next(), next(), next()];
         r.applied.engines.on = [true, false, false, true];
         r.applied.torque_cmd_body_nm = [next(), next(), next()];
@@ -965,15 +986,15 @@ pub(crate) mod tests {
     }
 
     /// The record's byte layout, pinned: the CRC-32 of a record with a different value in
-    /// every field, as OILSLOG5 writes it (protocol v2 packets, the devices' slots). A
+    /// every field, as OILSLOG6 writes it (protocol v3 packets, the devices' slots). A
     /// field moved, converted differently or dropped changes it.
     #[test]
     fn the_record_layout_is_pinned() {
         let r = distinct_record();
         let mut bytes = [0u8; RECORD_SIZE];
         r.encode(&mut bytes);
-        assert_eq!(RECORD_SIZE, 1936);
-        assert_eq!(crc32fast::hash(&bytes), 2_547_223_391, "layout changed");
+        assert_eq!(RECORD_SIZE, 2080);
+        assert_eq!(crc32fast::hash(&bytes), 733_859_406, "layout changed");
         assert_eq!(Record::decode(&bytes), Some(r));
     }
 

@@ -118,6 +118,7 @@ impl RunReport {
             faults: Vec::new(),
             propulsion_diagnostics: None,
             sensors_dropped: None,
+            fsw_report: None,
         };
         Self::new(cfg, run_id, wait, None, summary)
     }
@@ -251,6 +252,9 @@ impl RunReport {
         }
         if let Some(d) = &s.propulsion_diagnostics {
             diagnostics_lines(&mut out, d);
+        }
+        if let Some(f) = &s.fsw_report {
+            fsw_report_lines(&mut out, f);
         }
         let _ = writeln!(out, "digest      {}", s.digest);
         if let Some(log) = &self.log {
@@ -415,5 +419,77 @@ pub fn finish_run(
         Ok(())
     } else {
         Err(RunFailed::Verdict(why.join("; ")))
+    }
+}
+
+/// The flight software's own report, as table lines: navigation error at the end and
+/// consistency, devices in use, boots, rate-group compute times.
+fn fsw_report_lines(out: &mut String, f: &crate::fsw_monitor::FswSelfReport) {
+    use oils_shared::{
+        NAV_FLAG_LASER_LOST, NAV_FLAG_LASER_USED, NAV_FLAG_RF_USED, NAV_FLAG_STAR_TRACKER_USED,
+        NAV_FLAG_VELOCIMETER_USED,
+    };
+    if let Some(e) = &f.nav_error {
+        let source = if f.from_sensors { "sensors" } else { "bench" };
+        let _ = writeln!(
+            out,
+            "navigation  from {source}: error at t = {:.1} s {:.1} m (radial {:.2} m, horizontal {:.1} m), velocity {:.3} m/s, height {:.2} m; own sigma {:.1} m; max {:.1} m",
+            e.t_s,
+            e.position_m,
+            e.radial_m,
+            e.horizontal_m,
+            e.velocity_m_s,
+            e.altitude_m,
+            e.sigma_position_m,
+            f.nav_error_max_position_m
+        );
+        if let (Some(w), Some(n)) = (f.nav_within_3_sigma, f.nav_nees_mean) {
+            let _ = writeln!(
+                out,
+                "            within 3 sigma {:.1} % of cycles, mean NEES {:.2} (3 when consistent)",
+                w * 100.0,
+                n
+            );
+        }
+        if f.from_sensors {
+            let mut used = Vec::new();
+            for (bit, name) in [
+                (NAV_FLAG_STAR_TRACKER_USED, "star tracker"),
+                (NAV_FLAG_LASER_USED, "laser altimeter"),
+                (NAV_FLAG_RF_USED, "RF altimeter"),
+                (NAV_FLAG_VELOCIMETER_USED, "velocimeter"),
+            ] {
+                if f.nav_flags & bit != 0 {
+                    used.push(name);
+                }
+            }
+            let lost = if f.nav_flags & NAV_FLAG_LASER_LOST != 0 {
+                "; LASER ALTIMETER DECLARED LOST by the flight software"
+            } else {
+                ""
+            };
+            let _ = writeln!(out, "            in use at the end: {}{lost}", used.join(", "));
+        }
+    }
+    if f.boot_count > 1 {
+        let _ = writeln!(
+            out,
+            "fsw         {} boots ({} computer resets)",
+            f.boot_count,
+            f.boot_count - 1
+        );
+    }
+    for (i, g) in f.group_compute_ns.iter().enumerate() {
+        let _ = writeln!(
+            out,
+            "rate group  {i}: compute p50 {:.2} us, p99 {:.2} us, max {:.2} us ({} runs)",
+            g.p50 as f64 / 1000.0,
+            g.p99 as f64 / 1000.0,
+            g.max as f64 / 1000.0,
+            g.count
+        );
+    }
+    if f.cycle_slips > 0 {
+        let _ = writeln!(out, "CYCLE SLIPS {} (a rate group overran its period)", f.cycle_slips);
     }
 }

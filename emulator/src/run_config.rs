@@ -188,7 +188,7 @@ pub struct LogConfig {
     /// The log file; default `oils-out/<run id>.oilslog` (`.mcap` for MCAP).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub path: Option<PathBuf>,
-    /// The log's format: `oilslog` (OILSLOG5, the default) or `mcap`.
+    /// The log's format: `oilslog` (OILSLOG6, the default) or `mcap`.
     #[serde(skip_serializing_if = "crate::recorder::LogFormat::is_default")]
     pub format: crate::recorder::LogFormat,
 }
@@ -228,6 +228,10 @@ pub struct RunConfig {
     /// or `both`.
     #[serde(skip_serializing_if = "TelemetrySource::is_default")]
     pub telemetry: TelemetrySource,
+    /// The reference GNC's choices (`[gnc]`): `navigation = "bench" | "sensors"`,
+    /// `attitude = "torque" | "thrusters"`.
+    #[serde(skip_serializing_if = "oils_shared::fsw::GncOptions::is_default")]
+    pub gnc: oils_shared::fsw::GncOptions,
     /// Seed of every random stream.
     pub seed: u64,
     /// Propulsion model.
@@ -293,6 +297,7 @@ impl Default for RunConfig {
             fsw_period_ms: None,
             duration_s: 2000.0,
             telemetry: TelemetrySource::Nav,
+            gnc: Default::default(),
             seed: 0,
             propulsion: PropulsionKind::Surrogate,
             propulsion_fmu: None,
@@ -461,11 +466,30 @@ impl RunConfig {
                     )
                 })?;
         }
-        if self.fsw == FswSpec::Gnc && self.telemetry == TelemetrySource::Sensors {
+        use oils_shared::fsw::GncNavigation;
+        if self.fsw == FswSpec::Gnc {
+            match (self.gnc.navigation, self.telemetry) {
+                (GncNavigation::Bench, TelemetrySource::Sensors) => {
+                    return Err(invalid(
+                        "telemetry",
+                        "sensors",
+                        "the reference GNC with gnc.navigation = \"bench\" navigates from the ideal navigation source: use telemetry = \"nav\" or \"both\", or --gnc-nav sensors to fly it on its Kalman filter",
+                    ));
+                }
+                (GncNavigation::Sensors, TelemetrySource::Nav) => {
+                    return Err(invalid(
+                        "gnc.navigation",
+                        "sensors",
+                        "navigating from the sensors needs their samples: telemetry = \"sensors\" or \"both\" (--telemetry sensors)",
+                    ));
+                }
+                _ => {}
+            }
+        } else if !self.gnc.is_default() {
             return Err(invalid(
-                "telemetry",
-                "sensors",
-                "the reference GNC navigates from the ideal navigation source: use telemetry = \"nav\" or \"both\" with it (--telemetry both flies it and logs the devices)",
+                "gnc",
+                format!("{}/{}", self.gnc.navigation, self.gnc.attitude),
+                "the [gnc] choices are the reference GNC's: use them with fsw = \"gnc\"",
             ));
         }
         match (&self.fsw, &self.profile) {

@@ -26,7 +26,8 @@ use crate::sanitize::sanitize;
 use crate::timing::{TimingMonitor, TimingThresholds};
 use oils_shared::clock::monotonic_ns;
 use oils_shared::link::LinkError;
-use oils_shared::{Command, PacketHeader, TLM_FLAG_END_OF_RUN};
+use crate::fsw_monitor::FswMonitor;
+use oils_shared::{Command, PacketHeader, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_END_OF_RUN};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -187,6 +188,11 @@ pub struct RunSummary {
     /// zero when every sample reached the flight software.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sensors_dropped: Option<crate::sensors::DroppedSamples>,
+    /// What the flight software said of itself (protocol v3's `FswReport`), checked
+    /// against the truth: navigation error at the end and consistency, boots, rate
+    /// groups; `None` when it said nothing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fsw_report: Option<crate::fsw_monitor::FswSelfReport>,
 }
 
 /// Overruns of one rate group.
@@ -300,6 +306,9 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     // The last step whose telemetry went out mid-step (a replay must know whether the
     // end came before or after it: the end record says).
     let mut published: Option<u64> = None;
+    // A computer reset was under way at the last step.
+    let mut was_resetting = false;
+    let mut fsw_monitor = FswMonitor::new();
 
     loop {
         let mut step_times = StepTimes::default();
@@ -333,7 +342,16 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         let faults_active = faults.active_mask();
         let (sensor_faults, link_faults) = faults.stages();
         let mut link = FaultyLink::new(&mut *link, link_faults);
-        let mut tlm = plant.telemetry(PacketHeader::new(cfg.run_id, k, t_ns));
+        let resetting = link.resetting();
+        let mut header = PacketHeader::new(cfg.run_id, k, t_ns);
+        if resetting {
+            header.flags |= TLM_FLAG_COMPUTER_RESET;
+        } else if was_resetting {
+            // The computer is back: the ground uplinks a fresh state vector.
+            plant.uplink_state_vector();
+        }
+        was_resetting = resetting;
+        let mut tlm = plant.telemetry(header);
         sensor_faults.apply(&mut tlm, fired);
         let finished = abort.is_some()
             || matches!(status, PlantStatus::Touchdown(_))
@@ -437,6 +455,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     timing.record_in_process(round_trip_ns, cmd.stub_compute_ns);
                 }
                 digest.add_command(&cmd);
+                fsw_monitor.record(&cmd, &plant.truth(), t_ns);
                 flags |= REC_COMMAND_RECEIVED;
                 logged_cmd = cmd;
                 wire_cmd = Some(cmd);
@@ -450,8 +469,14 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             }
             None => {}
         }
-        // Link faults act between the wire and the sanitiser.
-        match link.deliver(wire_cmd) {
+        // Link faults act between the wire and the sanitiser. While the computer
+        // resets, what comes back is ignored: the main engines hold their command, the
+        // attitude torque stops (held thruster pulses never fire twice).
+        if resetting {
+            let _ = link.deliver(None);
+            applied.torque_cmd_body_nm = [0.0; 3];
+        } else {
+            match link.deliver(wire_cmd) {
             Some(cmd) => {
                 let (safe, rejected) = sanitize(&cmd, cfg.max_thrust_n, t_ns, cfg.fsw_period_ns);
                 if rejected > 0 {
@@ -486,6 +511,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     }
                 }
             }
+        }
         }
         if let Some(r) = recorder {
             let logged = r.record(&Record {
@@ -575,5 +601,6 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         faults: faults.report(),
         propulsion_diagnostics: plant.propulsion_diagnostics(),
         sensors_dropped: plant.sensors().map(|s| s.dropped()),
+        fsw_report: Some(fsw_monitor.finish()).filter(|r| r.boot_count > 0 || r.navigation_reported),
     })
 }

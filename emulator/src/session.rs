@@ -464,7 +464,7 @@ pub struct Replay {
 /// fed back in, and each telemetry the emulator publishes must equal the recorded one
 /// (else the replay stops with the first step that differs). The digest comes out the
 /// recorded run's: record == replay. `log` is the file at `log_path`, read by whichever
-/// reader its format needs ([`crate::recorder::read_log`] for OILSLOG5).
+/// reader its format needs ([`crate::recorder::read_log`] for OILSLOG6).
 ///
 /// The replay ends where the log does: at the step its end record names, as the
 /// recorded run ended it (before or after that step's telemetry went out, the end record

@@ -3,7 +3,7 @@
 //! both start from here; nothing here parses a command line.
 
 use crate::c_library::{CLibraryError, CLibraryFsw};
-use crate::fsw::{FlightSoftware, FswSpec};
+use crate::fsw::{FlightSoftware, FswSpec, GncOptions};
 use crate::gnc::{GncConfig, GncConfigError, ReferenceGnc, SiteTarget};
 use crate::playback::ProfilePlayback;
 use oils_shared::profile::{ProfileError, ProfileRules, ThrustProfile};
@@ -35,27 +35,32 @@ pub const MAX_FSW_PARAMS_BYTES: u64 = 1 << 20;
 /// [`MAX_FSW_PARAMS_BYTES`]) and `run_id` are handed to a C library's `oils_fsw_init`.
 /// `site`: the scenario's landing site, which the reference GNC flies to (`None`: the
 /// default scenario's, [`SiteTarget::CHANDRAYAAN_3`]); a C library is not told it.
+/// `gnc`: what the reference GNC navigates from and turns the vehicle with.
 pub fn build_fsw(
     spec: &FswSpec,
     profile: Option<(&Path, &ProfileRules)>,
     fsw_params: Option<&Path>,
     run_id: u64,
     site: Option<SiteTarget>,
+    gnc: GncOptions,
 ) -> Result<Box<dyn FlightSoftware>, FswBuildError> {
-    build_fsw_expecting(spec, profile, fsw_params, run_id, None, site)
+    build_fsw_expecting(spec, profile, fsw_params, run_id, None, site, gnc)
 }
 
-/// The reference GNC's configuration for a run whose scenario names `site`.
-pub fn gnc_config(site: Option<SiteTarget>) -> GncConfig {
+/// The reference GNC's configuration for a run whose scenario names `site`, with the
+/// run's `options`.
+pub fn gnc_config(site: Option<SiteTarget>, options: GncOptions) -> GncConfig {
     let mut cfg = GncConfig::default();
     if let Some(site) = site {
         cfg.site = Some(site);
     }
+    cfg.navigation = options.navigation;
+    cfg.attitude_actuator = options.attitude;
     cfg
 }
 
 /// [`build_fsw`]; a C library must also have the BLAKE3 `c_blake3` when given (see
-/// [`CLibraryFsw::load_expecting`]); `site` as for [`build_fsw`].
+/// [`CLibraryFsw::load_expecting`]); `site` and `gnc` as for [`build_fsw`].
 pub fn build_fsw_expecting(
     spec: &FswSpec,
     profile: Option<(&Path, &ProfileRules)>,
@@ -63,9 +68,10 @@ pub fn build_fsw_expecting(
     run_id: u64,
     c_blake3: Option<&str>,
     site: Option<SiteTarget>,
+    gnc: GncOptions,
 ) -> Result<Box<dyn FlightSoftware>, FswBuildError> {
     match spec {
-        FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(gnc_config(site))?)),
+        FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(gnc_config(site, gnc))?)),
         FswSpec::CLibrary(path) => {
             let params = match fsw_params {
                 Some(p) => read_params(p)?,

@@ -29,6 +29,8 @@ pub struct StubOptions {
     /// The scenario's landing site the reference GNC flies to (`None`: the default
     /// scenario's).
     pub site: Option<crate::gnc::SiteTarget>,
+    /// What the reference GNC navigates from and turns the vehicle with.
+    pub gnc: crate::fsw::GncOptions,
     /// busy, event or hybrid; `None`: what the emulator announces.
     pub wait: Option<String>,
     /// Give up after this long without telemetry, milliseconds.
@@ -50,6 +52,7 @@ impl StubOptions {
             fsw_params: None,
             fsw_blake3: None,
             site: None,
+            gnc: Default::default(),
             wait: None,
             timeout_ms: 5000,
             rt_priority: None,
@@ -116,6 +119,7 @@ pub fn run_stub(args: &StubOptions, stop: &AtomicBool) -> Result<StubSummary, Jo
         run_id,
         args.fsw_blake3.as_deref(),
         args.site,
+        args.gnc,
     )?;
     let node = create_node("oils-onboard-stub")?;
     let link = StubLink::open(&node, run_id, wait, args.startup_timeout_ms, stop)?;

@@ -57,7 +57,7 @@ fn probe(dir: &Path, name: &str, defines: &[&str]) -> FswSpec {
 
 /// The loader's error, as printed (the flight software itself has no `Debug`).
 fn load_error(spec: &FswSpec, params: Option<&Path>, run_id: u64) -> String {
-    match build_fsw(spec, None, params, run_id, None) {
+    match build_fsw(spec, None, params, run_id, None, Default::default()) {
         Ok(_) => panic!("{spec} loaded"),
         Err(e) => e.to_string(),
     }
@@ -74,7 +74,7 @@ fn tlm(step: u64) -> Telemetry {
 fn a_library_steps_and_its_failure_stops_it() {
     let dir = scratch("fails");
     let spec = probe(&dir, "fails", &["FAIL_STATUS=7"]);
-    let Ok(mut fsw) = build_fsw(&spec, None, None, 0x22, None) else {
+    let Ok(mut fsw) = build_fsw(&spec, None, None, 0x22, None, Default::default()) else {
         panic!("does not load")
     };
     assert_eq!(fsw.name(), "c");
@@ -103,7 +103,7 @@ fn init_gets_the_run_id_and_the_parameters() {
     let spec = probe(&dir, "init", &[]);
     let params = dir.join("params.txt");
     std::fs::write(&params, "gain = 2\n").unwrap();
-    assert!(build_fsw(&spec, None, Some(&params), 0x22, None).is_ok());
+    assert!(build_fsw(&spec, None, Some(&params), 0x22, None, Default::default()).is_ok());
     // The probe refuses any other run id: init's NULL is a clear error.
     let err = load_error(&spec, None, 0x23);
     assert!(err.contains("oils_fsw_init refused the run"), "{err}");
@@ -148,7 +148,7 @@ fn the_c_example_holds_its_weight_on_the_profile() {
     // the example commands gravity's thrust, shared by the four engines, and no torque.
     let dir = scratch("example");
     let lib = shared_library(&terminal_descent_c(), "terminal_descent", &dir, &[]);
-    let Ok(mut fsw) = build_fsw(&FswSpec::CLibrary(lib), None, None, 1, None) else {
+    let Ok(mut fsw) = build_fsw(&FswSpec::CLibrary(lib), None, None, 1, None, Default::default()) else {
         panic!("does not load")
     };
     let r_m = 1_737_400.0 + 1.2 + 2000.0;
@@ -189,7 +189,7 @@ fn a_library_is_hashed_and_refused_when_it_is_not_the_file_expected() {
     let fsw = CLibraryFsw::load_expecting(path, 0x22, "", Some(&hash)).unwrap();
     assert_eq!(fsw.blake3(), hash);
     let other = "0".repeat(64);
-    let err = match build_fsw_expecting(&spec, None, None, 0x22, Some(&other), None) {
+    let err = match build_fsw_expecting(&spec, None, None, 0x22, Some(&other), None, Default::default()) {
         Ok(_) => panic!("a file with another hash loaded"),
         Err(e) => e.to_string(),
     };

@@ -74,6 +74,7 @@ fn recording() -> &'static [Record] {
                 latitude_deg: cfg.scenario.site.latitude_deg,
                 longitude_deg: cfg.scenario.site.longitude_deg,
             }),
+            cfg.gnc,
         )
         .unwrap();
         session::run(

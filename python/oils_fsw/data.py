@@ -3,7 +3,7 @@
 Needs the ``data`` extra (``pip install './python[data]'``: numpy, pandas, and mcap for
 MCAP logs); the flight-software client (``oils_fsw`` itself) does not.
 
-* :func:`read_log` -- a log (OILSLOG5 binary records, or MCAP) as a DataFrame whose
+* :func:`read_log` -- a log (OILSLOG6 binary records, or MCAP) as a DataFrame whose
   columns are those of ``oils export LOG --csv``, in the same order, with the same values.
 * :func:`read_log_arrays` -- the same columns as a dict of numpy arrays.
 * :func:`read_records` -- the binary log's records as one numpy structured array (the
@@ -41,7 +41,7 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 LAYOUT_FORMAT = "oils-log-layout-1"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-OILSLOG_MAGIC = b"OILSLOG5"
+OILSLOG_MAGIC = b"OILSLOG6"
 
 __all__ = [
     "LogError",
@@ -81,9 +81,9 @@ def _load_layout(layout: Union[PathLike, Dict[str, Any], None], header: Dict[str
 
 
 def _read_header(path: Path, data) -> Dict[str, Any]:
-    """The JSON header of an OILSLOG5 file (its CRC checked), and where the records start."""
+    """The JSON header of an OILSLOG6 file (its CRC checked), and where the records start."""
     if len(data) < 16 or bytes(data[:8]) != OILSLOG_MAGIC:
-        raise LogError(f"{path}: not an OILSLOG5 log (magic {bytes(data[:8])!r})")
+        raise LogError(f"{path}: not an OILSLOG6 log (magic {bytes(data[:8])!r})")
     n = int.from_bytes(bytes(data[8:12]), "little")
     crc = int.from_bytes(bytes(data[12:16]), "little")
     if 16 + n > len(data):
@@ -98,7 +98,7 @@ def _read_header(path: Path, data) -> Dict[str, Any]:
 
 
 def read_layout(path: PathLike) -> Dict[str, Any]:
-    """The record layout an OILSLOG5 or MCAP log carries in its header."""
+    """The record layout an OILSLOG6 or MCAP log carries in its header."""
     path = Path(path)
     header = _mcap_header(path) if _is_mcap(path) else _read_header(path, _map(path))
     return _load_layout(None, header, path)
@@ -226,6 +226,11 @@ def _derive(layout: Dict[str, Any], out: Dict[str, np.ndarray]) -> None:
                 site_cache.update(_site_quantities(layout["site"], out))
             q = site_cache[d["quantity"]]
             v = q[:, d["index"]] if "index" in d else q
+        elif op == "nav_error":
+            # estimate - truth where the flight software reported an estimate, else NaN.
+            valid = (out[d["flags"]].astype(np.uint64) & np.uint64(d["mask"])) != 0
+            diff = out[d["estimate"]].astype(np.float64) - out[d["truth"]].astype(np.float64)
+            v = np.where(valid, diff, np.nan)
         else:
             raise LogError(f"column {c['name']}: unknown derivation {op!r} (a newer bench; update oils_fsw)")
         out[c["name"]] = _as_kind(c["kind"], v)
@@ -398,7 +403,7 @@ def read_log_arrays(path: PathLike, layout=None, verify: bool = True) -> Dict[st
 
 
 def read_log(path: PathLike, layout=None, verify: bool = True) -> pd.DataFrame:
-    """A log (OILSLOG5 or MCAP) as a DataFrame with the CSV export's columns, in order.
+    """A log (OILSLOG6 or MCAP) as a DataFrame with the CSV export's columns, in order.
 
     Integers are integers (ids ``uint64``), flags ``bool``, floats ``float64``; optional
     figures (timing) are ``float64`` with NaN where a step has none, as in the CSV.

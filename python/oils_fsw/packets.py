@@ -1,4 +1,4 @@
-"""ctypes mirrors of the oils wire packets (protocol v2).
+"""ctypes mirrors of the oils wire packets (protocol v3).
 
 Field for field the Rust structs of ``shared/src/lib.rs`` and the C structs of
 ``shared/include/oils.h``; ``docs/protocol.md`` gives every unit and frame. The test
@@ -8,7 +8,7 @@ hash against what the Rust side prints (``cargo run -p oils-shared --example lay
 
 import ctypes
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 ENGINE_COUNT = 4
 THRUSTER_COUNT = 8
 VELOCIMETER_BEAMS = 3
@@ -21,6 +21,17 @@ TLM_FLAG_NAV_NOISE = 1 << 1  # navigation values carry seeded noise
 TLM_FLAG_FOOTPAD_CONTACT = 1 << 2  # a footpad touches the ground: engines off
 TLM_FLAG_IDEAL_NAV = 1 << 3  # nav, accel_body_m_s2, altitude_m hold the ideal navigation source
 TLM_FLAG_SENSORS = 1 << 4  # sensors holds the device samples since the last cycle
+TLM_FLAG_STATE_VECTOR = 1 << 5  # nav holds the ground's state vector to start from
+TLM_FLAG_COMPUTER_RESET = 1 << 6  # the computer is resetting: state is lost
+NAV_FLAG_VALID = 1 << 0  # FswReport: the navigation fields hold an estimate
+NAV_FLAG_FROM_SENSORS = 1 << 1
+NAV_FLAG_STAR_TRACKER_USED = 1 << 2
+NAV_FLAG_LASER_USED = 1 << 3
+NAV_FLAG_RF_USED = 1 << 4
+NAV_FLAG_VELOCIMETER_USED = 1 << 5
+NAV_FLAG_LASER_LOST = 1 << 6
+NAV_FLAG_REINIT = 1 << 7
+RATE_GROUPS = 4
 SAMPLE_FLAG_SATURATED = 1 << 0
 SAMPLE_FLAG_NO_LOCK = 1 << 1  # no return: out of range, grazing, nothing in the beam
 SAMPLE_FLAG_INHIBITED = 1 << 2
@@ -40,7 +51,8 @@ SCHEMA = (
     "VelocimeterSample{t_ns:i64@0,los_velocity_m_s:[f64;3]@8,range_m:[f64;3]@32,valid:[u32;3]@56,flags:u32@68}=72|"
     "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,reserved:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728}=872|"
     "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1176|"
-    "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188}=192|"
+    "FswReport{nav_pos_mci_m:[f64;3]@0,nav_vel_mci_m_s:[f64;3]@24,nav_pos_sigma_m:[f64;3]@48,nav_vel_sigma_m_s:[f64;3]@72,nav_altitude_m:f64@96,nav_altitude_sigma_m:f64@104,group_compute_ns:[u32;4]@112,nav_flags:u32@128,phase:u32@132,boot_count:u32@136,cycle_slips:u32@140}=144|"
+    "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188,fsw:FswReport@192}=336|"
 )
 
 
@@ -53,7 +65,7 @@ def fnv1a64(text: str) -> int:
     return h
 
 
-SCHEMA_HASH = fnv1a64(SCHEMA)  # 0x6b7aac819410d7f5
+SCHEMA_HASH = fnv1a64(SCHEMA)
 
 _f64 = ctypes.c_double
 _u32 = ctypes.c_uint32
@@ -187,11 +199,29 @@ class Telemetry(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """iceoryx2 type name (must match the Rust side)."""
-        return "oils.v2.Telemetry"
+        return "oils.v3.Telemetry"
+
+
+class FswReport(ctypes.Structure):
+    """What the flight software says of itself each cycle (144 bytes; all zero: nothing)."""
+
+    _fields_ = [
+        ("nav_pos_mci_m", _f64 * 3),  # its position estimate, mci
+        ("nav_vel_mci_m_s", _f64 * 3),  # its velocity estimate, mci
+        ("nav_pos_sigma_m", _f64 * 3),  # its own 1-sigma per axis (0: not known)
+        ("nav_vel_sigma_m_s", _f64 * 3),
+        ("nav_altitude_m", _f64),  # its height above the ground below
+        ("nav_altitude_sigma_m", _f64),
+        ("group_compute_ns", _u32 * RATE_GROUPS),  # wall clock (not in the digest)
+        ("nav_flags", _u32),  # NAV_FLAG_*
+        ("phase", _u32),  # its own phase code
+        ("boot_count", _u32),  # 1 after the first start, +1 per computer reset
+        ("cycle_slips", _u32),  # rate-group overruns so far (not in the digest)
+    ]
 
 
 class Command(ctypes.Structure):
-    """Flight software -> emulator, once per cycle: held over [t_k, t_k+1) (192 bytes)."""
+    """Flight software -> emulator, once per cycle: held over [t_k, t_k+1) (336 bytes)."""
 
     _fields_ = [
         ("header", PacketHeader),  # echo run_id, step, t_ns of the telemetry answered
@@ -202,9 +232,10 @@ class Command(ctypes.Structure):
         ("thruster_on_time_ns", _u64 * THRUSTER_COUNT),  # from the cycle start (attitude_mode 1)
         ("attitude_mode", _u32),  # ATTITUDE_MODE_*
         ("reserved", _u32),
+        ("fsw", FswReport),  # optional: what the flight software says of itself
     ]
 
     @staticmethod
     def type_name() -> str:
         """iceoryx2 type name (must match the Rust side)."""
-        return "oils.v2.Command"
+        return "oils.v3.Command"

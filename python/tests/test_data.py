@@ -167,7 +167,7 @@ class LogsEqualTheCsvExport(unittest.TestCase):
     def test_not_a_log_is_refused(self):
         junk = self.tmp / "junk.oilslog"
         junk.write_bytes(b"OILSLOG1" + bytes(64))
-        with self.assertRaisesRegex(data.LogError, "not an OILSLOG5 log"):
+        with self.assertRaisesRegex(data.LogError, "not an OILSLOG6 log"):
             oils_fsw.read_log(junk)
 
 

@@ -54,8 +54,8 @@ class LayoutMatchesRust(unittest.TestCase):
         return self.rust["structs"][ty]["size"]
 
     def test_type_names_are_the_rust_ones(self):
-        self.assertEqual(p.Telemetry.type_name(), "oils.v2.Telemetry")
-        self.assertEqual(p.Command.type_name(), "oils.v2.Command")
+        self.assertEqual(p.Telemetry.type_name(), "oils.v3.Telemetry")
+        self.assertEqual(p.Command.type_name(), "oils.v3.Command")
         self.assertEqual(ctypes.alignment(p.Telemetry), 8)
 
 

@@ -16,16 +16,27 @@
 extern "C" {
 #endif
 
-#define OILS_PROTOCOL_VERSION 2u
-#define OILS_SCHEMA_HASH UINT64_C(0x6b7aac819410d7f5)
+#define OILS_PROTOCOL_VERSION 3u
+#define OILS_SCHEMA_HASH UINT64_C(0x93604debf7838a12)
 #define OILS_FSW_ABI_VERSION 1u
-#define OILS_FSW_LAYOUT_HASH UINT64_C(0xed5e40d868baa0fe)
+#define OILS_FSW_LAYOUT_HASH UINT64_C(0x7fd827c5eac8e267)
 #define OILS_ENGINE_COUNT 4
 #define OILS_TLM_FLAG_END_OF_RUN 1u /* last telemetry: answer nothing */
 #define OILS_TLM_FLAG_NAV_NOISE 2u  /* nav values carry seeded noise */
 #define OILS_TLM_FLAG_FOOTPAD_CONTACT 4u  /* a footpad touches the ground: engines off */
 #define OILS_TLM_FLAG_IDEAL_NAV 8u  /* nav, accel_body_m_s2, altitude_m are filled */
 #define OILS_TLM_FLAG_SENSORS 16u  /* sensors holds the device samples */
+#define OILS_TLM_FLAG_STATE_VECTOR 32u  /* nav holds the ground's state vector to start from */
+#define OILS_TLM_FLAG_COMPUTER_RESET 64u  /* the computer is resetting: state is lost */
+#define OILS_NAV_FLAG_VALID 1u
+#define OILS_NAV_FLAG_FROM_SENSORS 2u
+#define OILS_NAV_FLAG_STAR_TRACKER_USED 4u
+#define OILS_NAV_FLAG_LASER_USED 8u
+#define OILS_NAV_FLAG_RF_USED 16u
+#define OILS_NAV_FLAG_VELOCIMETER_USED 32u
+#define OILS_NAV_FLAG_LASER_LOST 64u
+#define OILS_NAV_FLAG_REINIT 128u
+#define OILS_RATE_GROUPS 4
 #define OILS_THRUSTER_COUNT 8
 #define OILS_VELOCIMETER_BEAMS 3
 #define OILS_IMU_SAMPLES_MAX 8
@@ -52,7 +63,8 @@ extern "C" {
   "VelocimeterSample{t_ns:i64@0,los_velocity_m_s:[f64;3]@8,range_m:[f64;3]@32,valid:[u32;3]@56,flags:u32@68}=72|" \
   "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,reserved:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728}=872|" \
   "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1176|" \
-  "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188}=192|"
+  "FswReport{nav_pos_mci_m:[f64;3]@0,nav_vel_mci_m_s:[f64;3]@24,nav_pos_sigma_m:[f64;3]@48,nav_vel_sigma_m_s:[f64;3]@72,nav_altitude_m:f64@96,nav_altitude_sigma_m:f64@104,group_compute_ns:[u32;4]@112,nav_flags:u32@128,phase:u32@132,boot_count:u32@136,cycle_slips:u32@140}=144|" \
+  "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188,fsw:FswReport@192}=336|"
 
 typedef struct oils_packet_header {
   uint32_t protocol_version;
@@ -138,6 +150,20 @@ typedef struct oils_telemetry {
   oils_sensor_frame sensors;
 } oils_telemetry;
 
+typedef struct oils_fsw_report {
+  double nav_pos_mci_m[3];
+  double nav_vel_mci_m_s[3];
+  double nav_pos_sigma_m[3];
+  double nav_vel_sigma_m_s[3];
+  double nav_altitude_m;
+  double nav_altitude_sigma_m;
+  uint32_t group_compute_ns[4];
+  uint32_t nav_flags;
+  uint32_t phase;
+  uint32_t boot_count;
+  uint32_t cycle_slips;
+} oils_fsw_report;
+
 typedef struct oils_command {
   oils_packet_header header;
   double thrust_cmd_n[4];
@@ -147,6 +173,7 @@ typedef struct oils_command {
   uint64_t thruster_on_time_ns[8];
   uint32_t attitude_mode;
   uint32_t reserved;
+  oils_fsw_report fsw;
 } oils_command;
 
 typedef struct oils_fsw_config {
@@ -228,6 +255,18 @@ OILS_STATIC_ASSERT(offsetof(oils_telemetry, mass_estimate_kg) == 176, "oils_tele
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, propulsion) == 184, "oils_telemetry.propulsion offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, sensors) == 304, "oils_telemetry.sensors offset");
 OILS_STATIC_ASSERT(sizeof(oils_telemetry) == 1176, "oils_telemetry size");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_pos_mci_m) == 0, "oils_fsw_report.nav_pos_mci_m offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_vel_mci_m_s) == 24, "oils_fsw_report.nav_vel_mci_m_s offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_pos_sigma_m) == 48, "oils_fsw_report.nav_pos_sigma_m offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_vel_sigma_m_s) == 72, "oils_fsw_report.nav_vel_sigma_m_s offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_altitude_m) == 96, "oils_fsw_report.nav_altitude_m offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_altitude_sigma_m) == 104, "oils_fsw_report.nav_altitude_sigma_m offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, group_compute_ns) == 112, "oils_fsw_report.group_compute_ns offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_flags) == 128, "oils_fsw_report.nav_flags offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, phase) == 132, "oils_fsw_report.phase offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, boot_count) == 136, "oils_fsw_report.boot_count offset");
+OILS_STATIC_ASSERT(offsetof(oils_fsw_report, cycle_slips) == 140, "oils_fsw_report.cycle_slips offset");
+OILS_STATIC_ASSERT(sizeof(oils_fsw_report) == 144, "oils_fsw_report size");
 OILS_STATIC_ASSERT(offsetof(oils_command, header) == 0, "oils_command.header offset");
 OILS_STATIC_ASSERT(offsetof(oils_command, thrust_cmd_n) == 40, "oils_command.thrust_cmd_n offset");
 OILS_STATIC_ASSERT(offsetof(oils_command, engine_on) == 72, "oils_command.engine_on offset");
@@ -236,7 +275,8 @@ OILS_STATIC_ASSERT(offsetof(oils_command, stub_compute_ns) == 112, "oils_command
 OILS_STATIC_ASSERT(offsetof(oils_command, thruster_on_time_ns) == 120, "oils_command.thruster_on_time_ns offset");
 OILS_STATIC_ASSERT(offsetof(oils_command, attitude_mode) == 184, "oils_command.attitude_mode offset");
 OILS_STATIC_ASSERT(offsetof(oils_command, reserved) == 188, "oils_command.reserved offset");
-OILS_STATIC_ASSERT(sizeof(oils_command) == 192, "oils_command size");
+OILS_STATIC_ASSERT(offsetof(oils_command, fsw) == 192, "oils_command.fsw offset");
+OILS_STATIC_ASSERT(sizeof(oils_command) == 336, "oils_command size");
 OILS_STATIC_ASSERT(offsetof(oils_fsw_config, abi_version) == 0, "oils_fsw_config.abi_version offset");
 OILS_STATIC_ASSERT(offsetof(oils_fsw_config, protocol_version) == 4, "oils_fsw_config.protocol_version offset");
 OILS_STATIC_ASSERT(offsetof(oils_fsw_config, schema_hash) == 8, "oils_fsw_config.schema_hash offset");

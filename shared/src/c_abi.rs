@@ -22,6 +22,11 @@ use crate::{
     STAR_TRACKER_SAMPLES_MAX, THRUSTER_COUNT, TLM_FLAG_IDEAL_NAV, TLM_FLAG_SENSORS,
     VELOCIMETER_BEAMS, VELOCIMETER_SAMPLES_MAX,
 };
+use crate::{
+    NAV_FLAG_FROM_SENSORS, NAV_FLAG_LASER_LOST, NAV_FLAG_LASER_USED, NAV_FLAG_REINIT,
+    NAV_FLAG_RF_USED, NAV_FLAG_STAR_TRACKER_USED, NAV_FLAG_VALID, NAV_FLAG_VELOCIMETER_USED,
+    RATE_GROUPS, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_STATE_VECTOR,
+};
 use crate::{ENGINE_COUNT, PROTOCOL_VERSION, SCHEMA, SCHEMA_HASH};
 use crate::{TLM_FLAG_END_OF_RUN, TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_NAV_NOISE};
 use core::ffi::c_char;
@@ -172,6 +177,17 @@ pub fn c_header() -> String {
          #define OILS_TLM_FLAG_FOOTPAD_CONTACT {TLM_FLAG_FOOTPAD_CONTACT}u  /* a footpad touches the ground: engines off */\n\
          #define OILS_TLM_FLAG_IDEAL_NAV {TLM_FLAG_IDEAL_NAV}u  /* nav, accel_body_m_s2, altitude_m are filled */\n\
          #define OILS_TLM_FLAG_SENSORS {TLM_FLAG_SENSORS}u  /* sensors holds the device samples */\n\
+         #define OILS_TLM_FLAG_STATE_VECTOR {TLM_FLAG_STATE_VECTOR}u  /* nav holds the ground's state vector to start from */\n\
+         #define OILS_TLM_FLAG_COMPUTER_RESET {TLM_FLAG_COMPUTER_RESET}u  /* the computer is resetting: state is lost */\n\
+         #define OILS_NAV_FLAG_VALID {NAV_FLAG_VALID}u\n\
+         #define OILS_NAV_FLAG_FROM_SENSORS {NAV_FLAG_FROM_SENSORS}u\n\
+         #define OILS_NAV_FLAG_STAR_TRACKER_USED {NAV_FLAG_STAR_TRACKER_USED}u\n\
+         #define OILS_NAV_FLAG_LASER_USED {NAV_FLAG_LASER_USED}u\n\
+         #define OILS_NAV_FLAG_RF_USED {NAV_FLAG_RF_USED}u\n\
+         #define OILS_NAV_FLAG_VELOCIMETER_USED {NAV_FLAG_VELOCIMETER_USED}u\n\
+         #define OILS_NAV_FLAG_LASER_LOST {NAV_FLAG_LASER_LOST}u\n\
+         #define OILS_NAV_FLAG_REINIT {NAV_FLAG_REINIT}u\n\
+         #define OILS_RATE_GROUPS {RATE_GROUPS}\n\
          #define OILS_THRUSTER_COUNT {THRUSTER_COUNT}\n\
          #define OILS_VELOCIMETER_BEAMS {VELOCIMETER_BEAMS}\n\
          #define OILS_IMU_SAMPLES_MAX {IMU_SAMPLES_MAX}\n\
@@ -396,6 +412,19 @@ mod tests {
                 propulsion,
                 sensors
             },
+            FswReport {
+                nav_pos_mci_m,
+                nav_vel_mci_m_s,
+                nav_pos_sigma_m,
+                nav_vel_sigma_m_s,
+                nav_altitude_m,
+                nav_altitude_sigma_m,
+                group_compute_ns,
+                nav_flags,
+                phase,
+                boot_count,
+                cycle_slips
+            },
             Command {
                 header,
                 thrust_cmd_n,
@@ -404,7 +433,8 @@ mod tests {
                 stub_compute_ns,
                 thruster_on_time_ns,
                 attitude_mode,
-                reserved
+                reserved,
+                fsw
             },
             FswConfig {
                 abi_version,

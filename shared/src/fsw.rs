@@ -6,7 +6,7 @@
 //! calls one in its own thread (the in-process link). Neither needs the other's code.
 
 use crate::clock::monotonic_ns;
-use crate::{Command, PacketHeader, Telemetry};
+use crate::{Command, PacketHeader, Telemetry, TLM_FLAG_COMPUTER_RESET};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::PathBuf;
@@ -29,6 +29,11 @@ pub trait FlightSoftware {
     fn failure(&self) -> Option<FswFailure> {
         None
     }
+    /// The onboard computer resets (telemetry flagged `TLM_FLAG_COMPUTER_RESET`): the
+    /// flight software loses its state and starts again on the next unflagged telemetry.
+    /// Called instead of `step` while the flag is up. Must not allocate. Default: nothing
+    /// (flight software that keeps no state across steps).
+    fn computer_reset(&mut self) {}
 }
 
 /// Runs the flight software on Telemetry(k) and returns Command(k) stamped as the wire
@@ -38,11 +43,88 @@ pub trait FlightSoftware {
 /// carries it.
 pub fn answer<F: FlightSoftware + ?Sized>(fsw: &mut F, tlm: &Telemetry) -> Command {
     let started_ns = monotonic_ns();
-    let mut cmd = fsw.step(tlm);
+    let mut cmd = if tlm.header.flags & TLM_FLAG_COMPUTER_RESET != 0 {
+        // The computer is down: nothing runs, the emulator ignores what comes back.
+        fsw.computer_reset();
+        Command::default()
+    } else {
+        fsw.step(tlm)
+    };
     let compute_ns = monotonic_ns().saturating_sub(started_ns);
     cmd.header = PacketHeader::new(tlm.header.run_id, tlm.header.step, tlm.header.t_ns);
     cmd.stub_compute_ns = compute_ns;
     cmd
+}
+
+/// How the reference GNC navigates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GncNavigation {
+    /// From the bench's ideal navigation source (`nav`, with its noise): a complementary
+    /// filter over it. Needs telemetry `nav` or `both`.
+    #[default]
+    Bench,
+    /// From the device samples: the error-state Kalman filter, started from the ground's
+    /// state vector. Needs telemetry `sensors` or `both`.
+    Sensors,
+}
+
+/// How the reference GNC turns the vehicle.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GncAttitude {
+    /// The ideal body-torque actuator (the comparison case).
+    #[default]
+    Torque,
+    /// The eight attitude thrusters, pulse-width modulated.
+    Thrusters,
+}
+
+macro_rules! text_enum {
+    ($t:ty, $what:literal, $($v:path => $s:literal),+) => {
+        impl $t {
+            /// The name on the command line and in a run configuration.
+            pub fn as_str(&self) -> &'static str {
+                match self { $($v => $s),+ }
+            }
+        }
+        impl FromStr for $t {
+            type Err = String;
+            fn from_str(s: &str) -> Result<Self, Self::Err> {
+                match s {
+                    $($s => Ok($v),)+
+                    other => Err(format!(
+                        concat!("unknown ", $what, " `{}` (expected ", $($s, " "),+, ")"),
+                        other
+                    )),
+                }
+            }
+        }
+        impl fmt::Display for $t {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                f.write_str(self.as_str())
+            }
+        }
+    };
+}
+text_enum!(GncNavigation, "GNC navigation", GncNavigation::Bench => "bench", GncNavigation::Sensors => "sensors");
+text_enum!(GncAttitude, "GNC attitude actuator", GncAttitude::Torque => "torque", GncAttitude::Thrusters => "thrusters");
+
+/// The reference GNC's choices a run makes (the rest is the GNC's own configuration).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct GncOptions {
+    /// What it navigates from.
+    pub navigation: GncNavigation,
+    /// What turns the vehicle.
+    pub attitude: GncAttitude,
+}
+
+impl GncOptions {
+    /// Both at their defaults (`bench`, `torque`): omitted from configurations.
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
 }
 
 /// A step the flight software reported as failed (in a run report: `fsw_failure`).

@@ -34,7 +34,7 @@ pub mod service;
 pub mod signals;
 
 /// Protocol version; bump on any change to a packet layout or meaning.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// Number of main engines.
 pub const ENGINE_COUNT: usize = 4;
@@ -63,6 +63,37 @@ pub const TLM_FLAG_FOOTPAD_CONTACT: u32 = 1 << 2;
 pub const TLM_FLAG_IDEAL_NAV: u32 = 1 << 3;
 /// Telemetry flag: `sensors` holds the device samples since the last cycle.
 pub const TLM_FLAG_SENSORS: u32 = 1 << 4;
+/// Telemetry flag: `nav` holds the ground's state vector (orbit determination, with its
+/// documented error) for the flight software to start its navigation from; sent on the
+/// first cycle of a `sensors` run and on the first cycle after a computer reset (never
+/// with [`TLM_FLAG_IDEAL_NAV`]: a `both` run starts from the ideal navigation).
+pub const TLM_FLAG_STATE_VECTOR: u32 = 1 << 5;
+/// Telemetry flag: the onboard computer is resetting: the flight software's state is
+/// lost; it restarts on the first telemetry without this flag. Commands answered to a
+/// flagged telemetry are ignored (the engines and thrusters hold what they had).
+pub const TLM_FLAG_COMPUTER_RESET: u32 = 1 << 6;
+
+/// `FswReport::nav_flags`: the report's navigation fields hold an estimate.
+pub const NAV_FLAG_VALID: u32 = 1 << 0;
+/// `FswReport::nav_flags`: the estimate comes from the device samples (not the ideal
+/// navigation source).
+pub const NAV_FLAG_FROM_SENSORS: u32 = 1 << 1;
+/// `FswReport::nav_flags`: the star tracker updated the filter in the last 2 s.
+pub const NAV_FLAG_STAR_TRACKER_USED: u32 = 1 << 2;
+/// `FswReport::nav_flags`: the laser altimeter updated the filter in the last 2 s.
+pub const NAV_FLAG_LASER_USED: u32 = 1 << 3;
+/// `FswReport::nav_flags`: the RF altimeter updated the filter in the last 2 s.
+pub const NAV_FLAG_RF_USED: u32 = 1 << 4;
+/// `FswReport::nav_flags`: the velocimeter updated the filter in the last 2 s.
+pub const NAV_FLAG_VELOCIMETER_USED: u32 = 1 << 5;
+/// `FswReport::nav_flags`: the flight software has declared the laser altimeter lost
+/// (no valid sample for 10 s while in range) and navigates on the rest.
+pub const NAV_FLAG_LASER_LOST: u32 = 1 << 6;
+/// `FswReport::nav_flags`: the flight software is re-initialising after a reset.
+pub const NAV_FLAG_REINIT: u32 = 1 << 7;
+
+/// Rate groups a flight software may time in [`FswReport::group_compute_ns`].
+pub const RATE_GROUPS: usize = 4;
 
 /// Sample flag: the device saturated (an IMU axis at its range limit).
 pub const SAMPLE_FLAG_SATURATED: u32 = 1 << 0;
@@ -95,7 +126,8 @@ pub const SCHEMA: &str = concat!(
     "VelocimeterSample{t_ns:i64@0,los_velocity_m_s:[f64;3]@8,range_m:[f64;3]@32,valid:[u32;3]@56,flags:u32@68}=72|",
     "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,reserved:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728}=872|",
     "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1176|",
-    "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188}=192|",
+    "FswReport{nav_pos_mci_m:[f64;3]@0,nav_vel_mci_m_s:[f64;3]@24,nav_pos_sigma_m:[f64;3]@48,nav_vel_sigma_m_s:[f64;3]@72,nav_altitude_m:f64@96,nav_altitude_sigma_m:f64@104,group_compute_ns:[u32;4]@112,nav_flags:u32@128,phase:u32@132,boot_count:u32@136,cycle_slips:u32@140}=144|",
+    "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188,fsw:FswReport@192}=336|",
 );
 
 /// FNV-1a over [`SCHEMA`], evaluated at compile time.
@@ -120,7 +152,7 @@ pub const SCHEMA_HASH: u64 = schema_hash_of(SCHEMA);
 /// Header at the start of every packet.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.PacketHeader")]
+#[type_name("oils.v3.PacketHeader")]
 pub struct PacketHeader {
     /// [`PROTOCOL_VERSION`] of the sender.
     pub protocol_version: u32,
@@ -192,7 +224,7 @@ impl core::error::Error for ProtocolMismatch {}
 /// Navigation state as the onboard computer sees it (possibly with seeded noise).
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.NavState")]
+#[type_name("oils.v3.NavState")]
 pub struct NavState {
     /// Position of the centre of mass, Moon-centred inertial, metres.
     pub pos_mci_m: [f64; 3],
@@ -207,7 +239,7 @@ pub struct NavState {
 /// One main engine's readings.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.EngineReading")]
+#[type_name("oils.v3.EngineReading")]
 pub struct EngineReading {
     /// Thrust as sensed (the propulsion model's output), newtons.
     pub thrust_n: f64,
@@ -222,7 +254,7 @@ pub struct EngineReading {
 /// Propulsion system readings.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.PropulsionReadings")]
+#[type_name("oils.v3.PropulsionReadings")]
 pub struct PropulsionReadings {
     /// Helium bottle pressure, pascals.
     pub gas_pressure_pa: f64,
@@ -237,7 +269,7 @@ pub struct PropulsionReadings {
 /// One IMU sample: velocity and angle increments over the IMU period ending at `t_ns`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.ImuSample")]
+#[type_name("oils.v3.ImuSample")]
 pub struct ImuSample {
     /// End of the integration period (time of validity), ns since the start of the run.
     pub t_ns: i64,
@@ -254,7 +286,7 @@ pub struct ImuSample {
 /// One star-tracker sample: the body attitude it measured.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.StarTrackerSample")]
+#[type_name("oils.v3.StarTrackerSample")]
 pub struct StarTrackerSample {
     /// Time of validity, ns since the start of the run.
     pub t_ns: i64,
@@ -270,7 +302,7 @@ pub struct StarTrackerSample {
 /// One altimeter sample: slant range along the beam to the terrain.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.AltimeterSample")]
+#[type_name("oils.v3.AltimeterSample")]
 pub struct AltimeterSample {
     /// Time of validity, ns since the start of the run.
     pub t_ns: i64,
@@ -286,7 +318,7 @@ pub struct AltimeterSample {
 /// to the surface and the range.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.VelocimeterSample")]
+#[type_name("oils.v3.VelocimeterSample")]
 pub struct VelocimeterSample {
     /// Time of validity, ns since the start of the run.
     pub t_ns: i64,
@@ -305,7 +337,7 @@ pub struct VelocimeterSample {
 /// counts say how many entries of each array hold samples (the rest are zero).
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.SensorFrame")]
+#[type_name("oils.v3.SensorFrame")]
 pub struct SensorFrame {
     /// Entries of `imu` in use.
     pub imu_count: u32,
@@ -334,7 +366,7 @@ pub struct SensorFrame {
 /// Emulator -> onboard computer, once per flight-software cycle, at `t_k`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.Telemetry")]
+#[type_name("oils.v3.Telemetry")]
 pub struct Telemetry {
     /// Packet header.
     pub header: PacketHeader,
@@ -352,10 +384,44 @@ pub struct Telemetry {
     pub sensors: SensorFrame,
 }
 
+/// What the flight software says of itself each cycle: its navigation estimate with its
+/// own 1-sigma (so the bench can log estimate minus truth and check consistency), the
+/// phase it flies, how often it has booted, and its rate groups' compute times. The
+/// bench never acts on it. All zero (`nav_flags` 0) means "nothing said".
+#[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v3.FswReport")]
+pub struct FswReport {
+    /// Estimated position, `mci`, metres.
+    pub nav_pos_mci_m: [f64; 3],
+    /// Estimated velocity, `mci`, m/s.
+    pub nav_vel_mci_m_s: [f64; 3],
+    /// The estimate's own 1-sigma per `mci` axis, metres (0: not known).
+    pub nav_pos_sigma_m: [f64; 3],
+    /// The estimate's own 1-sigma per `mci` axis, m/s (0: not known).
+    pub nav_vel_sigma_m_s: [f64; 3],
+    /// Estimated height above the ground below, metres.
+    pub nav_altitude_m: f64,
+    /// Its 1-sigma, metres (0: not known).
+    pub nav_altitude_sigma_m: f64,
+    /// Wall-clock compute time of each rate group that ran this cycle, nanoseconds
+    /// (0: did not run); excluded from the run digest, like `stub_compute_ns`.
+    pub group_compute_ns: [u32; RATE_GROUPS],
+    /// `NAV_FLAG_*` bits.
+    pub nav_flags: u32,
+    /// The flight software's own phase code (the reference GNC's: `docs/gnc.md`).
+    pub phase: u32,
+    /// Boots so far (1 after the first start; +1 per computer reset).
+    pub boot_count: u32,
+    /// Rate-group cycle slips so far (a group whose compute time exceeded its period,
+    /// wall clock); excluded from the run digest.
+    pub cycle_slips: u32,
+}
+
 /// Onboard computer -> emulator, once per step: held over `[t_k, t_k+1)`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v2.Command")]
+#[type_name("oils.v3.Command")]
 pub struct Command {
     /// Packet header; `step` must echo the telemetry it answers.
     pub header: PacketHeader,
@@ -377,6 +443,8 @@ pub struct Command {
     pub attitude_mode: u32,
     /// Zero.
     pub reserved: u32,
+    /// What the flight software says of itself (navigation, phase, boots, rate groups).
+    pub fsw: FswReport,
 }
 
 /// Views a packet as bytes, for digests and log records.
@@ -484,7 +552,13 @@ mod tests {
         assert_eq!(offset_of!(Telemetry, propulsion), 184);
         assert_eq!(offset_of!(Telemetry, sensors), 304);
 
-        assert_eq!(size_of::<Command>(), 192);
+        assert_eq!(size_of::<FswReport>(), 144);
+        assert_eq!(offset_of!(FswReport, nav_pos_sigma_m), 48);
+        assert_eq!(offset_of!(FswReport, nav_altitude_m), 96);
+        assert_eq!(offset_of!(FswReport, group_compute_ns), 112);
+        assert_eq!(offset_of!(FswReport, nav_flags), 128);
+        assert_eq!(offset_of!(FswReport, cycle_slips), 140);
+        assert_eq!(size_of::<Command>(), 336);
         assert_eq!(offset_of!(Command, header), 0);
         assert_eq!(offset_of!(Command, thrust_cmd_n), 40);
         assert_eq!(offset_of!(Command, engine_on), 72);
@@ -493,6 +567,7 @@ mod tests {
         assert_eq!(offset_of!(Command, thruster_on_time_ns), 120);
         assert_eq!(offset_of!(Command, attitude_mode), 184);
         assert_eq!(offset_of!(Command, reserved), 188);
+        assert_eq!(offset_of!(Command, fsw), 192);
     }
 
     #[test]
@@ -521,7 +596,11 @@ mod tests {
             40 + 104 + 24 + 8 + 8 + 120 + size_of::<SensorFrame>(),
             size_of::<Telemetry>()
         );
-        assert_eq!(40 + 32 + 16 + 24 + 8 + 64 + 4 + 4, size_of::<Command>());
+        assert_eq!(8 * (3 + 3 + 3 + 3 + 1 + 1) + 4 * 4 + 4 * 4, size_of::<FswReport>());
+        assert_eq!(
+            40 + 32 + 16 + 24 + 8 + 64 + 4 + 4 + size_of::<FswReport>(),
+            size_of::<Command>()
+        );
     }
 
     #[test]
@@ -539,6 +618,7 @@ mod tests {
             ("VelocimeterSample", size_of::<VelocimeterSample>()),
             ("SensorFrame", size_of::<SensorFrame>()),
             ("Telemetry", size_of::<Telemetry>()),
+            ("FswReport", size_of::<FswReport>()),
             ("Command", size_of::<Command>()),
         ] {
             let entry = SCHEMA
@@ -556,7 +636,7 @@ mod tests {
         h.protocol_version = 7;
         h.schema_hash = 0xdead;
         let err = h.check_peer().unwrap_err().to_string();
-        assert!(err.contains("v2") && err.contains("v7"), "{err}");
+        assert!(err.contains("v3") && err.contains("v7"), "{err}");
         assert!(err.contains("0x000000000000dead"), "{err}");
     }
 

@@ -91,6 +91,16 @@ pub struct RunArgs {
     /// 200 Hz). [default: nav]
     #[arg(long, value_name = "nav|sensors|both")]
     pub telemetry: Option<oils_emulator::run_config::TelemetrySource>,
+    /// What the reference GNC navigates from: bench (the ideal navigation source) or
+    /// sensors (its error-state Kalman filter on the device samples, started from the
+    /// ground's state vector; needs --telemetry sensors or both). [default: bench]
+    #[arg(long, value_name = "bench|sensors")]
+    pub gnc_nav: Option<oils_shared::fsw::GncNavigation>,
+    /// What the reference GNC turns the vehicle with: torque (the ideal torque actuator)
+    /// or thrusters (the eight attitude thrusters, pulse-width modulated).
+    /// [default: torque]
+    #[arg(long, value_name = "torque|thrusters")]
+    pub gnc_attitude: Option<oils_shared::fsw::GncAttitude>,
     /// Propulsion model: surrogate (the learned model of the seed paper), hifi
     /// (physics, the truth model), ideal (first-order lag) or shadow (hifi drives, the
     /// surrogate runs beside it). [default: surrogate]
@@ -225,6 +235,12 @@ impl RunArgs {
                 cfg.dt_ms = 5;
             }
         }
+        if let Some(n) = self.gnc_nav {
+            cfg.gnc.navigation = n;
+        }
+        if let Some(a) = self.gnc_attitude {
+            cfg.gnc.attitude = a;
+        }
         if let Some(p) = &self.propulsion {
             cfg.propulsion = p.kind;
             cfg.propulsion_fmu = p.fmu.clone();
@@ -341,6 +357,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
             },
             if cfg.telemetry.sensors() { "on" } else { "off" }
         );
+        if cfg.fsw == oils_shared::fsw::FswSpec::Gnc {
+            println!(
+                "# Reference GNC: navigation {}, attitude {}",
+                cfg.gnc.navigation, cfg.gnc.attitude
+            );
+        }
         if cfg.telemetry.sensors() {
             println!("# The sensor set and rates ([scenario.sensors]):");
             for line in cfg.scenario.sensors.summary().lines() {
@@ -550,6 +572,7 @@ fn fly_in_process(
         run_id,
         fsw_library.map(|l| l.blake3.as_str()),
         Some(oils_lab::onboard::site_target(&cfg.scenario)),
+        cfg.gnc,
     )
     .map_err(|e| SessionError::Onboard(format!("building the flight software: {e}")))?;
     let extras = |observer| Extras {

@@ -36,6 +36,13 @@ pub struct StubArgs {
     /// (`oils run` passes its scenario's `[site]`; default: the default scenario's).
     #[arg(long, value_name = "LAT,LON", value_parser = parse_site, allow_hyphen_values = true)]
     pub site: Option<oils_onboard_stub::gnc::SiteTarget>,
+    /// What the reference GNC navigates from: `bench` (the ideal navigation source) or
+    /// `sensors` (its Kalman filter on the device samples).
+    #[arg(long, default_value = "bench")]
+    pub gnc_nav: oils_shared::fsw::GncNavigation,
+    /// What the reference GNC turns the vehicle with: `torque` (ideal) or `thrusters`.
+    #[arg(long, default_value = "torque")]
+    pub gnc_attitude: oils_shared::fsw::GncAttitude,
     /// Write how the stub ended to FILE as JSON (`error`, `fsw_failure` with the step and
     /// the status a failed step returned, `commands`, `last_step`); `oils run` reads it
     /// into its report.
@@ -66,6 +73,10 @@ impl From<&StubArgs> for StubOptions {
             fsw_params: a.fsw_params.clone(),
             fsw_blake3: a.fsw_blake3.clone(),
             site: a.site,
+            gnc: oils_shared::fsw::GncOptions {
+                navigation: a.gnc_nav,
+                attitude: a.gnc_attitude,
+            },
             wait: a.wait.clone(),
             timeout_ms: a.timeout_ms,
             rt_priority: a.rt_priority,

@@ -108,6 +108,10 @@ pub fn spawn(
         "--site={},{}",
         cfg.scenario.site.latitude_deg, cfg.scenario.site.longitude_deg
     ));
+    p.arg("--gnc-nav")
+        .arg(cfg.gnc.navigation.as_str())
+        .arg("--gnc-attitude")
+        .arg(cfg.gnc.attitude.as_str());
     if let Some(params) = &cfg.fsw_params {
         p.arg("--fsw-params").arg(params);
     }

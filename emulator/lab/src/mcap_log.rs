@@ -1152,7 +1152,7 @@ pub fn read_mcap_timing(path: &Path) -> Result<Vec<StepTiming>, McapLogError> {
     Ok(read_mcap(path)?.records.iter().map(step_timing).collect())
 }
 
-/// Reads a run log in either format: OILSLOG5 or MCAP (by the file's magic).
+/// Reads a run log in either format: OILSLOG6 or MCAP (by the file's magic).
 pub fn read_any(path: &Path) -> Result<Log, RecorderError> {
     if is_mcap(path) {
         Ok(read_mcap(path)?)

@@ -132,6 +132,8 @@ pub enum LinkAction {
     TelemetryDrop,
     /// The flight software paused: telemetry withheld.
     StubPause,
+    /// The onboard computer resetting: telemetry flagged, commands ignored.
+    ComputerReset,
 }
 
 /// A fault's effect, typed.
@@ -180,6 +182,10 @@ impl FaultAction {
                     factor: p("factor")?,
                 }))
             }
+            FaultKind::ThrustScaled => FaultAction::Plant(PlantFault::ThrustScaled {
+                engine: e,
+                factor: p("factor")?,
+            }),
             FaultKind::ValveStuck => {
                 FaultAction::Plant(PlantFault::Propulsion(PropulsionFault::ValveStuck {
                     engine: e,
@@ -233,6 +239,7 @@ impl FaultAction {
             }),
             FaultKind::TelemetryDrop => FaultAction::Link(LinkAction::TelemetryDrop),
             FaultKind::StubPause => FaultAction::Link(LinkAction::StubPause),
+            FaultKind::ComputerReset => FaultAction::Link(LinkAction::ComputerReset),
         })
     }
 }

@@ -33,6 +33,8 @@ pub struct LinkFaults {
     active: u64,
     /// Mask of the faults that withhold telemetry.
     withholding: u64,
+    /// Mask of the computer-reset faults.
+    resetting: u64,
     /// A duplicated command waiting to arrive (stale) at the next step.
     duplicate: Option<Command>,
 }
@@ -45,6 +47,9 @@ impl LinkFaults {
         };
         if matches!(action, LinkAction::TelemetryDrop | LinkAction::StubPause) {
             self.withholding |= 1 << index;
+        }
+        if action == LinkAction::ComputerReset {
+            self.resetting |= 1 << index;
         }
         self.entries.push(Entry {
             index,
@@ -68,6 +73,11 @@ impl LinkFaults {
     /// Whether Telemetry(k) is withheld from the flight software now.
     pub fn withheld(&self) -> bool {
         self.active & self.withholding != 0
+    }
+
+    /// Whether the onboard computer is resetting now.
+    pub fn resetting(&self) -> bool {
+        self.active & self.resetting != 0
     }
 
     fn deliver(&mut self, wire: Option<Command>) -> Option<Command> {
@@ -98,7 +108,9 @@ impl LinkFaults {
                         corrupt(c, bits, &mut e.rng);
                     }
                 }
-                LinkAction::TelemetryDrop | LinkAction::StubPause => {}
+                LinkAction::TelemetryDrop
+                | LinkAction::StubPause
+                | LinkAction::ComputerReset => {}
             }
         }
         cmd
@@ -121,6 +133,11 @@ impl<'a, L: Link + ?Sized> FaultyLink<'a, L> {
     /// and the step is a deadline miss (never a dead flight software).
     pub fn withheld(&self) -> bool {
         self.faults.withheld()
+    }
+
+    /// Whether the onboard computer is resetting now (a `computer-reset` fault).
+    pub fn resetting(&self) -> bool {
+        self.faults.resetting()
     }
 
     /// Publishes Telemetry(k) unless a fault withholds it; `Ok(true)`: it went out.

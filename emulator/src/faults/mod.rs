@@ -39,6 +39,14 @@ pub enum PlantFault {
     EngineStuck(usize),
     /// A failure inside the propulsion system.
     Propulsion(PropulsionFault),
+    /// The engine delivers `factor` times its output (any model: a scale on what it
+    /// delivers, like a calibration error).
+    ThrustScaled {
+        /// Engine, 0-based.
+        engine: usize,
+        /// Output factor.
+        factor: f64,
+    },
 }
 
 impl PlantFault {

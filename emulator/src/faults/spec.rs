@@ -9,6 +9,8 @@
 //! command-drop@random,p=0.2,window=100..800,for=2
 //! sensor-inhibit:laser-altimeter@t=0      a device (docs/sensors.md) rather than a field
 //! sensor-spike:laser-altimeter,value=-300@alt=2000
+//! thrust-scaled:3,factor=1.1@t=700       engine 3 delivers 10 % more than it should
+//! computer-reset@alt=14000,for=2          the onboard computer down for 2 s below 14 km
 //! ```
 //! Engines are numbered 1-4, as in the CSV export. Triggers: `t=S` (simulated time),
 //! `alt=M` (true altitude below M metres), `step=K`, or `random,p=P,window=A..B` (fires
@@ -31,6 +33,9 @@ pub enum FaultKind {
     EngineStuck,
     /// Engine thrust degraded (target: engine; `factor` in [0, 1)).
     ThrustDegraded,
+    /// Engine delivers `factor` times what it would (target: engine; `factor` in
+    /// (0, 2]: above 1, an engine hotter than its calibration).
+    ThrustScaled,
     /// Throttle valves of an engine stuck where they are (hifi; target: engine).
     ValveStuck,
     /// Throttle valves of an engine slowed (hifi; target: engine; `factor` in (0, 1)).
@@ -72,6 +77,11 @@ pub enum FaultKind {
     /// The flight software paused: it sees no telemetry for the fault's duration (in
     /// realtime each step is a deadline miss).
     StubPause,
+    /// The onboard computer resets for the fault's duration: telemetry carries
+    /// `TLM_FLAG_COMPUTER_RESET`, the flight software loses its state, commands are
+    /// ignored (the main engines hold, no attitude torque); at the end the ground
+    /// uplinks a fresh state vector.
+    ComputerReset,
 }
 
 /// Every kind with its text name, parameters (name, meaning) and target meaning.
@@ -81,6 +91,12 @@ const KINDS: &[(FaultKind, &str, &[&str], Target)] = &[
     (
         FaultKind::ThrustDegraded,
         "thrust-degraded",
+        &["factor"],
+        Target::Engine,
+    ),
+    (
+        FaultKind::ThrustScaled,
+        "thrust-scaled",
         &["factor"],
         Target::Engine,
     ),
@@ -178,6 +194,12 @@ const KINDS: &[(FaultKind, &str, &[&str], Target)] = &[
         Target::None,
     ),
     (FaultKind::StubPause, "stub-pause", &[], Target::None),
+    (
+        FaultKind::ComputerReset,
+        "computer-reset",
+        &[],
+        Target::None,
+    ),
 ];
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -208,6 +230,7 @@ impl FaultKind {
             FaultKind::EngineOff
                 | FaultKind::EngineStuck
                 | FaultKind::ThrustDegraded
+                | FaultKind::ThrustScaled
                 | FaultKind::ValveStuck
                 | FaultKind::ValveSlow
                 | FaultKind::RegulatorOpen
@@ -472,6 +495,7 @@ impl FaultSpec {
             let ok = v.is_finite()
                 && match *key {
                     "factor" if self.kind == FaultKind::ThrustDegraded => (0.0..1.0).contains(&v),
+                    "factor" if self.kind == FaultKind::ThrustScaled => v > 0.0 && v <= 2.0,
                     "factor" if self.kind == FaultKind::SensorNoise => v > 0.0 && v <= 1e6,
                     "factor" => v > 0.0 && v < 1.0,
                     "area_mm2" => v > 0.0 && v <= 100.0,
@@ -493,6 +517,11 @@ impl FaultSpec {
         }
         if self.kind == FaultKind::StubPause && self.duration_s.is_none() {
             return Err(ctx("stub-pause needs for=SECONDS".into()));
+        }
+        if self.kind == FaultKind::ComputerReset && self.duration_s.is_none() {
+            return Err(ctx(
+                "computer-reset needs for=SECONDS (how long the computer is down)".into(),
+            ));
         }
         Ok(())
     }

@@ -33,10 +33,11 @@ use ground::Ground;
 use integrator::RK4;
 use legs::{Legs, CONTACT_SUBSTEP_NS};
 use nalgebra::Vector3;
-use nav_noise::NavNoise;
+use nav_noise::{NavNoise, StateVectorUplink};
 use oils_shared::{
     EngineReading, NavState, PacketHeader, PropulsionReadings, Telemetry, ENGINE_COUNT,
-    TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_IDEAL_NAV, TLM_FLAG_NAV_NOISE, TLM_FLAG_SENSORS,
+    TLM_FLAG_COMPUTER_RESET, TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_IDEAL_NAV, TLM_FLAG_NAV_NOISE,
+    TLM_FLAG_SENSORS, TLM_FLAG_STATE_VECTOR,
 };
 use rigid_body::{Dynamics, HeldLoads, MassModel, StateVector};
 use thrusters::ThrusterBank;
@@ -215,6 +216,11 @@ pub struct Plant {
     noise: Option<NavNoise>,
     /// Whether the telemetry carries the ideal navigation source.
     ideal_nav: bool,
+    /// The ground's state vector, sent on the first telemetry with the devices on and
+    /// after each computer reset.
+    state_vector: StateVectorUplink,
+    /// A state vector is due on the next telemetry (with the devices on).
+    state_vector_due: bool,
     /// Engine faults acting on the command.
     engine_faults: [EngineFault; ENGINE_COUNT],
     /// Output scale of each engine (the configured thrust scale times a degradation
@@ -318,6 +324,8 @@ impl Plant {
             touchdown: None,
             noise,
             ideal_nav: true,
+            state_vector: StateVectorUplink::new(&cfg.state_vector, seed),
+            state_vector_due: true,
             engine_faults: [EngineFault::None; ENGINE_COUNT],
             output_factor: lander.engine_thrust_scale,
             thrust_scale: lander.engine_thrust_scale,
@@ -375,6 +383,21 @@ impl Plant {
         if let Some(sensors) = self.sensors.as_mut() {
             sensors.fill_frame(header.t_ns, &mut tlm.sensors);
             tlm.header.flags |= TLM_FLAG_SENSORS;
+            // Only when the ideal navigation is off: with it on (`both`), it is what a
+            // flight software starts from.
+            if !self.ideal_nav
+                && self.state_vector_due
+                && header.flags & TLM_FLAG_COMPUTER_RESET == 0
+            {
+                // The ground's state vector in place of the ideal navigation: the truth
+                // plus the orbit determination's error (docs/sensors.md).
+                self.state_vector_due = false;
+                tlm.accel_body_m_s2 = [0.0; 3];
+                tlm.altitude_m = 0.0;
+                self.state_vector.apply(&mut tlm.nav);
+                tlm.header.flags |= TLM_FLAG_STATE_VECTOR;
+                return tlm;
+            }
         }
         if !self.ideal_nav {
             tlm.nav = NavState::default();
@@ -388,6 +411,12 @@ impl Plant {
             tlm.header.flags |= TLM_FLAG_NAV_NOISE;
         }
         tlm
+    }
+
+    /// A computer reset ended: the ground uplinks a fresh state vector on the next
+    /// telemetry (with the devices on).
+    pub fn uplink_state_vector(&mut self) {
+        self.state_vector_due = true;
     }
 
     /// Puts the sensors on board: from now on every step feeds them the truth and every
@@ -933,7 +962,9 @@ impl Plant {
     /// those; the rest need a model that represents them physically.
     pub fn supports(&self, fault: &PlantFault) -> bool {
         match fault {
-            PlantFault::EngineOff(_) | PlantFault::EngineStuck(_) => true,
+            PlantFault::EngineOff(_)
+            | PlantFault::EngineStuck(_)
+            | PlantFault::ThrustScaled { .. } => true,
             PlantFault::Propulsion(PropulsionFault::ThrustDegraded { .. }) => true,
             PlantFault::Propulsion(f) => self.propulsion.represents(f),
         }
@@ -959,6 +990,10 @@ impl Plant {
                 } else {
                     EngineFault::None
                 }
+            }
+            PlantFault::ThrustScaled { engine, factor } => {
+                let scale = self.thrust_scale[engine];
+                self.output_factor[engine] = if active { scale * factor } else { scale };
             }
             PlantFault::Propulsion(f) => {
                 if self.propulsion.represents(&f) {

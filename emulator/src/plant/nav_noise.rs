@@ -96,3 +96,41 @@ mod tests {
         assert!((sigma / cfg.position_m - 1.0).abs() < 0.03, "sigma {sigma}");
     }
 }
+
+/// ChaCha stream id of the ground's state-vector error (fixed, apart from the others).
+pub const STATE_VECTOR_STREAM: u64 = 0x7374_6174_6576_6563; // "statevec"
+
+/// The ground's orbit determination: the true position and velocity plus a seeded error
+/// of the configured one-sigma sizes, drawn afresh for every uplink (the descent start,
+/// each computer reset) from its own stream.
+#[derive(Debug, Clone)]
+pub struct StateVectorUplink {
+    sigma_pos_m: f64,
+    sigma_vel_m_s: f64,
+    rng: ChaCha8Rng,
+}
+
+impl StateVectorUplink {
+    /// The uplinks of run `seed`.
+    pub fn new(cfg: &crate::config::StateVectorConfig, seed: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        rng.set_stream(STATE_VECTOR_STREAM);
+        Self {
+            sigma_pos_m: cfg.position_sigma_m,
+            sigma_vel_m_s: cfg.velocity_sigma_m_s,
+            rng,
+        }
+    }
+
+    /// Adds one uplink's error to `nav` (position, then velocity, x y z each).
+    pub fn apply(&mut self, nav: &mut oils_shared::NavState) {
+        for i in 0..3 {
+            let n: f64 = self.rng.sample(StandardNormal);
+            nav.pos_mci_m[i] += n * self.sigma_pos_m;
+        }
+        for i in 0..3 {
+            let n: f64 = self.rng.sample(StandardNormal);
+            nav.vel_mci_m_s[i] += n * self.sigma_vel_m_s;
+        }
+    }
+}

@@ -22,21 +22,21 @@ use super::navigation::NavSolution;
 use super::GncConfig;
 use nalgebra::Vector3;
 
-/// Phase of the descent.
+/// Phase of the descent; the number is the code the GNC reports (`FswReport::phase`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Phase {
     /// High-thrust braking of the orbital speed with altitude managed.
-    RoughBraking,
+    RoughBraking = 0,
     /// Thrust direction held while the vehicle settles (navigation update in flight).
-    AttitudeHold,
+    AttitudeHold = 1,
     /// E-guidance to rest above the landing site.
-    FineBraking,
+    FineBraking = 2,
     /// Vertical-speed profile down to the hover altitude.
-    TerminalDescent,
+    TerminalDescent = 3,
     /// Altitude hold above the site.
-    Hover,
+    Hover = 4,
     /// Slow vertical descent to contact.
-    FinalDescent,
+    FinalDescent = 5,
 }
 
 /// The landing site, chosen when fine braking starts: on the current ground track,

@@ -10,15 +10,20 @@ pub mod attitude;
 pub mod guidance;
 pub mod nav_filter;
 pub mod navigation;
+pub mod sensor_nav;
 pub mod thrust_loop;
 
-use crate::fsw::FlightSoftware;
+use crate::fsw::{FlightSoftware, GncAttitude, GncNavigation};
 use allocation::{EngineSet, ThrustAllocator};
 use attitude::AttitudeController;
 use guidance::{Guidance, Phase};
 use nalgebra::Vector3;
 use navigation::NavFilter;
-use oils_shared::{Command, Telemetry, ENGINE_COUNT, TLM_FLAG_FOOTPAD_CONTACT};
+use oils_shared::{
+    Command, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE, ENGINE_COUNT, NAV_FLAG_VALID,
+    TLM_FLAG_FOOTPAD_CONTACT,
+};
+use sensor_nav::{SensorNav, SensorNavConfig};
 use thrust_loop::ThrustLoop;
 
 /// The landing site the descent is aimed at, Moon-fixed (the scenario's `[site]`, handed
@@ -50,6 +55,13 @@ impl SiteTarget {
 /// gains. Plain numbers with defaults; `validate` before use.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GncConfig {
+    /// What it navigates from: the bench's ideal navigation source, or the device
+    /// samples through its Kalman filter.
+    pub navigation: GncNavigation,
+    /// What turns the vehicle: the ideal torque actuator or the attitude thrusters.
+    pub attitude_actuator: GncAttitude,
+    /// The sensor navigation (with `navigation = Sensors`).
+    pub sensor_nav: SensorNavConfig,
     /// Moon gravitational parameter, m^3/s^2.
     pub moon_mu_m3_s2: f64,
     /// Moon rotation rate about the inertial +Z (its pole), rad/s: the ground the
@@ -209,6 +221,9 @@ pub struct GncConfig {
 impl Default for GncConfig {
     fn default() -> Self {
         Self {
+            navigation: GncNavigation::Bench,
+            attitude_actuator: GncAttitude::Torque,
+            sensor_nav: SensorNavConfig::default(),
             moon_mu_m3_s2: 4.9028e12,
             moon_rotation_rad_s: 2.6617e-6,
             moon_radius_m: 1_737_400.0,
@@ -398,6 +413,10 @@ impl GncConfig {
 pub struct ReferenceGnc {
     cfg: GncConfig,
     nav: NavFilter,
+    sensor_nav: SensorNav,
+    /// Boots so far (kept across a computer reset, as a real boot counter in protected
+    /// memory is).
+    boot_count: u32,
     guidance: Guidance,
     attitude: AttitudeController,
     allocator: ThrustAllocator,
@@ -480,6 +499,8 @@ impl ReferenceGnc {
         })?;
         Ok(Self {
             nav: NavFilter::new(&cfg),
+            sensor_nav: SensorNav::new(cfg.sensor_nav.clone()),
+            boot_count: 1,
             guidance: Guidance::new(&cfg),
             attitude: AttitudeController::new(&cfg),
             thrust_loop: ThrustLoop::new(&cfg),
@@ -493,6 +514,11 @@ impl ReferenceGnc {
             touched_down: false,
             cfg,
         })
+    }
+
+    /// The sensor navigation (its filter's counters), when it flies on it.
+    pub fn sensor_nav(&self) -> Option<&SensorNav> {
+        (self.cfg.navigation == GncNavigation::Sensors).then_some(&self.sensor_nav)
     }
 
     /// Current descent phase.
@@ -570,8 +596,56 @@ impl FlightSoftware for ReferenceGnc {
         "gnc"
     }
 
+    fn computer_reset(&mut self) {
+        // Everything but the configuration and the boot counter is lost; nothing here
+        // allocates (the state is fixed-size).
+        let boots = self.boot_count;
+        let cfg = self.cfg.clone();
+        if let Ok(fresh) = Self::new(cfg) {
+            *self = fresh;
+        }
+        self.boot_count = boots + 1;
+    }
+
     fn step(&mut self, tlm: &Telemetry) -> Command {
-        let nav = self.nav.update(tlm);
+        let mut report = FswReport {
+            boot_count: self.boot_count,
+            ..Default::default()
+        };
+        let nav = match self.cfg.navigation {
+            GncNavigation::Bench => {
+                let nav = self.nav.update(tlm);
+                report.nav_pos_mci_m = nav.pos_mci_m.into();
+                report.nav_vel_mci_m_s = nav.vel_mci_m_s.into();
+                report.nav_altitude_m = nav.altitude_m;
+                report.nav_flags = NAV_FLAG_VALID;
+                nav
+            }
+            GncNavigation::Sensors => {
+                let omega = Vector3::new(0.0, 0.0, self.cfg.moon_rotation_rad_s);
+                match self.sensor_nav.update(tlm, omega, &mut report) {
+                    Some(nav) => nav,
+                    // No state vector yet: nothing to fly on, engines stay off.
+                    None => {
+                        return Command {
+                            fsw: report,
+                            ..Default::default()
+                        }
+                    }
+                }
+            }
+        };
+        report.phase = self.guidance.phase() as u32;
+        let mut cmd = self.fly(tlm, &nav);
+        cmd.fsw = report;
+        cmd
+    }
+}
+
+impl ReferenceGnc {
+    /// Guidance, control and allocation on this cycle's navigation solution.
+    fn fly(&mut self, tlm: &Telemetry, nav: &navigation::NavSolution) -> Command {
+        let nav = *nav;
         if tlm.header.flags & TLM_FLAG_FOOTPAD_CONTACT != 0 {
             // On the legs: engines off for good (the touchdown switches' cut-off), no
             // attitude torque; the vehicle settles under its own weight.
@@ -632,6 +706,7 @@ impl FlightSoftware for ReferenceGnc {
             thrust_cmd_n: alloc.thrust_cmd_n,
             engine_on: alloc.on.map(u32::from),
             torque_cmd_body_nm: alloc.rcs_torque_body_nm.into(),
+            attitude_mode: ATTITUDE_MODE_IDEAL_TORQUE,
             ..Default::default()
         }
     }
