@@ -417,6 +417,8 @@ pub struct ReferenceGnc {
     /// Boots so far (kept across a computer reset, as a real boot counter in protected
     /// memory is).
     boot_count: u32,
+    /// The computer is down (a reset under way).
+    down: bool,
     guidance: Guidance,
     attitude: AttitudeController,
     allocator: ThrustAllocator,
@@ -501,6 +503,7 @@ impl ReferenceGnc {
             nav: NavFilter::new(&cfg),
             sensor_nav: SensorNav::new(cfg.sensor_nav.clone()),
             boot_count: 1,
+            down: false,
             guidance: Guidance::new(&cfg),
             attitude: AttitudeController::new(&cfg),
             thrust_loop: ThrustLoop::new(&cfg),
@@ -597,17 +600,26 @@ impl FlightSoftware for ReferenceGnc {
     }
 
     fn computer_reset(&mut self) {
-        // Everything but the configuration and the boot counter is lost; nothing here
-        // allocates (the state is fixed-size).
+        // Everything but the configuration and the boot counter is lost (a real boot
+        // counter lives in protected memory); nothing here allocates (fixed-size state).
+        // Called on every cycle the computer is down: the state is lost once.
+        if self.down {
+            return;
+        }
         let boots = self.boot_count;
-        let cfg = self.cfg.clone();
-        if let Ok(fresh) = Self::new(cfg) {
+        if let Ok(fresh) = Self::new(self.cfg.clone()) {
             *self = fresh;
         }
-        self.boot_count = boots + 1;
+        self.boot_count = boots;
+        self.down = true;
     }
 
     fn step(&mut self, tlm: &Telemetry) -> Command {
+        if self.down {
+            // The first cycle after a reset: booted again.
+            self.down = false;
+            self.boot_count += 1;
+        }
         let mut report = FswReport {
             boot_count: self.boot_count,
             ..Default::default()
