@@ -617,45 +617,47 @@ impl FeatureSpec {
     /// bits (`fill_engines_equals_fill_engine_by_engine`). A feature the engines share
     /// (gas pressure, masses, lambda, the sums) is computed once and put in every lane;
     /// an engine's own one is read as the four engines' values side by side, which is
-    /// how the ring holds them.
+    /// how the ring holds them. A run of features that are 0 in every lane (a phase no
+    /// engine is in, hats of clocks that all read outside their knots: most steps) is
+    /// handed over as a count ([`EngineLanes::put_zeros`]), not computed.
     #[inline]
-    pub fn fill_engines<H: History + ?Sized>(&self, h: &H, mut put: impl FnMut(f64x4)) {
+    pub fn fill_engines<H: History + ?Sized>(&self, h: &H, out: &mut impl EngineLanes) {
         debug_assert_eq!(self.layout, Layout::PerEngine);
         let n = self.history;
         // Entries `at..at + 4` of an input or state: the four engines' values.
         let engines = |v: &[f64], at: usize| f64x4::new([v[at], v[at + 1], v[at + 2], v[at + 3]]);
         let shared = f64x4::splat;
-        put(engines(h.input(0), 0));
+        out.put(engines(h.input(0), 0));
         for k in 1..=n {
-            put(engines(h.input(k), 0));
+            out.put(engines(h.input(k), 0));
         }
         for k in 1..=n {
-            put(engines(h.state(k), 0));
+            out.put(engines(h.state(k), 0));
         }
         for k in 1..=n + 1 {
-            put(shared(h.state(k)[STATE_P]));
+            out.put(shared(h.state(k)[STATE_P]));
         }
         if self.mass_features {
             for k in 1..=n {
-                put(shared(h.state(k)[STATE_MF]));
+                out.put(shared(h.state(k)[STATE_MF]));
             }
             for k in 1..=n {
-                put(shared(h.state(k)[STATE_MO]));
+                out.put(shared(h.state(k)[STATE_MO]));
             }
         }
-        put(engines(h.input(0), ENGINE_COUNT));
+        out.put(engines(h.input(0), ENGINE_COUNT));
         if self.mass_features {
             let s = h.state(1);
-            put(shared(lambda_of(s[STATE_MF], s[STATE_MO])));
+            out.put(shared(lambda_of(s[STATE_MF], s[STATE_MO])));
         }
         for k in 0..self.valve_features() {
-            put(f64x4::new(h.valve(k).valve_n));
+            out.put(f64x4::new(h.valve(k).valve_n));
         }
         for k in 0..self.valve_sum_features() {
-            put(shared(valve_sum_change_of(h, k)));
+            out.put(shared(valve_sum_change_of(h, k)));
         }
         if self.command_sum {
-            put(shared(command_sum_of(h.input(0))));
+            out.put(shared(command_sum_of(h.input(0))));
         }
         if self.phase_features() > 0 {
             // Each engine's phase age as a lane, NaN for none (NaN equals no k).
@@ -664,25 +666,56 @@ impl FeatureSpec {
                     phase_age(h, e, on, cap).map_or(f64::NAN, |k| k as f64)
                 }))
             };
-            let (start, stop) = (age(true, self.start_steps), age(false, self.stop_steps));
-            for k in 0..self.start_steps {
-                put(indicator_lanes(start.cmp_eq(shared(k as f64))));
-            }
-            for k in 0..self.stop_steps {
-                put(indicator_lanes(stop.cmp_eq(shared(k as f64))));
+            // An age that is NaN in every lane: no engine in the phase, every
+            // indicator 0.0 in every lane.
+            for (ages, steps) in [
+                (age(true, self.start_steps), self.start_steps),
+                (age(false, self.stop_steps), self.stop_steps),
+            ] {
+                if ages.is_nan().all() {
+                    out.put_zeros(steps);
+                } else {
+                    for k in 0..steps {
+                        out.put(indicator_lanes(ages.cmp_eq(shared(k as f64))));
+                    }
+                }
             }
         }
         if let Some(c) = self.ignition() {
             let since = f64x4::new(h.valve(0).since_ignition_s);
-            put(IgnitionClock::priming_lanes(
+            out.put(IgnitionClock::priming_lanes(
                 engines(h.input(0), ENGINE_COUNT),
                 since,
             ));
             let at = c.clock_lanes(since);
-            for j in 0..c.knots {
-                put(IgnitionClock::hat_lanes(at, j));
+            if c.hats_all_zero(at) {
+                out.put_zeros(c.knots);
+            } else {
+                for j in 0..c.knots {
+                    out.put(IgnitionClock::hat_lanes(at, j));
+                }
             }
         }
+    }
+}
+
+/// Where [`FeatureSpec::fill_engines`] hands the features over, in order.
+pub trait EngineLanes {
+    /// The next feature, the four engines' values as lanes.
+    fn put(&mut self, lanes: f64x4);
+    /// The next `n` features, each 0.0 in every lane (a consumer may know what that
+    /// gives without the values).
+    fn put_zeros(&mut self, n: usize) {
+        for _ in 0..n {
+            self.put(f64x4::ZERO);
+        }
+    }
+}
+
+/// Features as lane vectors in a `Vec`, in order (tests).
+impl EngineLanes for Vec<f64x4> {
+    fn put(&mut self, lanes: f64x4) {
+        self.push(lanes);
     }
 }
 
@@ -913,8 +946,9 @@ pub(crate) mod source_tests {
                 valve_rest,
                 t,
             };
-            let mut lanes = Vec::new();
-            spec.fill_engines(&h, |v| lanes.push(v.to_array()));
+            let mut lanes: Vec<f64x4> = Vec::new();
+            spec.fill_engines(&h, &mut lanes);
+            let lanes: Vec<[f64; 4]> = lanes.iter().map(|l| l.to_array()).collect();
             assert_eq!(lanes.len(), spec.dim());
             for e in 0..ENGINE_COUNT {
                 spec.fill(&h, e, &mut one);

@@ -14,7 +14,9 @@
 //!
 //! [`FeatureSpec::fill`]: super::features::FeatureSpec::fill
 
-use super::features::{History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_MF, STATE_MO};
+use super::features::{
+    EngineLanes, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_MF, STATE_MO,
+};
 use super::model::{eval_term, ActiveTerm, Model, OutputRow, Submodel, Term};
 use super::valve::{ValveState, ValveTrack};
 use oils_shared::ENGINE_COUNT;
@@ -356,16 +358,39 @@ impl Scaling<f64> {
         (clamped - self.mean) * self.inv_std
     }
 
-    /// The same numbers in four lanes.
-    fn lanes(&self) -> Scaling<f64x4> {
-        Scaling {
-            lo: f64x4::splat(self.lo),
-            hi: f64x4::splat(self.hi),
-            mean: f64x4::splat(self.mean),
-            inv_std: f64x4::splat(self.inv_std),
-            used: self.used,
+    /// The same numbers in four lanes, with what a 0.0 gives. A feature no term reads
+    /// gets no envelope: its value is never read and its leaving the envelope never
+    /// counts, so it need not send the step down the clamping path.
+    fn lanes(&self) -> LaneScaling {
+        let (lo, hi) = if self.used {
+            (self.lo, self.hi)
+        } else {
+            (f64::NEG_INFINITY, f64::INFINITY)
+        };
+        let mut zero_outside = false;
+        let zero = self.scale(0.0, &mut zero_outside);
+        LaneScaling {
+            scaling: Scaling {
+                lo: f64x4::splat(lo),
+                hi: f64x4::splat(hi),
+                mean: f64x4::splat(self.mean),
+                inv_std: f64x4::splat(self.inv_std),
+                used: self.used,
+            },
+            zero: f64x4::splat(zero),
+            zero_outside,
         }
     }
+}
+
+/// A per-engine feature's scaling in four lanes, and what a 0.0 in every lane gives.
+#[derive(Debug, Clone, Copy)]
+struct LaneScaling {
+    scaling: Scaling<f64x4>,
+    /// [`Scaling::scale`] of 0.0 (clamped if 0.0 is outside the envelope), each lane.
+    zero: f64x4,
+    /// 0.0 is outside the envelope of a used feature.
+    zero_outside: bool,
 }
 
 impl Scaling<f64x4> {
@@ -416,7 +441,7 @@ struct Read {
 /// all with their numbers in four lanes.
 #[derive(Debug, Clone)]
 struct EngineUse {
-    scaling: Vec<Scaling<f64x4>>,
+    scaling: Vec<LaneScaling>,
     /// Terms in groups: first those summed every step, then one group per phase or
     /// ignition feature (a term has at most one, `Model::check`) with the terms that
     /// have it. Such a feature is 0 outside its phase, most steps, and then so are its
@@ -424,7 +449,7 @@ struct EngineUse {
     /// committed model's 430), so this skips most of the step's work; grouped, the
     /// check is once per feature, where a check per term in file order would
     /// mispredict its branch.
-    groups: Vec<TermGroup<f64x4>>,
+    groups: Vec<LaneGroup>,
 }
 
 /// Per feature of a submodel, whether some active term reads it.
@@ -498,7 +523,7 @@ impl SubmodelUse {
                     .collect(),
                 groups: groups_of(&s.rows[0])
                     .into_iter()
-                    .map(TermGroup::lanes)
+                    .map(|g| g.lanes(dim))
                     .collect(),
             }),
         }
@@ -519,22 +544,95 @@ fn gather(s: &Submodel, u: &MimoUse, h: &Ring, x: &mut [f64]) -> bool {
 }
 
 /// The features of the four engines of a per-engine submodel, as lanes: each feature
-/// is read for the four engines at once ([`FeatureSpec::fill_engines`]), then clamped
-/// and scaled in its four lanes together ([`Scaling::scale`]), into `lanes`, with the
-/// constant 1.0 after them; true when a used feature was outside the envelope.
+/// is read for the four engines at once ([`FeatureSpec::fill_engines`]) and scaled in
+/// its four lanes together, into `lanes`, with the constant 1.0 after them; true when a
+/// used feature was outside the envelope.
+///
+/// Nearly every step every feature is inside its envelope, where clamping picks the
+/// value itself: the features are scaled without it ([`Unclamped`]) while the lanes
+/// that leave the envelope are noted, and only when some did is the step gathered
+/// again with the clamping ([`Clamped`]), which is then what the lanes hold.
 ///
 /// [`FeatureSpec::fill_engines`]: super::features::FeatureSpec::fill_engines
 fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut [f64x4]) -> bool {
     let dim = s.features.dim();
-    let mut outside = false;
-    let mut i = 0;
-    s.features.fill_engines(h, |raw| {
-        lanes[i] = u.scaling[i].scale(raw, &mut outside);
-        i += 1;
-    });
-    debug_assert_eq!(i, dim);
+    let mut fast = Unclamped {
+        lanes,
+        scaling: &u.scaling,
+        i: 0,
+        below: f64x4::ZERO,
+        above: f64x4::ZERO,
+        zero_outside: false,
+    };
+    s.features.fill_engines(h, &mut fast);
+    debug_assert_eq!(fast.i, dim);
+    let mut outside = fast.zero_outside;
+    if (fast.below | fast.above).any() {
+        let mut clamped = Clamped {
+            lanes: fast.lanes,
+            scaling: &u.scaling,
+            i: 0,
+            outside: false,
+        };
+        s.features.fill_engines(h, &mut clamped);
+        outside |= clamped.outside;
+    }
     lanes[dim] = f64x4::ONE;
     outside
+}
+
+/// Scales features into their lanes without clamping, noting which lanes were outside
+/// the envelope (below it, above it), for [`gather_engines`].
+struct Unclamped<'a> {
+    lanes: &'a mut [f64x4],
+    scaling: &'a [LaneScaling],
+    /// The next feature.
+    i: usize,
+    below: f64x4,
+    above: f64x4,
+    /// A run of zeros was outside the envelope of a used feature (its lanes hold the
+    /// clamped value).
+    zero_outside: bool,
+}
+
+impl EngineLanes for Unclamped<'_> {
+    #[inline(always)]
+    fn put(&mut self, raw: f64x4) {
+        let f = &self.scaling[self.i].scaling;
+        self.below |= raw.cmp_lt(f.lo);
+        self.above |= raw.cmp_gt(f.hi);
+        self.lanes[self.i] = (raw - f.mean) * f.inv_std;
+        self.i += 1;
+    }
+
+    #[inline(always)]
+    fn put_zeros(&mut self, n: usize) {
+        let range = self.i..self.i + n;
+        for (l, f) in self.lanes[range.clone()]
+            .iter_mut()
+            .zip(&self.scaling[range])
+        {
+            *l = f.zero;
+            self.zero_outside |= f.zero_outside;
+        }
+        self.i += n;
+    }
+}
+
+/// Clamps and scales features into their lanes ([`Scaling::scale`]), for
+/// [`gather_engines`] when some lane left the envelope.
+struct Clamped<'a> {
+    lanes: &'a mut [f64x4],
+    scaling: &'a [LaneScaling],
+    i: usize,
+    outside: bool,
+}
+
+impl EngineLanes for Clamped<'_> {
+    fn put(&mut self, raw: f64x4) {
+        self.lanes[self.i] = self.scaling[self.i].scaling.scale(raw, &mut self.outside);
+        self.i += 1;
+    }
 }
 
 /// Some of a row's terms (coefficients and factors, in file order), and the phase or
@@ -563,15 +661,48 @@ impl<C> Default for TermGroup<C> {
 }
 
 impl TermGroup<f64> {
-    /// The same group with each coefficient in four lanes.
-    fn lanes(self) -> TermGroup<f64x4> {
-        TermGroup {
+    /// The same group for four lanes ([`LaneGroup`]); `dim` is the pad's index.
+    fn lanes(self, dim: usize) -> LaneGroup {
+        let pad = dim as u16;
+        // 1, 2 or 3: the factors before the trailing pads.
+        let degree = |t: &Term| match t {
+            [_, j, k] if *j == pad && *k == pad => 1,
+            [_, _, k] if *k == pad => 2,
+            _ => 3,
+        };
+        let mut g = LaneGroup {
             gate: self.gate,
-            coefs: self.coefs.into_iter().map(f64x4::splat).collect(),
-            factors: self.factors,
-            cubic: self.cubic,
+            linear: Vec::new(),
+            quadratic: Vec::new(),
+            cubic: Vec::new(),
+        };
+        let in_degree_order = self
+            .factors
+            .windows(2)
+            .all(|w| degree(&w[0]) <= degree(&w[1]));
+        for (&c, t) in self.coefs.iter().zip(&self.factors) {
+            let c = f64x4::splat(c);
+            match (in_degree_order, degree(t)) {
+                (true, 1) => g.linear.push((c, t[0])),
+                (true, 2) => g.quadratic.push((c, [t[0], t[1]])),
+                _ => g.cubic.push((c, *t)),
+            }
         }
+        g
     }
+}
+
+/// A [`TermGroup`] of a per-engine row for four lanes: each coefficient in four lanes
+/// beside its factors, and the terms by degree. The 1.0 pad makes `a * 1.0` = `a`
+/// and `a * b * 1.0` = `a * b` bit for bit, so a term of one or two factors skips its
+/// pads; kept in file order, since the library lists terms by degree (a group whose
+/// terms are not in that order keeps them all, pads and all, in `cubic`).
+#[derive(Debug, Clone)]
+struct LaneGroup {
+    gate: Option<usize>,
+    linear: Vec<(f64x4, u16)>,
+    quadratic: Vec<(f64x4, [u16; 2])>,
+    cubic: Vec<(f64x4, Term)>,
 }
 
 /// A row's intercept plus its active terms, group by group (see [`EngineUse`]),
@@ -601,7 +732,8 @@ fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &[f64]) -> f64 {
 /// get back the sum from before the group, as [`sum`] skipping it leaves it (adding
 /// its terms would add zeros, or not a number for a feature that is not one).
 #[inline(always)]
-fn sum_engines(row: &OutputRow, groups: &[TermGroup<f64x4>], x: &[f64x4]) -> f64x4 {
+fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &[f64x4]) -> f64x4 {
+    let at = |f: u16| x[usize::from(f)];
     let mut y = f64x4::splat(row.intercept);
     for g in groups {
         let off = match g.gate {
@@ -612,14 +744,14 @@ fn sum_engines(row: &OutputRow, groups: &[TermGroup<f64x4>], x: &[f64x4]) -> f64
             continue;
         }
         let before = y;
-        if g.cubic {
-            for (&c, &[i, j, k]) in g.coefs.iter().zip(&g.factors) {
-                y += c * (x[i as usize] * x[j as usize] * x[k as usize]);
-            }
-        } else {
-            for (&c, &[i, j, _]) in g.coefs.iter().zip(&g.factors) {
-                y += c * (x[i as usize] * x[j as usize]);
-            }
+        for &(c, i) in &g.linear {
+            y += c * at(i);
+        }
+        for &(c, [i, j]) in &g.quadratic {
+            y += c * (at(i) * at(j));
+        }
+        for &(c, [i, j, k]) in &g.cubic {
+            y += c * (at(i) * at(j) * at(k));
         }
         if off.any() {
             y = off.blend(before, y);
@@ -878,9 +1010,20 @@ pub(crate) mod tests {
                 (*lo, *hi) = (mid - half, mid + half);
             }
         }
+        // Phase features whose envelope leaves out 0.0: every step outside a phase
+        // (handed over as a run of zeros) is outside the envelope, and nothing else is.
+        let mut phases_above_zero = committed_model();
+        for s in &mut phases_above_zero.submodels {
+            for (j, role) in s.features.roles().iter().enumerate() {
+                if role.phase {
+                    s.envelope_lo[j] = 0.5;
+                }
+            }
+        }
         vec![
             committed_model(),
             narrow,
+            phases_above_zero,
             dense_model(3, 1),
             dense_model(2, 2),
         ]
@@ -961,7 +1104,7 @@ pub(crate) mod tests {
                 cubic: false,
             },
         ];
-        let lanes: Vec<_> = scalar.iter().cloned().map(TermGroup::lanes).collect();
+        let lanes: Vec<_> = scalar.iter().cloned().map(|g| g.lanes(2)).collect();
         let gate = [0.0, 1.0, 1.0, 0.0];
         let partner = [f64::NAN, 2.0, f64::NAN, 4.0];
         let x = [f64x4::new(gate), f64x4::new(partner), f64x4::ONE];
