@@ -13,6 +13,7 @@ use oils_shared::ENGINE_COUNT;
 
 use super::valve::{valve_sum_of, IgnitionClock, ValveFilter, ValveState};
 use serde::{Deserialize, Serialize};
+use wide::{f64x4, CmpEq};
 
 /// Inputs per step: four thrust commands (N), then four on/off switches (0 or 1).
 pub const INPUT_DIM: usize = 2 * ENGINE_COUNT;
@@ -609,6 +610,121 @@ impl FeatureSpec {
     }
 }
 
+impl FeatureSpec {
+    /// [`FeatureSpec::fill_with`] for the four engines of a per-engine layout at once:
+    /// each feature as one vector whose lane `e` is what `fill_with(h, e, ..)` gives for
+    /// engine `e`, by the same operations in the same order on each lane, so the same
+    /// bits (`fill_engines_equals_fill_engine_by_engine`). A feature the engines share
+    /// (gas pressure, masses, lambda, the sums) is computed once and put in every lane;
+    /// an engine's own one is read as the four engines' values side by side, which is
+    /// how the ring holds them. A run of features that are 0 in every lane (a phase no
+    /// engine is in, hats of clocks that all read outside their knots: most steps) is
+    /// handed over as a count ([`EngineLanes::put_zeros`]), not computed.
+    #[inline]
+    pub fn fill_engines<H: History + ?Sized>(&self, h: &H, out: &mut impl EngineLanes) {
+        debug_assert_eq!(self.layout, Layout::PerEngine);
+        let n = self.history;
+        // Entries `at..at + 4` of an input or state: the four engines' values.
+        let engines = |v: &[f64], at: usize| f64x4::new([v[at], v[at + 1], v[at + 2], v[at + 3]]);
+        let shared = f64x4::splat;
+        out.put(engines(h.input(0), 0));
+        for k in 1..=n {
+            out.put(engines(h.input(k), 0));
+        }
+        for k in 1..=n {
+            out.put(engines(h.state(k), 0));
+        }
+        for k in 1..=n + 1 {
+            out.put(shared(h.state(k)[STATE_P]));
+        }
+        if self.mass_features {
+            for k in 1..=n {
+                out.put(shared(h.state(k)[STATE_MF]));
+            }
+            for k in 1..=n {
+                out.put(shared(h.state(k)[STATE_MO]));
+            }
+        }
+        out.put(engines(h.input(0), ENGINE_COUNT));
+        if self.mass_features {
+            let s = h.state(1);
+            out.put(shared(lambda_of(s[STATE_MF], s[STATE_MO])));
+        }
+        for k in 0..self.valve_features() {
+            out.put(f64x4::new(h.valve(k).valve_n));
+        }
+        for k in 0..self.valve_sum_features() {
+            out.put(shared(valve_sum_change_of(h, k)));
+        }
+        if self.command_sum {
+            out.put(shared(command_sum_of(h.input(0))));
+        }
+        if self.phase_features() > 0 {
+            // Each engine's phase age as a lane, NaN for none (NaN equals no k).
+            let age = |on: bool, cap: usize| {
+                f64x4::new(std::array::from_fn(|e| {
+                    phase_age(h, e, on, cap).map_or(f64::NAN, |k| k as f64)
+                }))
+            };
+            // An age that is NaN in every lane: no engine in the phase, every
+            // indicator 0.0 in every lane.
+            for (ages, steps) in [
+                (age(true, self.start_steps), self.start_steps),
+                (age(false, self.stop_steps), self.stop_steps),
+            ] {
+                if ages.is_nan().all() {
+                    out.put_zeros(steps);
+                } else {
+                    for k in 0..steps {
+                        out.put(indicator_lanes(ages.cmp_eq(shared(k as f64))));
+                    }
+                }
+            }
+        }
+        if let Some(c) = self.ignition() {
+            let since = f64x4::new(h.valve(0).since_ignition_s);
+            out.put(IgnitionClock::priming_lanes(
+                engines(h.input(0), ENGINE_COUNT),
+                since,
+            ));
+            let at = c.clock_lanes(since);
+            if c.hats_all_zero(at) {
+                out.put_zeros(c.knots);
+            } else {
+                for j in 0..c.knots {
+                    out.put(IgnitionClock::hat_lanes(at, j));
+                }
+            }
+        }
+    }
+}
+
+/// Where [`FeatureSpec::fill_engines`] hands the features over, in order.
+pub trait EngineLanes {
+    /// The next feature, the four engines' values as lanes.
+    fn put(&mut self, lanes: f64x4);
+    /// The next `n` features, each 0.0 in every lane (a consumer may know what that
+    /// gives without the values).
+    fn put_zeros(&mut self, n: usize) {
+        for _ in 0..n {
+            self.put(f64x4::ZERO);
+        }
+    }
+}
+
+/// Features as lane vectors in a `Vec`, in order (tests).
+impl EngineLanes for Vec<f64x4> {
+    fn put(&mut self, lanes: f64x4) {
+        self.push(lanes);
+    }
+}
+
+/// [`indicator`] of each lane of a comparison's mask: 1.0 where it holds, 0.0 elsewhere.
+#[inline(always)]
+pub fn indicator_lanes(mask: f64x4) -> f64x4 {
+    mask & f64x4::ONE
+}
+
 /// A recorded trajectory seen from one step, for training. Before the first step the
 /// engines were off and the state was the initial one (as the runtime starts).
 pub struct TrajectoryHistory<'a> {
@@ -799,6 +915,55 @@ pub(crate) mod source_tests {
             assert!(spec.phase_features() == 0 || starts > 20.0);
             assert!(spec.ignition_features() == 0 || ignitions > 20.0);
         }
+    }
+
+    /// The four engines' features as lanes are each engine's `fill`, bit for bit, for
+    /// a spec with every per-engine feature (phases, valve, sums, ignition clock) over a
+    /// trajectory that switches engines and fires their ignition clocks.
+    #[test]
+    fn fill_engines_equals_fill_engine_by_engine() {
+        let (inputs, states) = switching_trajectory(300);
+        let initial = [1.0, 2.0, 3.0, 4.0, 2.8e7, 0.0, 0.0];
+        let spec = FeatureSpec {
+            mass_features: true,
+            start_steps: 7,
+            stop_steps: 4,
+            command_sum: true,
+            valve: Some(crate::propulsion::surrogate::predictor::tests::TEST_VALVE),
+            valve_sum: true,
+            ..FeatureSpec::per_engine(3)
+        };
+        let valves = spec.valve.map(|f| f.track(&inputs, 0.01)).unwrap();
+        let valve_rest = spec.valve.unwrap().rest();
+        let mut one = vec![0.0; spec.dim()];
+        let mut nonzero_hats = 0;
+        for t in 0..inputs.len() {
+            let h = TrajectoryHistory {
+                inputs: &inputs,
+                states: &states,
+                initial: &initial,
+                valves: &valves,
+                valve_rest,
+                t,
+            };
+            let mut lanes: Vec<f64x4> = Vec::new();
+            spec.fill_engines(&h, &mut lanes);
+            let lanes: Vec<[f64; 4]> = lanes.iter().map(|l| l.to_array()).collect();
+            assert_eq!(lanes.len(), spec.dim());
+            for e in 0..ENGINE_COUNT {
+                spec.fill(&h, e, &mut one);
+                for (j, l) in lanes.iter().enumerate() {
+                    assert_eq!(
+                        l[e].to_bits(),
+                        one[j].to_bits(),
+                        "t {t} engine {e} feature {j}"
+                    );
+                }
+                let hats = &one[spec.dim() - spec.ignition_features() + 1..];
+                nonzero_hats += hats.iter().filter(|&&v| v != 0.0).count();
+            }
+        }
+        assert!(nonzero_hats > 50, "{nonzero_hats}");
     }
 
     /// The draw changes: what the engines that are on draw after a step, less what they

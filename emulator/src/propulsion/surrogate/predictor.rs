@@ -5,12 +5,22 @@
 //! (the function training builds its rows with), clamped to the training envelope and
 //! scaled, the active terms are summed, and the physical guards are applied.
 //!
+//! The four engines of a per-engine submodel share one row of coefficients: they are
+//! evaluated as the four lanes of one vector (`f64x4` of the `wide` crate, safe SIMD on
+//! stable Rust), every lane doing exactly the operations, in the order, that evaluating
+//! its engine alone does (no fused multiply-add, nothing reassociated), so the result
+//! is that evaluation's bit for bit. The tests hold the engine-by-engine evaluation as
+//! the reference and compare bits (`lanes_equal_engine_by_engine_*`).
+//!
 //! [`FeatureSpec::fill`]: super::features::FeatureSpec::fill
 
-use super::features::{History, InputVec, Layout, StateVec, INPUT_DIM, STATE_MF, STATE_MO};
+use super::features::{
+    EngineLanes, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_MF, STATE_MO,
+};
 use super::model::{eval_term, ActiveTerm, Model, OutputRow, Submodel, Term};
 use super::valve::{ValveState, ValveTrack};
 use oils_shared::ENGINE_COUNT;
+use wide::{f64x4, CmpEq, CmpGt, CmpLt};
 
 /// The last steps' inputs (as the model saw them), valve states and states; slot `head`
 /// is the latest step. Allocated once, overwritten in place.
@@ -80,11 +90,11 @@ pub struct Predictor {
     ring: Ring,
     /// The valve filter (and ignition clock) the features read, if any.
     valve: Option<ValveTrack>,
-    /// One submodel's scaled features, then the constant 1.0 that pads lower-degree
+    /// A MIMO submodel's scaled features, then the constant 1.0 that pads lower-degree
     /// terms ([`eval_term`]).
     x: Vec<f64>,
-    /// The same for the four engines of a per-engine submodel, side by side.
-    lanes: Vec<Lanes>,
+    /// The same for the four engines of a per-engine submodel, as lanes.
+    lanes: Vec<f64x4>,
     out_of_envelope_steps: u64,
     guards: crate::propulsion::diagnostics::SurrogateGuards,
     /// Per state output, the largest value a prediction may take ([`Limits`]).
@@ -149,7 +159,7 @@ impl Predictor {
                 .find_map(|s| s.features.valve)
                 .map(|f| ValveTrack::new(f, dt_s)),
             x: vec![0.0; max_dim + 1],
-            lanes: vec![[0.0; ENGINE_COUNT]; max_dim + 1],
+            lanes: vec![f64x4::ZERO; max_dim + 1],
             out_of_envelope_steps: 0,
             guards: Default::default(),
             upper: Limits::NONE.upper(),
@@ -220,6 +230,14 @@ impl Predictor {
 
     /// Predicts the state at the end of a step with `input` held, and makes it history.
     pub fn step(&mut self, input: &InputVec) -> StateVec {
+        self.step_by(input, predict_engines)
+    }
+
+    /// [`Predictor::step`] with the four engines of a per-engine submodel predicted by
+    /// `engines` (their increments or values, and whether a used feature was clamped):
+    /// [`predict_engines`] in the loop, the engine-by-engine reference in the tests.
+    #[inline(always)]
+    fn step_by(&mut self, input: &InputVec, mut engines: impl EnginePrediction) -> StateVec {
         let prev = self.state();
         // The commands of engines that are on, clamped to the range seen on-and-running.
         let [lo, hi] = self.model.on_command_range_n;
@@ -243,21 +261,21 @@ impl Predictor {
         self.ring.states[head] = prev;
         let mut next = prev;
         for (s, u) in self.model.submodels.iter().zip(&self.subs) {
-            match s.features.layout {
+            match u {
                 // The four engines share one row, each with its own features.
-                Layout::PerEngine => {
-                    outside |= gather_engines(s, u, &self.ring, &mut self.lanes);
-                    let y = sum_engines(&s.rows[0], &u.groups[0], &self.lanes);
+                SubmodelUse::PerEngine(u) => {
+                    let (y, out) = engines(s, u, &self.ring, &mut self.lanes);
+                    outside |= out;
                     for (engine, &o) in s.outputs.iter().enumerate() {
                         let v = s.target.apply(prev[o], y[engine]);
                         next[o] = guarded(o, v, prev[o], self.upper[o], &mut guard);
                     }
                 }
                 // One feature vector, one row per output.
-                Layout::Mimo => {
-                    outside |= gather(s, u, &self.ring, 0, &mut self.x);
+                SubmodelUse::Mimo(u) => {
+                    outside |= gather(s, u, &self.ring, &mut self.x);
                     for (r, &o) in s.outputs.iter().enumerate() {
-                        let y = sum(&s.rows[r], &u.groups[r], &self.x);
+                        let y = sum(&s.rows[r], &u.rows[r], &self.x);
                         let v = s.target.apply(prev[o], y);
                         next[o] = guarded(o, v, prev[o], self.upper[o], &mut guard);
                     }
@@ -274,20 +292,57 @@ impl Predictor {
     }
 }
 
-/// One feature's training envelope and scaling, as the model file gives them.
+/// What predicts a per-engine submodel's four engines in [`Predictor::step_by`].
+trait EnginePrediction:
+    FnMut(&Submodel, &EngineUse, &Ring, &mut [f64x4]) -> ([f64; ENGINE_COUNT], bool)
+{
+}
+impl<F: FnMut(&Submodel, &EngineUse, &Ring, &mut [f64x4]) -> ([f64; ENGINE_COUNT], bool)>
+    EnginePrediction for F
+{
+}
+
+/// The four engines of a per-engine submodel as lanes: their features gathered and
+/// scaled ([`gather_engines`]) and the shared row summed ([`sum_engines`]).
+#[inline(always)]
+fn predict_engines(
+    s: &Submodel,
+    u: &EngineUse,
+    h: &Ring,
+    lanes: &mut [f64x4],
+) -> ([f64; ENGINE_COUNT], bool) {
+    let outside = gather_engines(s, u, h, lanes);
+    (
+        sum_engines(&s.rows[0], &u.groups, lanes).to_array(),
+        outside,
+    )
+}
+
+/// One feature's training envelope and scaling, as the model file gives them, with
+/// `T` = `f64` for one value or `f64x4` for four engines' (each number in every lane).
 #[derive(Debug, Clone, Copy)]
-struct Scaling {
-    lo: f64,
-    hi: f64,
-    mean: f64,
+struct Scaling<T> {
+    lo: T,
+    hi: T,
+    mean: T,
     /// `1 / std`.
-    inv_std: f64,
+    inv_std: T,
     /// Whether some active term reads the feature. Only those count as leaving the
     /// envelope: a feature no term reads cannot move a prediction.
     used: bool,
 }
 
-impl Scaling {
+impl Scaling<f64> {
+    fn of(s: &Submodel, j: usize, used: bool) -> Self {
+        Scaling {
+            lo: s.envelope_lo[j],
+            hi: s.envelope_hi[j],
+            mean: s.feature_mean[j],
+            inv_std: 1.0 / s.feature_std[j],
+            used,
+        }
+    }
+
     /// A raw feature clamped to the envelope and scaled; sets `outside` when a used
     /// feature was clamped. A value that is not a number stays one.
     #[inline(always)]
@@ -302,127 +357,291 @@ impl Scaling {
         };
         (clamped - self.mean) * self.inv_std
     }
+
+    /// The same numbers in four lanes, with what a 0.0 gives. A feature no term reads
+    /// gets no envelope: its value is never read and its leaving the envelope never
+    /// counts, so it need not send the step down the clamping path.
+    fn lanes(&self) -> LaneScaling {
+        let (lo, hi) = if self.used {
+            (self.lo, self.hi)
+        } else {
+            (f64::NEG_INFINITY, f64::INFINITY)
+        };
+        let mut zero_outside = false;
+        let zero = self.scale(0.0, &mut zero_outside);
+        LaneScaling {
+            scaling: Scaling {
+                lo: f64x4::splat(lo),
+                hi: f64x4::splat(hi),
+                mean: f64x4::splat(self.mean),
+                inv_std: f64x4::splat(self.inv_std),
+                used: self.used,
+            },
+            zero: f64x4::splat(zero),
+            zero_outside,
+        }
+    }
+}
+
+/// A per-engine feature's scaling in four lanes, and what a 0.0 in every lane gives.
+#[derive(Debug, Clone, Copy)]
+struct LaneScaling {
+    scaling: Scaling<f64x4>,
+    /// [`Scaling::scale`] of 0.0 (clamped if 0.0 is outside the envelope), each lane.
+    zero: f64x4,
+    /// 0.0 is outside the envelope of a used feature.
+    zero_outside: bool,
+}
+
+impl Scaling<f64x4> {
+    /// [`Scaling::scale`] of four engines' values: per lane the same comparisons pick
+    /// the same value (the bound below, else the bound above, else the value), then the
+    /// same two operations. Inside the envelope (nearly every step) the selection is
+    /// skipped: it would pick the value itself.
+    #[inline(always)]
+    fn scale(&self, raw: f64x4, outside: &mut bool) -> f64x4 {
+        let below = raw.cmp_lt(self.lo);
+        let above = raw.cmp_gt(self.hi);
+        let clamped = if (below | above).any() {
+            *outside |= self.used;
+            below.blend(self.lo, above.blend(self.hi, raw))
+        } else {
+            raw
+        };
+        (clamped - self.mean) * self.inv_std
+    }
 }
 
 /// What the step reads of a submodel besides its coefficients, worked out once.
 #[derive(Debug, Clone)]
-struct SubmodelUse {
-    /// Per feature, its envelope and scaling.
-    scaling: Vec<Scaling>,
-    /// Per row, its terms in groups: first those summed every step, then one group per
-    /// phase or ignition feature (a term has at most one, `Model::check`) with the terms
-    /// that have it. Such a feature is 0 outside its phase, most steps, and then so are
-    /// its terms: the group is skipped. Most of a thrust row's terms are gated (260 of
-    /// the committed model's 430), so this skips most of the step's work; grouped, the
-    /// check is once per feature, where a check per term in file order would mispredict
-    /// its branch.
-    groups: Vec<Vec<TermGroup>>,
+enum SubmodelUse {
+    Mimo(MimoUse),
+    PerEngine(EngineUse),
+}
+
+/// A MIMO submodel: the features its terms read, and its rows.
+#[derive(Debug, Clone)]
+struct MimoUse {
+    /// Only the features some active term reads: the others are never gathered (the
+    /// committed model's MIMO terms read 28 of its 65).
+    reads: Vec<Read>,
+    /// Per row, its terms in groups ([`TermGroup`]).
+    rows: Vec<Vec<TermGroup<f64>>>,
+}
+
+/// One feature a MIMO submodel gathers: its index, where it is read from, its scaling.
+#[derive(Debug, Clone, Copy)]
+struct Read {
+    feature: usize,
+    source: Source,
+    scaling: Scaling<f64>,
+}
+
+/// A per-engine submodel: every feature's scaling and the shared row's terms in groups,
+/// all with their numbers in four lanes.
+#[derive(Debug, Clone)]
+struct EngineUse {
+    scaling: Vec<LaneScaling>,
+    /// Terms in groups: first those summed every step, then one group per phase or
+    /// ignition feature (a term has at most one, `Model::check`) with the terms that
+    /// have it. Such a feature is 0 outside its phase, most steps, and then so are its
+    /// terms: the group is skipped. Most of a thrust row's terms are gated (260 of the
+    /// committed model's 430), so this skips most of the step's work; grouped, the
+    /// check is once per feature, where a check per term in file order would
+    /// mispredict its branch.
+    groups: Vec<LaneGroup>,
+}
+
+/// Per feature of a submodel, whether some active term reads it.
+fn used_features(s: &Submodel) -> Vec<bool> {
+    let mut used = vec![false; s.features.dim()];
+    for t in s.rows.iter().flat_map(|r| &r.terms) {
+        for &f in &t.factors {
+            if let Some(u) = used.get_mut(f as usize) {
+                *u = true;
+            }
+        }
+    }
+    used
+}
+
+/// A row's terms in groups ([`TermGroup`]): the every-step group first, then one per
+/// phase or ignition feature, each in file order.
+fn groups_of(s: &Submodel, r: &OutputRow) -> Vec<TermGroup<f64>> {
+    let dim = s.features.dim();
+    let roles = s.features.roles();
+    let gate_of = |t: &ActiveTerm| {
+        t.factors
+            .iter()
+            .map(|&f| f as usize)
+            .find(|&f| f < dim && roles[f].phase)
+    };
+    let mut groups = vec![TermGroup::default()];
+    for t in &r.terms {
+        let gate = gate_of(t);
+        let g = match groups.iter().position(|g| g.gate == gate) {
+            Some(g) => g,
+            None => {
+                groups.push(TermGroup {
+                    gate,
+                    ..TermGroup::default()
+                });
+                groups.len() - 1
+            }
+        };
+        groups[g].coefs.push(t.coef);
+        groups[g].factors.push(t.factors);
+        groups[g].cubic |= t.factors[2] as usize != dim;
+    }
+    groups
 }
 
 impl SubmodelUse {
     fn of(s: &Submodel) -> Self {
         let dim = s.features.dim();
-        let mut used = vec![false; dim];
-        for t in s.rows.iter().flat_map(|r| &r.terms) {
-            for &f in &t.factors {
-                if let Some(u) = used.get_mut(f as usize) {
-                    *u = true;
-                }
-            }
-        }
-        let roles = s.features.roles();
-        let gate_of = |t: &ActiveTerm| {
-            t.factors
-                .iter()
-                .map(|&f| f as usize)
-                .find(|&f| f < dim && roles[f].phase)
-        };
-        let groups_of = |r: &OutputRow| {
-            let mut groups = vec![TermGroup::default()];
-            for t in &r.terms {
-                let gate = gate_of(t);
-                let g = match groups.iter().position(|g| g.gate == gate) {
-                    Some(g) => g,
-                    None => {
-                        groups.push(TermGroup {
-                            gate,
-                            ..TermGroup::default()
-                        });
-                        groups.len() - 1
-                    }
-                };
-                groups[g].coefs.push(t.coef);
-                groups[g].factors.push(t.factors);
-                groups[g].cubic |= t.factors[2] as usize != dim;
-            }
-            groups
-        };
-        let scaling = (0..dim)
-            .map(|j| Scaling {
-                lo: s.envelope_lo[j],
-                hi: s.envelope_hi[j],
-                mean: s.feature_mean[j],
-                inv_std: 1.0 / s.feature_std[j],
-                used: used[j],
-            })
-            .collect();
-        Self {
-            scaling,
-            groups: s.rows.iter().map(groups_of).collect(),
+        let used = used_features(s);
+        let groups_of = |r: &OutputRow| groups_of(s, r);
+        match s.features.layout {
+            Layout::Mimo => Self::Mimo(MimoUse {
+                reads: s
+                    .features
+                    .sources()
+                    .into_iter()
+                    .enumerate()
+                    .filter(|&(j, _)| used[j])
+                    .map(|(j, source)| Read {
+                        feature: j,
+                        source,
+                        scaling: Scaling::of(s, j, true),
+                    })
+                    .collect(),
+                rows: s.rows.iter().map(groups_of).collect(),
+            }),
+            Layout::PerEngine => Self::PerEngine(EngineUse {
+                scaling: (0..dim)
+                    .map(|j| Scaling::of(s, j, used[j]).lanes())
+                    .collect(),
+                groups: groups_of(&s.rows[0])
+                    .into_iter()
+                    .map(|g| g.lanes(dim))
+                    .collect(),
+            }),
         }
     }
 }
 
-/// Fills `x` with the scaled features of `engine` (every engine's, for a MIMO submodel)
-/// and the constant 1.0 after them; true when a used feature was outside the envelope
-/// and clamped. A feature that is not a number stays one: the prediction is then not
-/// finite and [`guarded`] keeps the previous value.
-fn gather(s: &Submodel, u: &SubmodelUse, h: &Ring, engine: usize, x: &mut [f64]) -> bool {
-    let dim = s.features.dim();
-    s.features.fill(h, engine, &mut x[..dim]);
+/// Fills `x` with the scaled features of a MIMO submodel that its terms read (the
+/// others are never read) and the constant 1.0 after them; true when one was outside
+/// the envelope and clamped. A feature that is not a number stays one: the prediction
+/// is then not finite and [`guarded`] keeps the previous value.
+fn gather(s: &Submodel, u: &MimoUse, h: &Ring, x: &mut [f64]) -> bool {
     let mut outside = false;
-    for (v, f) in x[..dim].iter_mut().zip(&u.scaling) {
-        *v = f.scale(*v, &mut outside);
+    for r in &u.reads {
+        x[r.feature] = r.scaling.scale(r.source.read(h, 0), &mut outside);
     }
-    x[dim] = 1.0;
+    x[s.features.dim()] = 1.0;
     outside
 }
 
-/// [`gather`] for the four engines of a per-engine submodel at once, into lanes: each
-/// engine's features go straight into its lane, then each feature is clamped and scaled
-/// in its four lanes together (the same operations on each value as [`gather`], so the
-/// same bits; one engine at a time and then transposed, the step took longer).
-fn gather_engines(s: &Submodel, u: &SubmodelUse, h: &Ring, lanes: &mut [Lanes]) -> bool {
+/// The features of the four engines of a per-engine submodel, as lanes: each feature
+/// is read for the four engines at once ([`FeatureSpec::fill_engines`]) and scaled in
+/// its four lanes together, into `lanes`, with the constant 1.0 after them; true when a
+/// used feature was outside the envelope.
+///
+/// Nearly every step every feature is inside its envelope, where clamping picks the
+/// value itself: the features are scaled without it ([`Unclamped`]) while the lanes
+/// that leave the envelope are noted, and only when some did is the step gathered
+/// again with the clamping ([`Clamped`]), which is then what the lanes hold.
+///
+/// [`FeatureSpec::fill_engines`]: super::features::FeatureSpec::fill_engines
+fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut [f64x4]) -> bool {
     let dim = s.features.dim();
-    for engine in 0..ENGINE_COUNT {
-        let mut i = 0;
-        s.features.fill_with(h, engine, |v| {
-            lanes[i][engine] = v;
-            i += 1;
-        });
+    let mut fast = Unclamped {
+        lanes,
+        scaling: &u.scaling,
+        i: 0,
+        below: f64x4::ZERO,
+        above: f64x4::ZERO,
+        zero_outside: false,
+    };
+    s.features.fill_engines(h, &mut fast);
+    debug_assert_eq!(fast.i, dim);
+    let mut outside = fast.zero_outside;
+    if (fast.below | fast.above).any() {
+        let mut clamped = Clamped {
+            lanes: fast.lanes,
+            scaling: &u.scaling,
+            i: 0,
+            outside: false,
+        };
+        s.features.fill_engines(h, &mut clamped);
+        outside |= clamped.outside;
     }
-    // Feature by feature, the four lanes clamped and scaled together, each operation
-    // over the whole lane (the same operations on each value as `Scaling::scale`), so
-    // they compile to vector instructions; value by value they compiled to branches.
-    let mut outside = false;
-    for (l, f) in lanes[..dim].iter_mut().zip(&u.scaling) {
-        let raw = *l;
-        let moved = raw.map(|r| (r < f.lo) | (r > f.hi));
-        outside |= f.used & moved.iter().any(|&m| m);
-        let above_lo = raw.map(|r| if r < f.lo { f.lo } else { r });
-        let clamped = above_lo.map(|r| if r > f.hi { f.hi } else { r });
-        *l = clamped.map(|c| (c - f.mean) * f.inv_std);
-    }
-    lanes[dim] = [1.0; ENGINE_COUNT];
+    lanes[dim] = f64x4::ONE;
     outside
+}
+
+/// Scales features into their lanes without clamping, noting which lanes were outside
+/// the envelope (below it, above it), for [`gather_engines`].
+struct Unclamped<'a> {
+    lanes: &'a mut [f64x4],
+    scaling: &'a [LaneScaling],
+    /// The next feature.
+    i: usize,
+    below: f64x4,
+    above: f64x4,
+    /// A run of zeros was outside the envelope of a used feature (its lanes hold the
+    /// clamped value).
+    zero_outside: bool,
+}
+
+impl EngineLanes for Unclamped<'_> {
+    #[inline(always)]
+    fn put(&mut self, raw: f64x4) {
+        let f = &self.scaling[self.i].scaling;
+        self.below |= raw.cmp_lt(f.lo);
+        self.above |= raw.cmp_gt(f.hi);
+        self.lanes[self.i] = (raw - f.mean) * f.inv_std;
+        self.i += 1;
+    }
+
+    #[inline(always)]
+    fn put_zeros(&mut self, n: usize) {
+        let range = self.i..self.i + n;
+        for (l, f) in self.lanes[range.clone()]
+            .iter_mut()
+            .zip(&self.scaling[range])
+        {
+            *l = f.zero;
+            self.zero_outside |= f.zero_outside;
+        }
+        self.i += n;
+    }
+}
+
+/// Clamps and scales features into their lanes ([`Scaling::scale`]), for
+/// [`gather_engines`] when some lane left the envelope.
+struct Clamped<'a> {
+    lanes: &'a mut [f64x4],
+    scaling: &'a [LaneScaling],
+    i: usize,
+    outside: bool,
+}
+
+impl EngineLanes for Clamped<'_> {
+    fn put(&mut self, raw: f64x4) {
+        self.lanes[self.i] = self.scaling[self.i].scaling.scale(raw, &mut self.outside);
+        self.i += 1;
+    }
 }
 
 /// Some of a row's terms (coefficients and factors, in file order), and the phase or
-/// ignition feature they all have, if any.
-#[derive(Debug, Clone, Default)]
-struct TermGroup {
+/// ignition feature they all have, if any. `C` is `f64`, or `f64x4` for a per-engine
+/// row (the coefficient in every lane).
+#[derive(Debug, Clone)]
+struct TermGroup<C> {
     gate: Option<usize>,
-    coefs: Vec<f64>,
+    coefs: Vec<C>,
     factors: Vec<Term>,
     /// Some term has a third factor that is a feature, not the 1.0 pad. Otherwise the
     /// group's products skip the pad: `a * b * 1.0` is `a * b` bit for bit, and a
@@ -430,9 +649,65 @@ struct TermGroup {
     cubic: bool,
 }
 
-/// A row's intercept plus its active terms, group by group (see [`SubmodelUse`]),
+impl<C> Default for TermGroup<C> {
+    fn default() -> Self {
+        Self {
+            gate: None,
+            coefs: Vec::new(),
+            factors: Vec::new(),
+            cubic: false,
+        }
+    }
+}
+
+impl TermGroup<f64> {
+    /// The same group for four lanes ([`LaneGroup`]); `dim` is the pad's index.
+    fn lanes(self, dim: usize) -> LaneGroup {
+        let pad = dim as u16;
+        // 1, 2 or 3: the factors before the trailing pads.
+        let degree = |t: &Term| match t {
+            [_, j, k] if *j == pad && *k == pad => 1,
+            [_, _, k] if *k == pad => 2,
+            _ => 3,
+        };
+        let mut g = LaneGroup {
+            gate: self.gate,
+            linear: Vec::new(),
+            quadratic: Vec::new(),
+            cubic: Vec::new(),
+        };
+        let in_degree_order = self
+            .factors
+            .windows(2)
+            .all(|w| degree(&w[0]) <= degree(&w[1]));
+        for (&c, t) in self.coefs.iter().zip(&self.factors) {
+            let c = f64x4::splat(c);
+            match (in_degree_order, degree(t)) {
+                (true, 1) => g.linear.push((c, t[0])),
+                (true, 2) => g.quadratic.push((c, [t[0], t[1]])),
+                _ => g.cubic.push((c, *t)),
+            }
+        }
+        g
+    }
+}
+
+/// A [`TermGroup`] of a per-engine row for four lanes: each coefficient in four lanes
+/// beside its factors, and the terms by degree. The 1.0 pad makes `a * 1.0` = `a`
+/// and `a * b * 1.0` = `a * b` bit for bit, so a term of one or two factors skips its
+/// pads; kept in file order, since the library lists terms by degree (a group whose
+/// terms are not in that order keeps them all, pads and all, in `cubic`).
+#[derive(Debug, Clone)]
+struct LaneGroup {
+    gate: Option<usize>,
+    linear: Vec<(f64x4, u16)>,
+    quadratic: Vec<(f64x4, [u16; 2])>,
+    cubic: Vec<(f64x4, Term)>,
+}
+
+/// A row's intercept plus its active terms, group by group (see [`EngineUse`]),
 /// skipping a group whose phase or ignition feature is 0.
-fn sum(row: &OutputRow, groups: &[TermGroup], x: &[f64]) -> f64 {
+fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &[f64]) -> f64 {
     let mut y = row.intercept;
     for g in groups {
         if g.gate.is_some_and(|f| x[f] == 0.0) {
@@ -451,34 +726,35 @@ fn sum(row: &OutputRow, groups: &[TermGroup], x: &[f64]) -> f64 {
     y
 }
 
-/// Four engines' values of one feature, side by side.
-type Lanes = [f64; ENGINE_COUNT];
-
-/// [`sum`] for the four engines at once (a per-engine row, shared by the engines): the
-/// same operations in the same order for each engine, side by side, so the compiler
-/// turns them into vector instructions; one engine at a time, the step took about twice
-/// as long. A group is skipped when its feature is 0 for every engine (for the others
-/// its terms add exact zeros).
-fn sum_engines(row: &OutputRow, groups: &[TermGroup], x: &[Lanes]) -> Lanes {
-    let mut y = [row.intercept; ENGINE_COUNT];
+/// [`sum`] for the four engines of a per-engine row at once, each engine a lane: the
+/// same operations in the same order as [`sum`] of that engine alone. A group is
+/// skipped when its feature is 0 for every engine; when it is 0 for some, those lanes
+/// get back the sum from before the group, as [`sum`] skipping it leaves it (adding
+/// its terms would add zeros, or not a number for a feature that is not one).
+#[inline(always)]
+fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &[f64x4]) -> f64x4 {
+    let at = |f: u16| x[usize::from(f)];
+    let mut y = f64x4::splat(row.intercept);
     for g in groups {
-        if g.gate.is_some_and(|f| x[f] == [0.0; ENGINE_COUNT]) {
+        let off = match g.gate {
+            Some(f) => x[f].cmp_eq(f64x4::ZERO),
+            None => f64x4::ZERO,
+        };
+        if off.all() {
             continue;
         }
-        if g.cubic {
-            for (c, t) in g.coefs.iter().zip(&g.factors) {
-                let [a, b, d] = t.map(|f| &x[f as usize]);
-                for e in 0..ENGINE_COUNT {
-                    y[e] += c * (a[e] * b[e] * d[e]);
-                }
-            }
-        } else {
-            for (c, &[i, j, _]) in g.coefs.iter().zip(&g.factors) {
-                let (a, b) = (&x[i as usize], &x[j as usize]);
-                for e in 0..ENGINE_COUNT {
-                    y[e] += c * (a[e] * b[e]);
-                }
-            }
+        let before = y;
+        for &(c, i) in &g.linear {
+            y += c * at(i);
+        }
+        for &(c, [i, j]) in &g.quadratic {
+            y += c * (at(i) * at(j));
+        }
+        for &(c, [i, j, k]) in &g.cubic {
+            y += c * (at(i) * at(j) * at(k));
+        }
+        if off.any() {
+            y = off.blend(before, y);
         }
     }
     y
@@ -668,6 +944,193 @@ pub(crate) mod tests {
         });
         let e = m.check().unwrap_err();
         assert!(e.contains("more than one phase or ignition feature"), "{e}");
+    }
+
+    /// The reference for the lanes: each engine of a per-engine submodel on its own, in
+    /// scalar code, as the predictor evaluated them before they were lanes: its features
+    /// by `fill`, clamped and scaled one by one ([`Scaling::scale`]), its row summed by
+    /// [`sum`] from the model's own terms.
+    fn engine_by_engine(
+        s: &Submodel,
+        _: &EngineUse,
+        h: &Ring,
+        _: &mut [f64x4],
+    ) -> ([f64; ENGINE_COUNT], bool) {
+        let dim = s.features.dim();
+        let used = used_features(s);
+        let scaling: Vec<_> = (0..dim).map(|j| Scaling::of(s, j, used[j])).collect();
+        let groups = groups_of(s, &s.rows[0]);
+        let mut x = vec![0.0; dim + 1];
+        let mut outside = false;
+        let y = std::array::from_fn(|engine| {
+            s.features.fill(h, engine, &mut x[..dim]);
+            for (v, f) in x[..dim].iter_mut().zip(&scaling) {
+                *v = f.scale(*v, &mut outside);
+            }
+            x[dim] = 1.0;
+            sum(&s.rows[0], &groups, &x)
+        });
+        (y, outside)
+    }
+
+    /// Steps the lanes and the reference side by side through `cmds` and compares every
+    /// state bit for bit, and the guards' counts.
+    fn assert_lanes_equal_engine_by_engine(model: &Model, limits: Limits, cmds: &[InputVec]) {
+        let mut lanes = Predictor::new(model);
+        lanes.set_limits(limits);
+        let mut reference = lanes.clone();
+        for (t, cmd) in cmds.iter().enumerate() {
+            let got = lanes.step(cmd);
+            let want = reference.step_by(cmd, engine_by_engine);
+            assert_eq!(
+                got.map(f64::to_bits),
+                want.map(f64::to_bits),
+                "step {t} command {cmd:?}: {got:?} vs {want:?}"
+            );
+        }
+        assert_eq!(
+            lanes.out_of_envelope_steps(),
+            reference.out_of_envelope_steps()
+        );
+        assert_eq!(
+            format!("{:?}", lanes.guards()),
+            format!("{:?}", reference.guards())
+        );
+    }
+
+    /// The models the lanes are checked on: the committed one, the same with a narrow
+    /// envelope (features clamped in some lanes and not others), and dense ones with
+    /// every library term (three-factor terms, every gate).
+    fn lane_models() -> Vec<Model> {
+        let mut narrow = committed_model();
+        for s in &mut narrow.submodels {
+            for (lo, hi) in s.envelope_lo.iter_mut().zip(&mut s.envelope_hi) {
+                let mid = 0.5 * (*lo + *hi);
+                let half = 0.3 * (*hi - *lo);
+                (*lo, *hi) = (mid - half, mid + half);
+            }
+        }
+        // Phase features whose envelope leaves out 0.0: every step outside a phase
+        // (handed over as a run of zeros) is outside the envelope, and nothing else is.
+        let mut phases_above_zero = committed_model();
+        for s in &mut phases_above_zero.submodels {
+            for (j, role) in s.features.roles().iter().enumerate() {
+                if role.phase {
+                    s.envelope_lo[j] = 0.5;
+                }
+            }
+        }
+        vec![
+            committed_model(),
+            narrow,
+            phases_above_zero,
+            dense_model(3, 1),
+            dense_model(2, 2),
+        ]
+    }
+
+    /// A command of one engine: mostly within the range, sometimes outside it, now and
+    /// then not a number or infinite.
+    fn command_n() -> impl proptest::strategy::Strategy<Value = f64> {
+        use proptest::prelude::*;
+        prop_oneof![
+            20 => 300.0..820.0f64,
+            2 => -100.0..2000.0f64,
+            1 => Just(f64::NAN),
+            1 => Just(f64::INFINITY),
+            1 => Just(0.0),
+        ]
+    }
+
+    /// Random commands, engines switching on and off at random (each step keeps the
+    /// previous switch with some odds, so phases last a while).
+    fn command_sequences() -> impl proptest::strategy::Strategy<Value = Vec<InputVec>> {
+        use proptest::prelude::*;
+        let step = (
+            proptest::array::uniform4(command_n()),
+            proptest::array::uniform4(0u8..8),
+        );
+        proptest::collection::vec(step, 20..250).prop_map(|steps| {
+            let mut on = [true; ENGINE_COUNT];
+            steps
+                .into_iter()
+                .map(|(cmd, flip)| {
+                    let mut u = [0.0; INPUT_DIM];
+                    for e in 0..ENGINE_COUNT {
+                        on[e] ^= flip[e] == 0;
+                        u[e] = if on[e] { cmd[e] } else { 0.0 };
+                        u[ENGINE_COUNT + e] = f64::from(u8::from(on[e]));
+                    }
+                    u
+                })
+                .collect()
+        })
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::test_runner::Config::with_cases(24))]
+        /// The lanes give the engine-by-engine reference's bits on random commands,
+        /// including ones outside the envelope, not numbers and infinite.
+        #[test]
+        fn lanes_equal_engine_by_engine_on_random_commands(cmds in command_sequences()) {
+            for model in lane_models() {
+                assert_lanes_equal_engine_by_engine(&model, Limits::of_rating(800.0), &cmds);
+            }
+        }
+    }
+
+    /// An engine whose phase feature is 0 skips the phase's terms even when another
+    /// engine's is not, as it does on its own: its lane keeps the sum from before the
+    /// group, even where the group's terms would not add zero (a feature that is not a
+    /// number, read only by the phase's terms).
+    #[test]
+    fn an_engine_out_of_a_phase_skips_its_terms_while_another_is_in_it() {
+        // Features: 0 a phase indicator, 1 a partner; 2 the 1.0 pad.
+        let row = OutputRow {
+            output: "T_o".into(),
+            intercept: 1.5,
+            terms: vec![ActiveTerm {
+                name: "stop0[t]*T_r[t]".into(),
+                factors: [0, 1, 2],
+                coef: 0.25,
+            }],
+        };
+        let scalar = vec![
+            TermGroup::default(),
+            TermGroup {
+                gate: Some(0),
+                coefs: vec![0.25],
+                factors: vec![[0, 1, 2]],
+                cubic: false,
+            },
+        ];
+        let lanes: Vec<_> = scalar.iter().cloned().map(|g| g.lanes(2)).collect();
+        let gate = [0.0, 1.0, 1.0, 0.0];
+        let partner = [f64::NAN, 2.0, f64::NAN, 4.0];
+        let x = [f64x4::new(gate), f64x4::new(partner), f64x4::ONE];
+        let got = sum_engines(&row, &lanes, &x).to_array();
+        for e in 0..ENGINE_COUNT {
+            let want = sum(&row, &scalar, &[gate[e], partner[e], 1.0]);
+            assert_eq!(got[e].to_bits(), want.to_bits(), "engine {e}: {got:?}");
+        }
+        assert_eq!(got[0], 1.5);
+        assert!(got[2].is_nan());
+    }
+
+    /// The same over the switching trajectory and a long steady run (the ignition
+    /// window, the stop phases and the running engine are all passed through).
+    #[test]
+    fn lanes_equal_engine_by_engine_on_switching_and_steady_runs() {
+        let (mut cmds, _) =
+            crate::propulsion::surrogate::features::source_tests::switching_trajectory(400);
+        cmds.extend((0..600).map(|k| {
+            let c = 400.0 + (k % 300) as f64;
+            [c, c + 10.0, 800.0 - c * 0.5, 600.0, 1.0, 1.0, 1.0, 1.0]
+        }));
+        for model in lane_models() {
+            assert_lanes_equal_engine_by_engine(&model, Limits::NONE, &cmds);
+            assert_lanes_equal_engine_by_engine(&model, Limits::of_rating(800.0), &cmds);
+        }
     }
 
     /// The committed default model.

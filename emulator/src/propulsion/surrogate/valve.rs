@@ -9,6 +9,7 @@ use super::stroke_map::{StrokeMap, StrokeSlope};
 use crate::propulsion::hifi::engine::{Tfcv, TfcvDynamics};
 use oils_shared::ENGINE_COUNT;
 use serde::{Deserialize, Serialize};
+use wide::{f64x4, CmpEq, CmpGt, CmpLt};
 
 /// A throttle valve actuator in newtons: the valve position, expressed as the thrust it
 /// stands for, follows `max(command, park_n)` through a first-order lag whose rate is
@@ -139,6 +140,39 @@ impl IgnitionClock {
     #[inline(always)]
     pub fn priming(on: bool, since_ignition_s: f64) -> f64 {
         f64::from(u8::from(on && since_ignition_s == NOT_IGNITED))
+    }
+
+    /// [`IgnitionClock::priming`] of four engines as lanes, from their switches
+    /// (on above 0.5, as the features read them) and times since ignition.
+    #[inline(always)]
+    pub fn priming_lanes(switch: f64x4, since_ignition_s: f64x4) -> f64x4 {
+        let on = switch.cmp_gt(f64x4::splat(0.5));
+        super::features::indicator_lanes(on & since_ignition_s.cmp_eq(f64x4::splat(NOT_IGNITED)))
+    }
+
+    /// Where four engines' times since ignition fall among the knots (the `at` of
+    /// [`IgnitionClock::hat`], the same operations), once for all the hats.
+    #[inline(always)]
+    pub fn clock_lanes(&self, since_ignition_s: f64x4) -> f64x4 {
+        (since_ignition_s + f64x4::splat(self.lead_s)) / f64x4::splat(self.knot_spacing_s)
+    }
+
+    /// Whether every hat of [`IgnitionClock::clock_lanes`] `at` is 0.0 in every lane:
+    /// no lane strictly between -1 and `knots` (a clock not running, -inf, or past its
+    /// last knot). Exact: `at - j` rounds no higher than `at <= -1` nor lower than
+    /// `knots - j >= 1`, so `1 - |at - j| <= 0` and the hat is `max(.., 0)` = +0.0;
+    /// a lane that is not a number gives +0.0 too.
+    #[inline(always)]
+    pub fn hats_all_zero(&self, at: f64x4) -> bool {
+        (at.cmp_gt(f64x4::splat(-1.0)) & at.cmp_lt(f64x4::splat(self.knots as f64))).none()
+    }
+
+    /// [`IgnitionClock::hat`] `j` of four engines at once from [`IgnitionClock::clock_lanes`].
+    /// `max` with 0.0 returns 0.0 for a lane that is not a number, as `f64::max` does;
+    /// `1 - |a|` is never -0.0, the one value where the two could differ.
+    #[inline(always)]
+    pub fn hat_lanes(at: f64x4, j: usize) -> f64x4 {
+        (f64x4::ONE - (at - f64x4::splat(j as f64)).abs()).max(f64x4::ZERO)
     }
 
     /// Time after ignition beyond which every hat is 0, s.
