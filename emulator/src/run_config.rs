@@ -274,6 +274,11 @@ pub struct RunConfig {
     /// SCHED_FIFO priority (1-99) with memory locked; needs root or CAP_SYS_NICE.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rt_priority: Option<i32>,
+    /// CPUs to pin the stepping threads to: `[EMULATOR]` or `[EMULATOR, STUB]` (the
+    /// emulator's stepping thread on the first, the onboard stub's on the second; with
+    /// one, the stub is not pinned). Empty: no pinning. Checked online before tick 0.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub cpus: Vec<usize>,
     /// Timing bounds.
     pub thresholds: ThresholdConfig,
     /// Log settings.
@@ -317,6 +322,7 @@ impl Default for RunConfig {
             startup_timeout_ms: 10_000,
             allow_reattach: false,
             rt_priority: None,
+            cpus: Vec::new(),
             thresholds: ThresholdConfig::default(),
             log: LogConfig::default(),
             faults: Vec::new(),
@@ -432,6 +438,13 @@ impl RunConfig {
             if !(1..=99).contains(&p) {
                 return Err(invalid("rt_priority", p, "1-99"));
             }
+        }
+        if self.cpus.len() > 2 {
+            return Err(invalid(
+                "cpus",
+                format!("{:?}", self.cpus),
+                "one or two CPUs: [EMULATOR] or [EMULATOR, STUB]",
+            ));
         }
         let t = &self.thresholds;
         for (field, v) in [
@@ -564,6 +577,22 @@ impl RunConfig {
             hifi: self.hifi.clone().unwrap_or_default(),
             step_ns: Some(self.dt_ns()),
         }
+    }
+
+    /// Whether the stepping threads lock memory and prefault their stacks before tick 0:
+    /// in realtime runs, and whenever `rt_priority` is set.
+    pub fn realtime_memory(&self) -> bool {
+        self.mode == Mode::Realtime || self.rt_priority.is_some()
+    }
+
+    /// The CPU the emulator's stepping thread is pinned to (`cpus[0]`).
+    pub fn emulator_cpu(&self) -> Option<usize> {
+        self.cpus.first().copied()
+    }
+
+    /// The CPU the onboard stub's stepping thread is pinned to (`cpus[1]`).
+    pub fn stub_cpu(&self) -> Option<usize> {
+        self.cpus.get(1).copied()
     }
 
     /// The wait strategy: as set, else busy-poll in lockstep (the two processes take
