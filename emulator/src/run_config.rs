@@ -711,6 +711,23 @@ mod tests {
     }
 
     #[test]
+    fn cpus_read_as_emulator_then_stub() {
+        let cfg: RunConfig = toml::from_str("cpus = [0, 1]\n").unwrap();
+        assert_eq!((cfg.emulator_cpu(), cfg.stub_cpu()), (Some(0), Some(1)));
+        let cfg: RunConfig = toml::from_str("cpus = [1]\n").unwrap();
+        assert_eq!((cfg.emulator_cpu(), cfg.stub_cpu()), (Some(1), None));
+        let cfg = RunConfig::default();
+        assert_eq!((cfg.emulator_cpu(), cfg.stub_cpu()), (None, None));
+        assert!(!cfg.to_toml().contains("cpus"));
+        assert!(!cfg.realtime_memory());
+        let rt = RunConfig {
+            mode: Mode::Realtime,
+            ..RunConfig::default()
+        };
+        assert!(rt.realtime_memory());
+    }
+
+    #[test]
     fn a_partial_file_overrides_only_what_it_names() {
         let cfg: RunConfig = toml::from_str(
             "link = \"inproc\"\npropulsion = \"hifi\"\nseed = 7\n[scenario.initial]\naltitude_m = 20000.0\n",
@@ -737,6 +754,7 @@ mod tests {
         bad(&|c| c.speed = 1e-6, "speed");
         bad(&|c| c.deadline_frac = 0.0, "deadline_frac");
         bad(&|c| c.link_timeout_ms = u64::MAX, "link_timeout_ms");
+        bad(&|c| c.cpus = vec![0, 1, 0], "cpus");
         bad(
             &|c| c.thresholds.max_wake_p99_us = Some(f64::NAN),
             "max_wake_p99_us",

@@ -62,9 +62,7 @@ pub fn parse_cpus(s: &str) -> Result<Vec<usize>, CpusError> {
         .map(|e| {
             let e = e.trim();
             e.parse::<usize>()
-                .ok()
-                .filter(|&c| c < libc::CPU_SETSIZE as usize)
-                .ok_or_else(|| CpusError::NotANumber { entry: e.into() })
+                .map_err(|_| CpusError::NotANumber { entry: e.into() })
         })
         .collect::<Result<Vec<_>, _>>()?;
     check_count(&cpus)?;
@@ -96,6 +94,12 @@ pub fn check_cpus_against(
 ) -> Result<(), CpusError> {
     check_count(cpus)?;
     for &cpu in cpus {
+        if cpu >= libc::CPU_SETSIZE as usize {
+            return Err(CpusError::NotOnline {
+                cpu,
+                online: online.map_or("unknown".into(), |l| l.trim().into()),
+            });
+        }
         if let Some(list) = online {
             let list = list.trim();
             if !list_contains(list, cpu) {
@@ -414,10 +418,7 @@ mod tests {
             })
         );
         assert_eq!(parse_cpus("0,1,2"), Err(CpusError::TooMany { count: 3 }));
-        assert!(matches!(
-            parse_cpus("99999"),
-            Err(CpusError::NotANumber { .. })
-        ));
+        assert_eq!(parse_cpus("99999"), Ok(vec![99999]));
         let e = parse_cpus("0,x").unwrap_err().to_string();
         assert!(
             e.contains("`x` is not a CPU number") && e.contains("EMULATOR[,STUB]"),
@@ -453,6 +454,10 @@ mod tests {
             })
         );
         assert_eq!(check_cpus_against(&[], None, None), Err(CpusError::Empty));
+        assert!(matches!(
+            check_cpus_against(&[99999], None, None),
+            Err(CpusError::NotOnline { cpu: 99999, .. })
+        ));
     }
 
     #[test]
