@@ -299,3 +299,107 @@ fn rt_priority_runs_or_says_why_not() {
         );
     }
 }
+
+/// What a realtime run's stepping threads obtained is in the report, for the emulator
+/// and the stub, whether or not the machine granted it: pinned, or a warning saying why
+/// not; memory locked, or a warning saying why not. Never silence. No timing asserted.
+#[test]
+fn realtime_report_says_what_was_obtained() {
+    let dir = scratch("rt-hygiene");
+    let rep = dir.join("report.json");
+    let out = run_oils(&[
+        "run",
+        "--mode",
+        "realtime",
+        "--speed",
+        "10",
+        "--duration",
+        "1",
+        "--no-log",
+        "--cpus",
+        "0,0",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains("realtime    emulator"),
+        "{}",
+        text(&out)
+    );
+    let r = report(&rep);
+    let warnings: Vec<String> = r["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| w.as_str().unwrap().to_string())
+        .collect();
+    for (who, prefix) in [("emulator", "emulator: "), ("onboard", "onboard stub: ")] {
+        let s = &r["realtime"][who];
+        assert_eq!(s["sched_policy"], "SCHED_OTHER", "{who}: {s}");
+        assert_eq!(s["sched_priority"], 0, "{who}: {s}");
+        assert_eq!(s["cpu_requested"], 0, "{who}: {s}");
+        assert_eq!(s["memory_lock_requested"], true, "{who}: {s}");
+        assert!(
+            s["stack_prefaulted_bytes"].as_u64().unwrap() > 0,
+            "{who}: {s}"
+        );
+        let said = |what: &str| {
+            warnings
+                .iter()
+                .any(|w| w.starts_with(prefix) && w.contains(what))
+        };
+        if s["pinned"] == true {
+            assert_eq!(s["cpus_allowed"], serde_json::json!([0]), "{who}: {s}");
+        } else {
+            assert!(said("not pinned to CPU 0"), "{who}: {s} {warnings:?}");
+        }
+        if s["memory_locked"] != true {
+            assert!(said("memory not locked"), "{who}: {s} {warnings:?}");
+        }
+    }
+}
+
+#[test]
+fn bad_cpu_lists_are_refused_before_tick_0() {
+    for (cpus, says) in [
+        ("0,x", "`x` is not a CPU number"),
+        ("0,1,0", "3 CPUs given"),
+        ("", "an empty list"),
+        ("999", "CPU 999 is not online"),
+        ("0,99999", "CPU 99999 is not online"),
+    ] {
+        let out = run_oils(&["run", "--link", "inproc", "--no-log", "--cpus", cpus]);
+        assert!(!out.status.success(), "--cpus {cpus:?} accepted");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains(says) && !err.contains("panicked"),
+            "--cpus {cpus:?}: {err}"
+        );
+    }
+}
+
+/// A lockstep run in process asks for nothing and says so.
+#[test]
+fn lockstep_report_says_nothing_was_asked() {
+    let dir = scratch("rt-none");
+    let rep = dir.join("report.json");
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--duration",
+        "1",
+        "--no-log",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let r = report(&rep);
+    let s = &r["realtime"]["emulator"];
+    assert_eq!(s["memory_lock_requested"], false, "{s}");
+    assert_eq!(s["memory_locked"], false, "{s}");
+    assert_eq!(s["cpu_requested"], serde_json::Value::Null, "{s}");
+    assert_eq!(s["pinned"], false, "{s}");
+    assert_eq!(r["realtime"]["onboard"], serde_json::Value::Null);
+}

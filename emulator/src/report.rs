@@ -6,6 +6,7 @@ use crate::scheduler::{Mode, Outcome, RunSummary};
 use crate::timing::Percentiles;
 use oils_shared::fsw::FswFailure;
 use oils_shared::link::WaitStrategy;
+use oils_shared::realtime::RealtimeStatus;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 
@@ -54,6 +55,10 @@ pub struct RunReport {
     /// How the onboard process started for the run ended (`oils run` spawning its stub).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub onboard_process: Option<OnboardProcess>,
+    /// What the stepping threads obtained before tick 0 (scheduling class and priority,
+    /// memory lock, pinning), read back from the kernel.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub realtime: Option<RealtimeReport>,
     /// The run's figures.
     #[serde(flatten)]
     pub summary: RunSummary,
@@ -86,6 +91,7 @@ impl RunReport {
             fsw_library: None,
             fsw_failure: None,
             onboard_process: None,
+            realtime: None,
             summary,
         }
     }
@@ -233,6 +239,13 @@ impl RunReport {
         for w in &self.warnings {
             let _ = writeln!(out, "WARNING     {w}");
         }
+        if let Some(rt) = &self.realtime {
+            let _ = write!(out, "realtime    emulator {}", rt.emulator.summary());
+            if let Some(onboard) = &rt.onboard {
+                let _ = write!(out, "; stub {}", onboard.summary());
+            }
+            let _ = writeln!(out);
+        }
         if let Some(lib) = &self.fsw_library {
             let _ = writeln!(out, "fsw library {} (blake3 {})", lib.path, lib.blake3);
         }
@@ -271,6 +284,16 @@ pub struct FswLibrary {
     pub path: String,
     /// BLAKE3 of the file's bytes when it was loaded, 64 hex digits.
     pub blake3: String,
+}
+
+/// What the stepping threads of a run obtained before tick 0.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct RealtimeReport {
+    /// The emulator's stepping thread (in process: the flight software's too).
+    pub emulator: RealtimeStatus,
+    /// The onboard stub's, as the stub `oils run` spawned wrote it in its outcome
+    /// (`None`: in process, a stub started by hand, or one that died before writing it).
+    pub onboard: Option<RealtimeStatus>,
 }
 
 /// How the onboard process started for a run ended.

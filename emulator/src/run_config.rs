@@ -278,6 +278,11 @@ pub struct RunConfig {
     /// SCHED_FIFO priority (1-99) with memory locked; needs root or CAP_SYS_NICE.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rt_priority: Option<i32>,
+    /// CPUs to pin the stepping threads to: `[EMULATOR]` or `[EMULATOR, STUB]` (the
+    /// emulator's stepping thread on the first, the onboard stub's on the second; with
+    /// one, the stub is not pinned). Empty: no pinning. Checked online before tick 0.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub cpus: Vec<usize>,
     /// Timing bounds.
     pub thresholds: ThresholdConfig,
     /// Log settings.
@@ -322,6 +327,7 @@ impl Default for RunConfig {
             startup_timeout_ms: 10_000,
             allow_reattach: false,
             rt_priority: None,
+            cpus: Vec::new(),
             thresholds: ThresholdConfig::default(),
             log: LogConfig::default(),
             faults: Vec::new(),
@@ -437,6 +443,13 @@ impl RunConfig {
             if !(1..=99).contains(&p) {
                 return Err(invalid("rt_priority", p, "1-99"));
             }
+        }
+        if self.cpus.len() > 2 {
+            return Err(invalid(
+                "cpus",
+                format!("{:?}", self.cpus),
+                "one or two CPUs: [EMULATOR] or [EMULATOR, STUB]",
+            ));
         }
         let t = &self.thresholds;
         for (field, v) in [
@@ -590,6 +603,22 @@ impl RunConfig {
         }
     }
 
+    /// Whether the stepping threads lock memory and prefault their stacks before tick 0:
+    /// in realtime runs, and whenever `rt_priority` is set.
+    pub fn realtime_memory(&self) -> bool {
+        self.mode == Mode::Realtime || self.rt_priority.is_some()
+    }
+
+    /// The CPU the emulator's stepping thread is pinned to (`cpus[0]`).
+    pub fn emulator_cpu(&self) -> Option<usize> {
+        self.cpus.first().copied()
+    }
+
+    /// The CPU the onboard stub's stepping thread is pinned to (`cpus[1]`).
+    pub fn stub_cpu(&self) -> Option<usize> {
+        self.cpus.get(1).copied()
+    }
+
     /// The wait strategy: as set, else busy-poll in lockstep (the two processes take
     /// turns, so each spins only while the other works) and hybrid in realtime (leaves
     /// the core free between steps).
@@ -706,6 +735,23 @@ mod tests {
     }
 
     #[test]
+    fn cpus_read_as_emulator_then_stub() {
+        let cfg: RunConfig = toml::from_str("cpus = [0, 1]\n").unwrap();
+        assert_eq!((cfg.emulator_cpu(), cfg.stub_cpu()), (Some(0), Some(1)));
+        let cfg: RunConfig = toml::from_str("cpus = [1]\n").unwrap();
+        assert_eq!((cfg.emulator_cpu(), cfg.stub_cpu()), (Some(1), None));
+        let cfg = RunConfig::default();
+        assert_eq!((cfg.emulator_cpu(), cfg.stub_cpu()), (None, None));
+        assert!(!cfg.to_toml().contains("cpus"));
+        assert!(!cfg.realtime_memory());
+        let rt = RunConfig {
+            mode: Mode::Realtime,
+            ..RunConfig::default()
+        };
+        assert!(rt.realtime_memory());
+    }
+
+    #[test]
     fn a_partial_file_overrides_only_what_it_names() {
         let cfg: RunConfig = toml::from_str(
             "link = \"inproc\"\npropulsion = \"hifi\"\nseed = 7\n[scenario.initial]\naltitude_m = 20000.0\n",
@@ -732,6 +778,7 @@ mod tests {
         bad(&|c| c.speed = 1e-6, "speed");
         bad(&|c| c.deadline_frac = 0.0, "deadline_frac");
         bad(&|c| c.link_timeout_ms = u64::MAX, "link_timeout_ms");
+        bad(&|c| c.cpus = vec![0, 1, 0], "cpus");
         bad(
             &|c| c.thresholds.max_wake_p99_us = Some(f64::NAN),
             "max_wake_p99_us",

@@ -16,13 +16,14 @@ use crate::propulsion;
 use crate::recorder::{
     Log, LogFormat, Recorder, RecorderError, SinkOpener, REC_ENDED_AFTER_PUBLISH, REC_END_OF_RUN,
 };
-use crate::report::RunReport;
+use crate::report::{RealtimeReport, RunReport};
 use crate::run_config::{LinkKind, RunConfig, RunConfigError};
 use crate::scheduler::{self, Mode, SchedulerConfig, SchedulerError};
 use oils_shared::domain::Domain;
 use oils_shared::fsw::FlightSoftware;
 use oils_shared::link::{create_node_in, EmulatorLink, LinkError, PeerProcess, WaitStrategy};
 use oils_shared::profile::ProfileRules;
+use oils_shared::realtime::{Hygiene, RealtimeStatus};
 use oils_shared::PROTOCOL_VERSION;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -54,6 +55,9 @@ pub enum SessionError {
         #[source]
         source: std::io::Error,
     },
+    /// A CPU to pin a stepping thread to cannot be used.
+    #[error("invalid run configuration: cpus [flag --cpus]")]
+    Cpus(#[from] oils_shared::realtime::CpusError),
     /// Propulsion model could not be built.
     #[error("propulsion")]
     Propulsion(#[from] crate::propulsion::BuildError),
@@ -277,6 +281,9 @@ pub fn run(
     mut extras: Extras<'_>,
 ) -> Result<RunReport, SessionError> {
     cfg.validate()?;
+    if !cfg.cpus.is_empty() {
+        oils_shared::realtime::check_cpus(&cfg.cpus)?;
+    }
     if onboard.link() != cfg.link {
         return Err(SessionError::Onboard(format!(
             "the run's link is {} but the flight software was handed in for {}",
@@ -295,17 +302,32 @@ pub fn run(
     let mut clock = step_clock(cfg);
 
     if let Some(priority) = cfg.rt_priority {
-        oils_shared::clock::set_realtime_priority(priority)
+        oils_shared::realtime::set_realtime_priority(priority)
             .map_err(|source| SessionError::RealtimePriority { priority, source })?;
     }
+    // Memory locked now (MCL_FUTURE: the link's shared memory and the log writer, set up
+    // below, come locked too) and this thread's stack prefaulted; the thread is pinned
+    // only once the stub is spawned (a child would inherit the pin). Undone on return.
+    let mut hygiene = Hygiene::new();
+    if cfg.realtime_memory() {
+        hygiene.lock_memory();
+    }
+    let pin_and_tell = |hygiene: &mut Hygiene| {
+        if let Some(cpu) = cfg.emulator_cpu() {
+            hygiene.pin_to(cpu);
+        }
+        hygiene.status()
+    };
     let mut warnings = Vec::new();
     let mut reattachments = None;
     let observer = extras.observer.take();
     let mut fsw_failure = None;
+    let realtime: RealtimeStatus;
     let (summary, log_path, wait) = match onboard {
         Onboard::InProcess(fsw) => {
             let mut link = InProcLink::new(fsw);
             let recorder = open_recorder(cfg, run_id, extras.sinks)?;
+            realtime = pin_and_tell(&mut hygiene);
             let summary = run_and_close(
                 &sched,
                 &mut plant,
@@ -341,6 +363,7 @@ pub fn run(
             let joined =
                 link.wait_for_peer_watching(cfg.startup_timeout_ms, stop, launched.as_ref())?;
             let mut link = BoundLink::new(link, joined, cfg.allow_reattach);
+            realtime = pin_and_tell(&mut hygiene);
             let summary = run_and_close(
                 &sched,
                 &mut plant,
@@ -375,7 +398,13 @@ pub fn run(
             (summary.0, summary.1, Some(wait))
         }
     };
+    drop(hygiene);
+    warnings.extend(realtime.warnings.iter().map(|w| format!("emulator: {w}")));
     let mut report = RunReport::new(cfg, run_id, wait, log_path, summary);
+    report.realtime = Some(RealtimeReport {
+        emulator: realtime,
+        onboard: None,
+    });
     report.warnings = warnings;
     report.reattachments = reattachments;
     report.fsw_failure = fsw_failure;

@@ -7,6 +7,7 @@ use crate::fsw::{FswFailure, FswSpec};
 use crate::runner::{serve, StubError, StubSummary};
 use oils_shared::link::{create_node, LinkError, StubLink, WaitStrategy};
 use oils_shared::profile::{ProfileRules, RATED_THRUST_N};
+use oils_shared::realtime::{Hygiene, RealtimeStatus};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -35,8 +36,13 @@ pub struct StubOptions {
     pub wait: Option<String>,
     /// Give up after this long without telemetry, milliseconds.
     pub timeout_ms: u64,
-    /// SCHED_FIFO priority (1-99), memory locked.
+    /// SCHED_FIFO priority (1-99); refused: the stub fails.
     pub rt_priority: Option<i32>,
+    /// Lock memory and prefault the stack before serving (realtime runs); refused: a
+    /// warning.
+    pub lock_memory: bool,
+    /// Pin the stepping thread to this CPU (checked online first); refused: a warning.
+    pub cpu: Option<usize>,
     /// How long to wait for the emulator's services to appear, milliseconds.
     pub startup_timeout_ms: u64,
 }
@@ -56,6 +62,8 @@ impl StubOptions {
             wait: None,
             timeout_ms: 5000,
             rt_priority: None,
+            lock_memory: false,
+            cpu: None,
             startup_timeout_ms: 10_000,
         }
     }
@@ -88,8 +96,28 @@ impl JoinError {
     }
 }
 
+/// How the onboard process served a run, and what its stepping thread obtained.
+#[derive(Debug)]
+pub struct StubRun {
+    /// The run served, or why not.
+    pub served: Result<StubSummary, JoinError>,
+    /// Scheduling, memory lock and pinning as read back before the first step (`None`:
+    /// the stub failed before it got that far).
+    pub realtime: Option<RealtimeStatus>,
+}
+
 /// Joins the run and serves it to the end.
-pub fn run_stub(args: &StubOptions, stop: &AtomicBool) -> Result<StubSummary, JoinError> {
+pub fn run_stub(args: &StubOptions, stop: &AtomicBool) -> StubRun {
+    let mut realtime = None;
+    let served = join_and_serve(args, stop, &mut realtime);
+    StubRun { served, realtime }
+}
+
+fn join_and_serve(
+    args: &StubOptions,
+    stop: &AtomicBool,
+    realtime: &mut Option<RealtimeStatus>,
+) -> Result<StubSummary, JoinError> {
     let run_id = u64::from_str_radix(args.run_id.trim_start_matches("0x"), 16)
         .map_err(|_| JoinError::Argument(format!("--run-id {}: not a hex number", args.run_id)))?;
     let wait: Option<WaitStrategy> = match &args.wait {
@@ -99,7 +127,7 @@ pub fn run_stub(args: &StubOptions, stop: &AtomicBool) -> Result<StubSummary, Jo
         None => None,
     };
     if let Some(priority) = args.rt_priority {
-        oils_shared::clock::set_realtime_priority(priority).map_err(|e| {
+        oils_shared::realtime::set_realtime_priority(priority).map_err(|e| {
             JoinError::Argument(format!(
                 "--rt-priority {priority}: {e} (needs root or CAP_SYS_NICE)"
             ))
@@ -111,6 +139,10 @@ pub fn run_stub(args: &StubOptions, stop: &AtomicBool) -> Result<StubSummary, Jo
             args.max_thrust_n
         )));
     }
+    if let Some(cpu) = args.cpu {
+        oils_shared::realtime::check_cpus(&[cpu])
+            .map_err(|e| JoinError::Argument(format!("--cpu {cpu}: {e}")))?;
+    }
     let rules = ProfileRules::rated(args.max_thrust_n);
     let mut fsw = build_fsw_expecting(
         &args.fsw,
@@ -121,6 +153,22 @@ pub fn run_stub(args: &StubOptions, stop: &AtomicBool) -> Result<StubSummary, Jo
         args.site,
         args.gnc,
     )?;
+    // Before the link opens, so the emulator's first telemetry finds the stub ready:
+    // memory locked (MCL_FUTURE: the link's shared memory comes locked), the stack
+    // prefaulted, this (the stepping) thread pinned. The stub's watchdog thread, spawned
+    // by `serve`, inherits the pin; it wakes every 50 ms for microseconds.
+    let mut hygiene = Hygiene::new();
+    if args.lock_memory {
+        hygiene.lock_memory();
+    }
+    if let Some(cpu) = args.cpu {
+        hygiene.pin_to(cpu);
+    }
+    let status = hygiene.status();
+    for w in &status.warnings {
+        eprintln!("oils stub: warning: {w}");
+    }
+    *realtime = Some(status);
     let node = create_node("oils-onboard-stub")?;
     let link = StubLink::open(&node, run_id, wait, args.startup_timeout_ms, stop)?;
     Ok(serve(&link, fsw.as_mut(), args.timeout_ms, stop)?)

@@ -39,31 +39,6 @@ pub fn sleep_until_ns(deadline_ns: u64, spin_ns: u64) {
     }
 }
 
-/// Puts the calling process under `SCHED_FIFO` at `priority` (1-99) and locks its memory
-/// (`mlockall`), as real-time benches do: the kernel then wakes the stepping loop ahead
-/// of ordinary work, and no page fault lands in a step. Children spawned afterwards
-/// inherit the policy. Needs root or `CAP_SYS_NICE` (an `Err` otherwise).
-pub fn set_realtime_priority(priority: i32) -> std::io::Result<()> {
-    if !(1..=99).contains(&priority) {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            "priority must be 1-99",
-        ));
-    }
-    let param = libc::sched_param {
-        sched_priority: priority,
-    };
-    // SAFETY: valid pointer to a sched_param; pid 0 is this process.
-    if unsafe { libc::sched_setscheduler(0, libc::SCHED_FIFO, &param) } != 0 {
-        return Err(std::io::Error::last_os_error());
-    }
-    // SAFETY: plain syscall; failure only means pages may still fault, which is reported.
-    if unsafe { libc::mlockall(libc::MCL_CURRENT | libc::MCL_FUTURE) } != 0 {
-        return Err(std::io::Error::last_os_error());
-    }
-    Ok(())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

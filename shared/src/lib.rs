@@ -30,6 +30,7 @@ pub mod domain;
 pub mod fsw;
 pub mod link;
 pub mod profile;
+pub mod realtime;
 pub mod service;
 pub mod signals;
 

@@ -171,9 +171,16 @@ pub struct RunArgs {
     #[arg(long)]
     pub startup_timeout_ms: Option<u64>,
     /// Run the emulator (and the stub it spawns) under SCHED_FIFO at this priority
-    /// (1-99) with memory locked. Needs root or CAP_SYS_NICE.
+    /// (1-99), memory locked (as in every realtime run). Needs root or CAP_SYS_NICE:
+    /// refused, the run fails.
     #[arg(long)]
     pub rt_priority: Option<i32>,
+    /// Pin the stepping threads to cores: `EMULATOR[,STUB]`, the emulator's stepping
+    /// thread on the first CPU, the spawned stub's on the second (`--cpus 0,1`; one CPU:
+    /// the stub is not pinned). Each must be online and allowed to this process; a pin
+    /// the kernel refuses is a warning in the report.
+    #[arg(long, value_name = "EMU[,STUB]")]
+    pub cpus: Option<CpuList>,
     /// Run id (hex); default: a fresh one. It names the run's iceoryx2 services.
     #[arg(long)]
     pub run_id: Option<String>,
@@ -263,6 +270,9 @@ impl RunArgs {
         if let Some(p) = self.rt_priority {
             cfg.rt_priority = Some(p);
         }
+        if let Some(c) = &self.cpus {
+            cfg.cpus = c.0.clone();
+        }
         if let Some(path) = &self.hifi_params {
             cfg.hifi = Some(HifiParams::load(path).context("--hifi-params")?);
         }
@@ -317,6 +327,18 @@ impl RunArgs {
                     .with_context(|| format!("--run-id {s}: not a hex number"))
             })
             .transpose()
+    }
+}
+
+/// `--cpus EMU[,STUB]`: one or two CPU numbers (the syntax here; whether they are
+/// online, before tick 0).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CpuList(pub Vec<usize>);
+
+impl std::str::FromStr for CpuList {
+    type Err = oils_shared::realtime::CpusError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        oils_shared::realtime::parse_cpus(s).map(CpuList)
     }
 }
 
@@ -496,6 +518,15 @@ pub fn run(args: &RunArgs) -> Result<()> {
 /// sake (not by a signal to us), the error says what happened to it.
 fn tell_stub_end(report: &mut RunReport, end: &StubEnd, signalled: bool) {
     report.onboard_process = Some(end.process());
+    if let (Some(rt), Some(onboard)) = (&mut report.realtime, &end.realtime) {
+        report.warnings.extend(
+            onboard
+                .warnings
+                .iter()
+                .map(|w| format!("onboard stub: {w}")),
+        );
+        rt.onboard = Some(onboard.clone());
+    }
     if end.fsw_failure.is_some() {
         report.fsw_failure = end.fsw_failure;
     }

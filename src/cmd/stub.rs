@@ -44,8 +44,8 @@ pub struct StubArgs {
     #[arg(long, default_value = "torque")]
     pub gnc_attitude: oils_shared::fsw::GncAttitude,
     /// Write how the stub ended to FILE as JSON (`error`, `fsw_failure` with the step and
-    /// the status a failed step returned, `commands`, `last_step`); `oils run` reads it
-    /// into its report.
+    /// the status a failed step returned, `commands`, `last_step`, `realtime`: scheduling,
+    /// memory lock and pinning obtained); `oils run` reads it into its report.
     #[arg(long, value_name = "FILE")]
     pub outcome: Option<PathBuf>,
     /// busy, event or hybrid; default: what the emulator announces.
@@ -54,13 +54,21 @@ pub struct StubArgs {
     /// Give up after this long without telemetry, milliseconds.
     #[arg(long, default_value_t = 5000)]
     pub timeout_ms: u64,
-    /// Run under SCHED_FIFO at this priority (1-99) with memory locked (root or
-    /// CAP_SYS_NICE). A stub spawned by `oils run --rt-priority` inherits it anyway.
+    /// Run under SCHED_FIFO at this priority (1-99) (root or CAP_SYS_NICE; refused, the
+    /// stub fails). A stub spawned by `oils run --rt-priority` inherits it anyway.
     #[arg(long, value_parser = clap::value_parser!(i32).range(1..=99))]
     pub rt_priority: Option<i32>,
     /// How long to wait for the emulator's services to appear, milliseconds.
     #[arg(long, default_value_t = 10000)]
     pub startup_timeout_ms: u64,
+    /// Lock memory (`mlockall`) and prefault the stack before the first step (`oils run`
+    /// passes it for realtime runs). Refused: a warning, and the outcome says so.
+    #[arg(long)]
+    pub lock_memory: bool,
+    /// Pin the stepping thread to this CPU (`oils run --cpus E,S` passes S). Refused: a
+    /// warning, and the outcome says so.
+    #[arg(long, value_name = "CPU")]
+    pub cpu: Option<usize>,
 }
 
 impl From<&StubArgs> for StubOptions {
@@ -80,6 +88,8 @@ impl From<&StubArgs> for StubOptions {
             wait: a.wait.clone(),
             timeout_ms: a.timeout_ms,
             rt_priority: a.rt_priority,
+            lock_memory: a.lock_memory,
+            cpu: a.cpu,
             startup_timeout_ms: a.startup_timeout_ms,
         }
     }
@@ -103,9 +113,10 @@ fn parse_site(s: &str) -> Result<oils_onboard_stub::gnc::SiteTarget, String> {
 /// Runs `oils stub`: joins the run and serves it; with `--outcome`, writes how it ended.
 pub fn run(a: &StubArgs) -> Result<()> {
     let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
-    let served = run_stub(&a.into(), &stop);
+    let run = run_stub(&a.into(), &stop);
+    let served = run.served;
     if let Some(path) = &a.outcome {
-        let outcome = match &served {
+        let mut outcome = match &served {
             Ok(s) => serde_json::json!({
                 "error": null, "fsw_failure": null,
                 "commands": s.commands, "last_step": s.last_step,
@@ -114,6 +125,8 @@ pub fn run(a: &StubArgs) -> Result<()> {
                 "error": format!("{e}"), "fsw_failure": e.fsw_failure(),
             }),
         };
+        // What the stepping thread obtained, for the run report's `realtime.onboard`.
+        outcome["realtime"] = serde_json::to_value(&run.realtime).unwrap_or_default();
         write_outcome(path, &outcome.to_string())
             .with_context(|| format!("--outcome {}", path.display()))?;
     }

@@ -9,6 +9,7 @@ use oils_emulator::report::OnboardProcess;
 use oils_emulator::run_config::RunConfig;
 use oils_emulator::session::StubLaunch;
 use oils_shared::fsw::FswFailure;
+use oils_shared::realtime::RealtimeStatus;
 use std::collections::VecDeque;
 use std::io::{BufRead, Write};
 use std::os::unix::process::ExitStatusExt;
@@ -47,6 +48,9 @@ pub struct StubEnd {
     pub fsw_failure: Option<FswFailure>,
     /// The last lines of its standard error.
     pub stderr_tail: Vec<String>,
+    /// What its stepping thread obtained (scheduling, memory lock, pinning), from its
+    /// outcome file.
+    pub realtime: Option<RealtimeStatus>,
 }
 
 impl StubEnd {
@@ -118,6 +122,12 @@ pub fn spawn(
     if let Some(hash) = c_blake3 {
         p.arg("--fsw-blake3").arg(hash);
     }
+    if cfg.realtime_memory() {
+        p.arg("--lock-memory");
+    }
+    if let Some(cpu) = cfg.stub_cpu() {
+        p.arg("--cpu").arg(cpu.to_string());
+    }
     let _ = std::fs::remove_file(&outcome);
     let mut child = p.spawn().context("spawning the onboard stub")?;
     let tail = Arc::new(Mutex::new(VecDeque::with_capacity(TAIL_LINES)));
@@ -187,10 +197,12 @@ impl SpawnedStub {
             .lock()
             .map(|t| t.iter().cloned().collect())
             .unwrap_or_default();
-        let fsw_failure = std::fs::read_to_string(&self.outcome)
+        let outcome = std::fs::read_to_string(&self.outcome)
             .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| serde_json::from_value(v["fsw_failure"].clone()).ok());
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok());
+        let field = |name: &str| outcome.as_ref().map(|v| v[name].clone());
+        let fsw_failure = field("fsw_failure").and_then(|v| serde_json::from_value(v).ok());
+        let realtime = field("realtime").and_then(|v| serde_json::from_value(v).ok());
         let _ = std::fs::remove_file(&self.outcome);
         StubEnd {
             pid,
@@ -199,6 +211,7 @@ impl SpawnedStub {
             killed_after_run,
             fsw_failure,
             stderr_tail,
+            realtime,
         }
     }
 }

@@ -52,6 +52,7 @@ fn base(spec: &CampaignSpec) -> RunConfig {
     cfg.log.enabled = false;
     cfg.log.path = None;
     cfg.rt_priority = None;
+    cfg.cpus.clear();
     cfg
 }
 
