@@ -12,6 +12,7 @@ pub mod nav_filter;
 pub mod navigation;
 pub mod sensor_nav;
 pub mod thrust_loop;
+pub mod thruster_control;
 
 use crate::fsw::{FlightSoftware, GncAttitude, GncNavigation};
 use allocation::{EngineSet, ThrustAllocator};
@@ -20,11 +21,12 @@ use guidance::{Guidance, Phase};
 use nalgebra::Vector3;
 use navigation::NavFilter;
 use oils_shared::{
-    Command, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE, ENGINE_COUNT, NAV_FLAG_VALID,
-    TLM_FLAG_FOOTPAD_CONTACT,
+    Command, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE, ATTITUDE_MODE_THRUSTERS,
+    ENGINE_COUNT, NAV_FLAG_VALID, TLM_FLAG_FOOTPAD_CONTACT,
 };
 use sensor_nav::{SensorNav, SensorNavConfig};
 use thrust_loop::ThrustLoop;
+use thruster_control::{ThrusterControl, ThrusterLayout};
 
 /// The landing site the descent is aimed at, Moon-fixed (the scenario's `[site]`, handed
 /// to the flight software when it is built: see [`crate::build`]).
@@ -82,6 +84,12 @@ pub struct GncConfig {
     pub throttle_min_frac: f64,
     /// Attitude-thruster torque limit per axis, N m.
     pub rcs_max_torque_nm: [f64; 3],
+    /// The attitude thrusters (with `attitude_actuator = Thrusters`).
+    pub thrusters: ThrusterLayout,
+    /// The flight-software cycle the GNC is built for, seconds (the bench's default
+    /// `fsw_period_ms`, 10 ms): the thrusters' modulation period until the telemetry
+    /// gives the real one.
+    pub cycle_s: f64,
     /// Dry mass, kilograms (for the inertia estimate).
     pub dry_mass_kg: f64,
     /// Propellant at descent start, kilograms (for the inertia estimate).
@@ -238,6 +246,8 @@ impl Default for GncConfig {
             max_thrust_n: 800.0,
             throttle_min_frac: 0.4,
             rcs_max_torque_nm: [116.0; 3],
+            thrusters: ThrusterLayout::default(),
+            cycle_s: 0.010,
             dry_mass_kg: 750.0,
             propellant_kg: 1000.0,
             inertia_wet_kg_m2: [1200.0, 1200.0, 1100.0],
@@ -333,6 +343,9 @@ impl GncConfig {
             (self.rough_predict_step_s, "rough_predict_step_s"),
             (self.fine_plan_tgo_s, "fine_plan_tgo_s"),
             (self.max_thrust_n, "max_thrust_n"),
+            (self.cycle_s, "cycle_s"),
+            (self.thrusters.thrust_n, "thrusters.thrust_n"),
+            (self.thrusters.min_on_time_s, "thrusters.min_on_time_s"),
             (self.dry_mass_kg, "dry_mass_kg"),
             (self.rough_end_speed_m_s, "rough_end_speed_m_s"),
             (self.fine_min_tgo_s, "fine_min_tgo_s"),
@@ -384,6 +397,28 @@ impl GncConfig {
         if self.rough_gain_cross_speed_1_s.is_nan() || self.rough_gain_cross_speed_1_s < 0.0 {
             return err("rough_gain_cross_speed_1_s", ">= 0");
         }
+        let t = &self.thrusters;
+        if !(t.open_delay_s.is_finite()
+            && t.open_delay_s >= 0.0
+            && t.close_delay_s.is_finite()
+            && t.close_delay_s >= 0.0)
+        {
+            return err("thrusters.open_delay_s", "delays finite and >= 0");
+        }
+        if t.positions_body_m
+            .iter()
+            .chain(t.directions_body.iter())
+            .flatten()
+            .any(|v| !v.is_finite())
+            || t.directions_body
+                .iter()
+                .any(|d| (Vector3::from(*d).norm() - 1.0).abs() > 1e-6)
+        {
+            return err(
+                "thrusters.directions_body",
+                "finite positions and unit directions",
+            );
+        }
         if self.fine_max_tgo_s < self.fine_min_tgo_s {
             return err("fine_max_tgo_s", ">= fine_min_tgo_s");
         }
@@ -421,12 +456,18 @@ pub struct ReferenceGnc {
     attitude: AttitudeController,
     allocator: ThrustAllocator,
     thrust_loop: ThrustLoop,
+    thrusters: ThrusterControl,
     engine_set: EngineSet,
     /// Four engines forced back after the pair saturated (latched).
     pair_abandoned: bool,
     pair_saturated_s: f64,
     last_cmd_total_n: f64,
     last_t_s: f64,
+    /// Telemetry time of the last step, ns (the cycle the thrusters modulate over).
+    last_t_ns: Option<i64>,
+    /// Pointing error of body +Z from the demanded thrust direction at the last
+    /// powered step, rad.
+    pointing_error_rad: f64,
     /// Engine-out detection.
     monitor: EngineMonitor,
     /// A footpad touched: the engines stay off.
@@ -497,6 +538,10 @@ impl ReferenceGnc {
             field: "engine_positions_body_m",
             why: "engines must be able to produce x/y torque",
         })?;
+        let thrusters = ThrusterControl::new(&cfg.thrusters).map_err(|_| GncConfigError {
+            field: "thrusters",
+            why: "the layout must give a pure couple about each body axis, both signs",
+        })?;
         Ok(Self {
             nav: NavFilter::new(&cfg),
             sensor_nav: SensorNav::new(cfg.sensor_nav.clone()),
@@ -505,11 +550,14 @@ impl ReferenceGnc {
             attitude: AttitudeController::new(&cfg),
             thrust_loop: ThrustLoop::new(&cfg),
             allocator,
+            thrusters,
             engine_set: EngineSet::Four,
             pair_abandoned: false,
             pair_saturated_s: 0.0,
             last_cmd_total_n: 0.0,
             last_t_s: 0.0,
+            last_t_ns: None,
+            pointing_error_rad: 0.0,
             monitor: EngineMonitor::default(),
             touched_down: false,
             cfg,
@@ -539,6 +587,12 @@ impl ReferenceGnc {
     /// The landing site, once chosen.
     pub fn site(&self) -> Option<guidance::LandingSite> {
         self.guidance.site()
+    }
+
+    /// Pointing error of the thrust axis from the demanded thrust direction at the last
+    /// powered step, rad.
+    pub fn pointing_error_rad(&self) -> f64 {
+        self.pointing_error_rad
     }
 
     /// Thrust efficiency the thrust loop has learned.
@@ -658,6 +712,11 @@ impl ReferenceGnc {
         }
         let dt_s = (nav.t_s - self.last_t_s).max(0.0);
         self.last_t_s = nav.t_s;
+        let cycle_ns = match self.last_t_ns {
+            Some(last) if tlm.header.t_ns > last => (tlm.header.t_ns - last) as u64,
+            _ => (self.cfg.cycle_s * 1e9).round() as u64,
+        };
+        self.last_t_ns = Some(tlm.header.t_ns);
         if self.monitor.failed.is_none() && self.monitor.update(tlm, dt_s).is_some() {
             // Reconfigure before this step's allocation.
             self.engine_set = self
@@ -698,16 +757,26 @@ impl ReferenceGnc {
 
         let inertia = self.cfg.inertia_kg_m2(mass_kg);
         let torque = self.attitude.torque_body_nm(&nav, &dir, &inertia);
+        self.pointing_error_rad = AttitudeController::pointing_error_body(&nav, &dir).norm();
         let alloc = self.allocator.allocate(set, wanted_n, torque);
         self.last_cmd_total_n = alloc.thrust_cmd_n.iter().sum();
         self.monitor.commanded(&alloc.thrust_cmd_n, &alloc.on);
 
-        Command {
+        let mut cmd = Command {
             thrust_cmd_n: alloc.thrust_cmd_n,
             engine_on: alloc.on.map(u32::from),
             torque_cmd_body_nm: alloc.rcs_torque_body_nm.into(),
             attitude_mode: ATTITUDE_MODE_IDEAL_TORQUE,
             ..Default::default()
+        };
+        if self.cfg.attitude_actuator == GncAttitude::Thrusters {
+            // What the ideal actuator would have been given, as thruster pulses; the
+            // torque field stays filled for the log (the plant ignores it in this mode).
+            cmd.thruster_on_time_ns = self
+                .thrusters
+                .on_times_ns(&alloc.rcs_torque_body_nm, cycle_ns);
+            cmd.attitude_mode = ATTITUDE_MODE_THRUSTERS;
         }
+        cmd
     }
 }
