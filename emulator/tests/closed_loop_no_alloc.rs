@@ -16,7 +16,7 @@ mod common;
 #[global_allocator]
 static GLOBAL: common::CountingAlloc = common::CountingAlloc;
 
-fn actuator(cmd: &Command) -> ActuatorCommand {
+fn actuator(cmd: &Command, cycle_start_ns: i64) -> ActuatorCommand {
     let mut engines = EngineCommand::default();
     for i in 0..4 {
         engines.thrust_cmd_n[i] = cmd.thrust_cmd_n[i].clamp(0.0, 800.0);
@@ -25,7 +25,9 @@ fn actuator(cmd: &Command) -> ActuatorCommand {
     ActuatorCommand {
         engines,
         torque_cmd_body_nm: cmd.torque_cmd_body_nm,
-        ..Default::default()
+        use_thrusters: cmd.attitude_mode == oils_shared::ATTITUDE_MODE_THRUSTERS,
+        thruster_on_time_ns: cmd.thruster_on_time_ns,
+        cycle_start_ns,
     }
 }
 
@@ -36,9 +38,10 @@ fn allocations_in_loop(fsw: &mut dyn FlightSoftware, cfg: &ScenarioConfig) -> us
     let before = common::allocations();
     let mut landed = false;
     for k in 0..200_000u64 {
-        let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
+        let t_ns = plant.time_ns();
+        let tlm = plant.telemetry(PacketHeader::new(1, k, t_ns));
         let cmd = fsw.step(&tlm);
-        if let PlantStatus::Touchdown(td) = plant.step(&actuator(&cmd), 10_000_000) {
+        if let PlantStatus::Touchdown(td) = plant.step(&actuator(&cmd, t_ns), 10_000_000) {
             std::hint::black_box(td);
             landed = true;
             break;
@@ -55,6 +58,13 @@ fn a_whole_descent_allocates_nothing() {
     cfg.nav_noise.enabled = true;
     let mut gnc = ReferenceGnc::new(GncConfig::default()).unwrap();
     assert_eq!(allocations_in_loop(&mut gnc, &cfg), 0);
+    // The same on the attitude thrusters (pulse on-times instead of the ideal torque).
+    let mut pulsed = ReferenceGnc::new(GncConfig {
+        attitude_actuator: oils_onboard_stub::fsw::GncAttitude::Thrusters,
+        ..GncConfig::default()
+    })
+    .unwrap();
+    assert_eq!(allocations_in_loop(&mut pulsed, &cfg), 0);
 
     let mut low = ScenarioConfig::default();
     low.initial.altitude_m = 30.0;

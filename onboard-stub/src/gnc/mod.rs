@@ -12,19 +12,22 @@ pub mod nav_filter;
 pub mod navigation;
 pub mod sensor_nav;
 pub mod thrust_loop;
+pub mod thruster_control;
 
 use crate::fsw::{FlightSoftware, GncAttitude, GncNavigation};
 use allocation::{EngineSet, ThrustAllocator};
 use attitude::AttitudeController;
-use guidance::{Guidance, Phase};
+use guidance::{Guidance, GuidanceCommand, Phase};
 use nalgebra::Vector3;
 use navigation::NavFilter;
+use oils_shared::clock::monotonic_ns;
 use oils_shared::{
-    Command, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE, ENGINE_COUNT, NAV_FLAG_VALID,
-    TLM_FLAG_FOOTPAD_CONTACT,
+    Command, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE, ATTITUDE_MODE_THRUSTERS,
+    ENGINE_COUNT, NAV_FLAG_VALID, RATE_GROUPS, TLM_FLAG_FOOTPAD_CONTACT,
 };
 use sensor_nav::{SensorNav, SensorNavConfig};
 use thrust_loop::ThrustLoop;
+use thruster_control::{ThrusterControl, ThrusterLayout};
 
 /// The landing site the descent is aimed at, Moon-fixed (the scenario's `[site]`, handed
 /// to the flight software when it is built: see [`crate::build`]).
@@ -82,6 +85,16 @@ pub struct GncConfig {
     pub throttle_min_frac: f64,
     /// Attitude-thruster torque limit per axis, N m.
     pub rcs_max_torque_nm: [f64; 3],
+    /// The attitude thrusters (with `attitude_actuator = Thrusters`).
+    pub thrusters: ThrusterLayout,
+    /// The flight-software cycle the GNC is built for, seconds (the bench's default
+    /// `fsw_period_ms`, 10 ms): the thrusters' modulation period until the telemetry
+    /// gives the real one.
+    pub cycle_s: f64,
+    /// The guidance rate group's period, seconds: a whole multiple of `cycle_s`; the
+    /// group runs on the first cycle of each period (when `floor(t / period)` changes)
+    /// and its output is held in between. Navigation and control run every cycle.
+    pub guidance_period_s: f64,
     /// Dry mass, kilograms (for the inertia estimate).
     pub dry_mass_kg: f64,
     /// Propellant at descent start, kilograms (for the inertia estimate).
@@ -238,6 +251,9 @@ impl Default for GncConfig {
             max_thrust_n: 800.0,
             throttle_min_frac: 0.4,
             rcs_max_torque_nm: [116.0; 3],
+            thrusters: ThrusterLayout::default(),
+            cycle_s: 0.010,
+            guidance_period_s: 0.010,
             dry_mass_kg: 750.0,
             propellant_kg: 1000.0,
             inertia_wet_kg_m2: [1200.0, 1200.0, 1100.0],
@@ -333,6 +349,10 @@ impl GncConfig {
             (self.rough_predict_step_s, "rough_predict_step_s"),
             (self.fine_plan_tgo_s, "fine_plan_tgo_s"),
             (self.max_thrust_n, "max_thrust_n"),
+            (self.cycle_s, "cycle_s"),
+            (self.guidance_period_s, "guidance_period_s"),
+            (self.thrusters.thrust_n, "thrusters.thrust_n"),
+            (self.thrusters.min_on_time_s, "thrusters.min_on_time_s"),
             (self.dry_mass_kg, "dry_mass_kg"),
             (self.rough_end_speed_m_s, "rough_end_speed_m_s"),
             (self.fine_min_tgo_s, "fine_min_tgo_s"),
@@ -384,6 +404,32 @@ impl GncConfig {
         if self.rough_gain_cross_speed_1_s.is_nan() || self.rough_gain_cross_speed_1_s < 0.0 {
             return err("rough_gain_cross_speed_1_s", ">= 0");
         }
+        let cycles = (self.guidance_period_s / self.cycle_s).round();
+        if !(cycles >= 1.0 && (self.guidance_period_s - cycles * self.cycle_s).abs() < 1e-9) {
+            return err("guidance_period_s", "a whole multiple of cycle_s");
+        }
+        let t = &self.thrusters;
+        if !(t.open_delay_s.is_finite()
+            && t.open_delay_s >= 0.0
+            && t.close_delay_s.is_finite()
+            && t.close_delay_s >= 0.0)
+        {
+            return err("thrusters.open_delay_s", "delays finite and >= 0");
+        }
+        if t.positions_body_m
+            .iter()
+            .chain(t.directions_body.iter())
+            .flatten()
+            .any(|v| !v.is_finite())
+            || t.directions_body
+                .iter()
+                .any(|d| (Vector3::from(*d).norm() - 1.0).abs() > 1e-6)
+        {
+            return err(
+                "thrusters.directions_body",
+                "finite positions and unit directions",
+            );
+        }
         if self.fine_max_tgo_s < self.fine_min_tgo_s {
             return err("fine_max_tgo_s", ">= fine_min_tgo_s");
         }
@@ -423,12 +469,26 @@ pub struct ReferenceGnc {
     attitude: AttitudeController,
     allocator: ThrustAllocator,
     thrust_loop: ThrustLoop,
+    thrusters: ThrusterControl,
     engine_set: EngineSet,
     /// Four engines forced back after the pair saturated (latched).
     pair_abandoned: bool,
     pair_saturated_s: f64,
     last_cmd_total_n: f64,
     last_t_s: f64,
+    /// Telemetry time of the last step, ns (the cycle the thrusters modulate over).
+    last_t_ns: Option<i64>,
+    /// Pointing error of body +Z from the demanded thrust direction at the last
+    /// powered step, rad.
+    pointing_error_rad: f64,
+    /// Rate groups: the guidance group's period, ns; the period it last ran in
+    /// (`floor(t / period)`) and its output, held until it runs again.
+    guidance_period_ns: i64,
+    guidance_slot: Option<i64>,
+    held_guidance: Option<GuidanceCommand>,
+    /// Rate-group overruns so far (compute time over the group's period; wall clock,
+    /// for the report only).
+    cycle_slips: u32,
     /// Engine-out detection.
     monitor: EngineMonitor,
     /// A footpad touched: the engines stay off.
@@ -499,6 +559,10 @@ impl ReferenceGnc {
             field: "engine_positions_body_m",
             why: "engines must be able to produce x/y torque",
         })?;
+        let thrusters = ThrusterControl::new(&cfg.thrusters).map_err(|_| GncConfigError {
+            field: "thrusters",
+            why: "the layout must give a pure couple about each body axis, both signs",
+        })?;
         Ok(Self {
             nav: NavFilter::new(&cfg),
             sensor_nav: SensorNav::new(cfg.sensor_nav.clone()),
@@ -508,11 +572,18 @@ impl ReferenceGnc {
             attitude: AttitudeController::new(&cfg),
             thrust_loop: ThrustLoop::new(&cfg),
             allocator,
+            thrusters,
             engine_set: EngineSet::Four,
             pair_abandoned: false,
             pair_saturated_s: 0.0,
             last_cmd_total_n: 0.0,
             last_t_s: 0.0,
+            last_t_ns: None,
+            pointing_error_rad: 0.0,
+            guidance_period_ns: (cfg.guidance_period_s * 1e9).round() as i64,
+            guidance_slot: None,
+            held_guidance: None,
+            cycle_slips: 0,
             monitor: EngineMonitor::default(),
             touched_down: false,
             cfg,
@@ -542,6 +613,12 @@ impl ReferenceGnc {
     /// The landing site, once chosen.
     pub fn site(&self) -> Option<guidance::LandingSite> {
         self.guidance.site()
+    }
+
+    /// Pointing error of the thrust axis from the demanded thrust direction at the last
+    /// powered step, rad.
+    pub fn pointing_error_rad(&self) -> f64 {
+        self.pointing_error_rad
     }
 
     /// Thrust efficiency the thrust loop has learned.
@@ -607,10 +684,12 @@ impl FlightSoftware for ReferenceGnc {
             return;
         }
         let boots = self.boot_count;
+        let slips = self.cycle_slips;
         if let Ok(fresh) = Self::new(self.cfg.clone()) {
             *self = fresh;
         }
         self.boot_count = boots;
+        self.cycle_slips = slips;
         self.down = true;
     }
 
@@ -624,6 +703,8 @@ impl FlightSoftware for ReferenceGnc {
             boot_count: self.boot_count,
             ..Default::default()
         };
+        // Rate group 0, navigation: every cycle, all of its samples.
+        let start_ns = monotonic_ns();
         let nav = match self.cfg.navigation {
             GncNavigation::Bench => {
                 let nav = self.nav.update(tlm);
@@ -639,24 +720,96 @@ impl FlightSoftware for ReferenceGnc {
                     Some(nav) => nav,
                     // No state vector yet: nothing to fly on, engines stay off.
                     None => {
+                        self.time_group(&mut report, 0, start_ns, self.cycle_ns());
                         return Command {
                             fsw: report,
                             ..Default::default()
-                        }
+                        };
                     }
                 }
             }
         };
+        self.time_group(&mut report, 0, start_ns, self.cycle_ns());
         report.phase = self.guidance.phase() as u32;
-        let mut cmd = self.fly(tlm, &nav);
+        let mut cmd = self.fly(tlm, &nav, &mut report);
         cmd.fsw = report;
         cmd
     }
 }
 
 impl ReferenceGnc {
-    /// Guidance, control and allocation on this cycle's navigation solution.
-    fn fly(&mut self, tlm: &Telemetry, nav: &navigation::NavSolution) -> Command {
+    /// The configured cycle, ns.
+    fn cycle_ns(&self) -> i64 {
+        (self.cfg.cycle_s * 1e9).round() as i64
+    }
+
+    /// Records rate group `group`'s compute time since `start_ns` (wall clock, for the
+    /// report only: nothing flown depends on it); over `period_ns` is a cycle slip.
+    fn time_group(&mut self, report: &mut FswReport, group: usize, start_ns: u64, period_ns: i64) {
+        let ns = monotonic_ns().saturating_sub(start_ns);
+        self.record_group(report, group, ns, period_ns);
+    }
+
+    fn record_group(&mut self, report: &mut FswReport, group: usize, ns: u64, period_ns: i64) {
+        debug_assert!(group < RATE_GROUPS);
+        // 0 means "did not run": a group that ran reports at least 1 ns.
+        report.group_compute_ns[group] = ns.clamp(1, u64::from(u32::MAX)) as u32;
+        if ns > period_ns.max(0) as u64 {
+            self.cycle_slips = self.cycle_slips.saturating_add(1);
+        }
+        report.cycle_slips = self.cycle_slips;
+    }
+
+    /// Rate group 1, guidance: runs on the first cycle of each of its periods (and on
+    /// the first cycle flown); in between, its last output is held.
+    fn guidance_group(
+        &mut self,
+        nav: &navigation::NavSolution,
+        t_ns: i64,
+        max_accel_m_s2: f64,
+        min_accel_m_s2: f64,
+        report: &mut FswReport,
+    ) -> (GuidanceCommand, u64) {
+        let slot = t_ns.div_euclid(self.guidance_period_ns.max(1));
+        if let Some(held) = self.held_guidance {
+            if self.guidance_slot == Some(slot) {
+                return (held, 0);
+            }
+        }
+        let start_ns = monotonic_ns();
+        let guid = self.guidance.update(nav, max_accel_m_s2, min_accel_m_s2);
+        let ns = monotonic_ns().saturating_sub(start_ns);
+        self.guidance_slot = Some(slot);
+        self.held_guidance = Some(guid);
+        self.record_group(report, 1, ns, self.guidance_period_ns);
+        (guid, ns)
+    }
+
+    /// Rate groups 1 (guidance) and 2 (control: thrust loop, attitude, allocation,
+    /// thrusters) on this cycle's navigation solution.
+    fn fly(
+        &mut self,
+        tlm: &Telemetry,
+        nav: &navigation::NavSolution,
+        report: &mut FswReport,
+    ) -> Command {
+        let start_ns = monotonic_ns();
+        let (cmd, guidance_ns) = self.control(tlm, nav, report);
+        let ns = monotonic_ns()
+            .saturating_sub(start_ns)
+            .saturating_sub(guidance_ns);
+        self.record_group(report, 2, ns, self.cycle_ns());
+        cmd
+    }
+
+    /// Guidance (through its rate group), control and allocation; also the guidance
+    /// group's compute time this cycle (0 when it did not run).
+    fn control(
+        &mut self,
+        tlm: &Telemetry,
+        nav: &navigation::NavSolution,
+        report: &mut FswReport,
+    ) -> (Command, u64) {
         let nav = *nav;
         if tlm.header.flags & TLM_FLAG_FOOTPAD_CONTACT != 0 {
             // On the legs: engines off for good (the touchdown switches' cut-off), no
@@ -666,10 +819,15 @@ impl ReferenceGnc {
         if self.touched_down {
             self.monitor
                 .commanded(&[0.0; ENGINE_COUNT], &[false; ENGINE_COUNT]);
-            return Command::default();
+            return (Command::default(), 0);
         }
         let dt_s = (nav.t_s - self.last_t_s).max(0.0);
         self.last_t_s = nav.t_s;
+        let cycle_ns = match self.last_t_ns {
+            Some(last) if tlm.header.t_ns > last => (tlm.header.t_ns - last) as u64,
+            _ => (self.cfg.cycle_s * 1e9).round() as u64,
+        };
+        self.last_t_ns = Some(tlm.header.t_ns);
         if self.monitor.failed.is_none() && self.monitor.update(tlm, dt_s).is_some() {
             // Reconfigure before this step's allocation.
             self.engine_set = self
@@ -690,7 +848,8 @@ impl ReferenceGnc {
         let set = self.engine_set;
         let max_accel = self.allocator.max_total_n(set) * eta / mass_kg;
         let min_accel = self.allocator.min_total_n(set) * eta / mass_kg;
-        let guid = self.guidance.update(&nav, max_accel, min_accel);
+        let (guid, guidance_ns) =
+            self.guidance_group(&nav, tlm.header.t_ns, max_accel, min_accel, report);
 
         let accel = guid.accel_mci_m_s2;
         let accel_norm = accel.norm();
@@ -710,16 +869,26 @@ impl ReferenceGnc {
 
         let inertia = self.cfg.inertia_kg_m2(mass_kg);
         let torque = self.attitude.torque_body_nm(&nav, &dir, &inertia);
+        self.pointing_error_rad = AttitudeController::pointing_error_body(&nav, &dir).norm();
         let alloc = self.allocator.allocate(set, wanted_n, torque);
         self.last_cmd_total_n = alloc.thrust_cmd_n.iter().sum();
         self.monitor.commanded(&alloc.thrust_cmd_n, &alloc.on);
 
-        Command {
+        let mut cmd = Command {
             thrust_cmd_n: alloc.thrust_cmd_n,
             engine_on: alloc.on.map(u32::from),
             torque_cmd_body_nm: alloc.rcs_torque_body_nm.into(),
             attitude_mode: ATTITUDE_MODE_IDEAL_TORQUE,
             ..Default::default()
+        };
+        if self.cfg.attitude_actuator == GncAttitude::Thrusters {
+            // What the ideal actuator would have been given, as thruster pulses; the
+            // torque field stays filled for the log (the plant ignores it in this mode).
+            cmd.thruster_on_time_ns = self
+                .thrusters
+                .on_times_ns(&alloc.rcs_torque_body_nm, cycle_ns);
+            cmd.attitude_mode = ATTITUDE_MODE_THRUSTERS;
         }
+        (cmd, guidance_ns)
     }
 }
