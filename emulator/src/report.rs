@@ -502,10 +502,12 @@ fn fsw_report_lines(out: &mut String, f: &crate::fsw_monitor::FswSelfReport) {
             f.boot_count - 1
         );
     }
-    for (i, g) in f.group_compute_ns.iter().enumerate() {
+    // The reference GNC's groups (docs/gnc.md); another flight software's are numbered.
+    const NAMES: [&str; 4] = ["navigation", "guidance", "control", "3"];
+    for (name, g) in NAMES.iter().zip(f.group_compute_ns.iter()) {
         let _ = writeln!(
             out,
-            "rate group  {i}: compute p50 {:.2} us, p99 {:.2} us, max {:.2} us ({} runs)",
+            "rate group  {name}: compute p50 {:.2} us, p99 {:.2} us, max {:.2} us ({} runs)",
             g.p50 as f64 / 1000.0,
             g.p99 as f64 / 1000.0,
             g.max as f64 / 1000.0,

@@ -213,6 +213,11 @@ pub struct GncConfig {
     pub two_engine_margin: f64,
     /// Back to four engines after the pair saturates for this long, seconds.
     pub two_engine_saturation_s: f64,
+    /// Below fine braking, fly the pair (whatever `two_engine_enabled` says) once four
+    /// engines at their throttle floor have pushed harder than wanted for this long, s.
+    pub two_engine_floor_s: f64,
+    /// ... and the thrust loop has learned an efficiency above `1 + this` (hot engines).
+    pub two_engine_hot_margin: f64,
 
     /// Attitude loop natural frequency, rad/s.
     pub attitude_natural_freq_rad_s: f64,
@@ -314,6 +319,8 @@ impl Default for GncConfig {
             two_engine_pair: [0, 2],
             two_engine_margin: 0.12,
             two_engine_saturation_s: 1.0,
+            two_engine_floor_s: 3.0,
+            two_engine_hot_margin: 0.03,
 
             attitude_natural_freq_rad_s: 1.0,
             attitude_damping: 0.8,
@@ -474,6 +481,8 @@ pub struct ReferenceGnc {
     /// Four engines forced back after the pair saturated (latched).
     pair_abandoned: bool,
     pair_saturated_s: f64,
+    /// How long four engines at their floor have pushed harder than wanted, s.
+    floor_held_s: f64,
     last_cmd_total_n: f64,
     last_t_s: f64,
     /// Telemetry time of the last step, ns (the cycle the thrusters modulate over).
@@ -576,6 +585,7 @@ impl ReferenceGnc {
             engine_set: EngineSet::Four,
             pair_abandoned: false,
             pair_saturated_s: 0.0,
+            floor_held_s: 0.0,
             last_cmd_total_n: 0.0,
             last_t_s: 0.0,
             last_t_ns: None,
@@ -638,15 +648,29 @@ impl ReferenceGnc {
         }
         let phase = self.guidance.phase();
         let late = matches!(phase, Phase::Hover | Phase::FinalDescent);
+        // Four engines at their throttle floor still push harder than wanted (engines
+        // hotter than rated, a light vehicle): the vehicle cannot come down. Held for
+        // `two_engine_floor_s` below fine braking, that calls for the pair.
+        // Only with engines measurably hotter than rated (the nominal vehicle's floor is
+        // below its landing weight, docs/gnc.md).
+        let at_floor = wanted_n < self.allocator.min_total_n(EngineSet::Four)
+            && self.thrust_loop.efficiency() > 1.0 + self.cfg.two_engine_hot_margin;
+        self.floor_held_s = if at_floor {
+            self.floor_held_s + dt_s
+        } else {
+            0.0
+        };
+        let floor_bound = matches!(
+            phase,
+            Phase::TerminalDescent | Phase::Hover | Phase::FinalDescent
+        ) && self.floor_held_s > self.cfg.two_engine_floor_s;
         match self.engine_set {
             EngineSet::Four => {
                 let pair_max = self.allocator.max_total_n(EngineSet::DiagonalPair)
                     * self.thrust_loop.efficiency();
                 let weight = mass_kg * gravity_m_s2;
                 let margin = 1.0 + self.cfg.two_engine_margin;
-                if self.cfg.two_engine_enabled
-                    && late
-                    && !self.pair_abandoned
+                if ((self.cfg.two_engine_enabled && late && !self.pair_abandoned) || floor_bound)
                     && pair_max >= weight * margin
                     && wanted_n * margin <= pair_max
                 {
