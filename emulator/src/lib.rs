@@ -23,6 +23,7 @@ pub mod clock;
 pub mod config;
 pub mod digest;
 pub mod exact_json;
+pub mod failure_scenarios;
 pub mod faults;
 pub mod fixed_len;
 pub mod fsw_monitor;

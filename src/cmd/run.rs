@@ -130,8 +130,10 @@ pub struct RunArgs {
     /// Seeded navigation noise on the telemetry: on or off. [default: on]
     #[arg(long, value_name = "ON|OFF", value_parser = ["on", "off"])]
     pub nav_noise: Option<String>,
-    /// Scenario: a name (default) or a TOML file overriding any default (template:
-    /// emulator/config/scenario.toml). Navigation noise stays as --nav-noise says.
+    /// Scenario: a name (default, terminal-descent), a TOML file overriding any default
+    /// (template: emulator/config/scenario.toml), or a failure scenario flown on the
+    /// GNC's own navigation: rim-jump, imu-reset, hot-engines, altimeter-inhibited
+    /// (docs/gnc.md). Navigation noise stays as --nav-noise says.
     #[arg(long, value_name = "NAME|TOML")]
     pub scenario: Option<String>,
     /// Write the JSON report here.
@@ -276,7 +278,20 @@ impl RunArgs {
         if let Some(path) = &self.hifi_params {
             cfg.hifi = Some(HifiParams::load(path).context("--hifi-params")?);
         }
-        if let Some(s) = &self.scenario {
+        if let Some(f) = self
+            .scenario
+            .as_deref()
+            .and_then(oils_emulator::failure_scenarios::failure_scenario)
+        {
+            // A failure scenario: the default scenario with its devices, navigation and
+            // faults (docs/gnc.md, "Failure scenarios").
+            f.apply(&mut cfg).context("--scenario")?;
+            // What the command line says explicitly still wins.
+            set!(dt_ms => dt_ms, telemetry => telemetry);
+            if let Some(n) = self.gnc_nav {
+                cfg.gnc.navigation = n;
+            }
+        } else if let Some(s) = &self.scenario {
             // The noise switch is a run setting (--nav-noise), not the scenario file's.
             let noise = cfg.scenario.nav_noise.enabled;
             cfg.scenario = load_scenario(s).context("--scenario")?;
