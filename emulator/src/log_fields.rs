@@ -750,10 +750,13 @@ pub static FIELDS: &[Field] = &[
     },
     Field {
         since: 4,
-        ..packet!(Command, "fsw.group_compute_ns", U32, oils_shared::RATE_GROUPS, |r, i| r
-            .command
-            .fsw
-            .group_compute_ns[i])
+        ..packet!(
+            Command,
+            "fsw.group_compute_ns",
+            U32,
+            oils_shared::RATE_GROUPS,
+            |r, i| r.command.fsw.group_compute_ns[i]
+        )
     },
     Field {
         since: 4,
@@ -769,7 +772,10 @@ pub static FIELDS: &[Field] = &[
     },
     Field {
         since: 4,
-        ..packet!(Command, "fsw.cycle_slips", U32, |r| r.command.fsw.cycle_slips)
+        ..packet!(Command, "fsw.cycle_slips", U32, |r| r
+            .command
+            .fsw
+            .cycle_slips)
     },
     slot!(Command, "applied.thrust_cmd_n", F64, E, 0, 1, |r, i| r
         .applied
@@ -831,11 +837,13 @@ pub static FIELDS: &[Field] = &[
     },
     Field {
         since: 4,
-        ..derived!(Truth, "nav_error.vel_mci_m_s", F64, 3, |r, _d, i| nav_error(
-            r,
-            r.command.fsw.nav_vel_mci_m_s[i],
-            r.truth.vel_mci_m_s[i]
-        ))
+        ..derived!(
+            Truth,
+            "nav_error.vel_mci_m_s",
+            F64,
+            3,
+            |r, _d, i| nav_error(r, r.command.fsw.nav_vel_mci_m_s[i], r.truth.vel_mci_m_s[i])
+        )
     },
     Field {
         since: 4,

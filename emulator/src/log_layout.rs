@@ -213,7 +213,10 @@ fn derivation(f: &Field, i: usize) -> Option<Json> {
         (Topic::Truth, q @ ("pos_site_m" | "vel_site_m_s")) => {
             Some(json!({"op": "site", "quantity": q, "index": i}))
         }
-        (Topic::Truth, q @ ("nav_error.pos_mci_m" | "nav_error.vel_mci_m_s" | "nav_error.altitude_m")) => {
+        (
+            Topic::Truth,
+            q @ ("nav_error.pos_mci_m" | "nav_error.vel_mci_m_s" | "nav_error.altitude_m"),
+        ) => {
             let (estimate, truth, index) = match q {
                 "nav_error.pos_mci_m" => ("fsw.nav_pos_mci_m", "pos_mci_m", i),
                 "nav_error.vel_mci_m_s" => ("fsw.nav_vel_mci_m_s", "vel_mci_m_s", i),

@@ -491,7 +491,11 @@ fn fsw_report_lines(out: &mut String, f: &crate::fsw_monitor::FswSelfReport) {
             } else {
                 ""
             };
-            let _ = writeln!(out, "            in use at the end: {}{lost}", used.join(", "));
+            let _ = writeln!(
+                out,
+                "            in use at the end: {}{lost}",
+                used.join(", ")
+            );
         }
     }
     if f.boot_count > 1 {
@@ -515,6 +519,10 @@ fn fsw_report_lines(out: &mut String, f: &crate::fsw_monitor::FswSelfReport) {
         );
     }
     if f.cycle_slips > 0 {
-        let _ = writeln!(out, "CYCLE SLIPS {} (a rate group overran its period)", f.cycle_slips);
+        let _ = writeln!(
+            out,
+            "CYCLE SLIPS {} (a rate group overran its period)",
+            f.cycle_slips
+        );
     }
 }

@@ -16,6 +16,7 @@
 use crate::clock::StepClock;
 use crate::digest::RunDigest;
 use crate::faults::{FaultPlan, FaultReport, FaultyLink};
+use crate::fsw_monitor::FswMonitor;
 use crate::link::{ExchangeError, Link};
 use crate::plant::{ActuatorCommand, Plant, PlantStatus, TouchdownState};
 use crate::recorder::{
@@ -26,7 +27,6 @@ use crate::sanitize::sanitize;
 use crate::timing::{TimingMonitor, TimingThresholds};
 use oils_shared::clock::monotonic_ns;
 use oils_shared::link::LinkError;
-use crate::fsw_monitor::FswMonitor;
 use oils_shared::{Command, PacketHeader, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_END_OF_RUN};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -477,41 +477,42 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             applied.torque_cmd_body_nm = [0.0; 3];
         } else {
             match link.deliver(wire_cmd) {
-            Some(cmd) => {
-                let (safe, rejected) = sanitize(&cmd, cfg.max_thrust_n, t_ns, cfg.fsw_period_ns);
-                if rejected > 0 {
-                    rejected_commands += 1;
-                    rejected_values += rejected as u64;
-                    flags |= REC_REJECTED_VALUES;
+                Some(cmd) => {
+                    let (safe, rejected) =
+                        sanitize(&cmd, cfg.max_thrust_n, t_ns, cfg.fsw_period_ns);
+                    if rejected > 0 {
+                        rejected_commands += 1;
+                        rejected_values += rejected as u64;
+                        flags |= REC_REJECTED_VALUES;
+                    }
+                    applied = safe;
                 }
-                applied = safe;
-            }
-            None => {
-                timing.record_deadline_miss();
-                flags |= REC_DEADLINE_MISS;
-                // Only a realtime run can miss a deadline on a live link: in lockstep
-                // a miss comes from a fault alone (simulated), and a dead peer is
-                // what `receive_until` waiting out the link timeout finds.
-                let silent_ms = (received_ns - last_command_ns) / 1_000_000;
-                if clock.misses_allowed() && silent_ms >= cfg.link_timeout_ms {
-                    abort = Some(Abort::StubSilent {
-                        step: k,
-                        waited_ms: silent_ms,
-                    });
-                    continue;
-                }
-                match cfg.miss_policy {
-                    MissPolicy::Hold => {}
-                    MissPolicy::Zero => applied = ActuatorCommand::default(),
-                    MissPolicy::Abort { after } => {
-                        if timing.deadline_misses() >= after {
-                            abort = Some(Abort::TooManyMisses(timing.deadline_misses()));
-                            continue;
+                None => {
+                    timing.record_deadline_miss();
+                    flags |= REC_DEADLINE_MISS;
+                    // Only a realtime run can miss a deadline on a live link: in lockstep
+                    // a miss comes from a fault alone (simulated), and a dead peer is
+                    // what `receive_until` waiting out the link timeout finds.
+                    let silent_ms = (received_ns - last_command_ns) / 1_000_000;
+                    if clock.misses_allowed() && silent_ms >= cfg.link_timeout_ms {
+                        abort = Some(Abort::StubSilent {
+                            step: k,
+                            waited_ms: silent_ms,
+                        });
+                        continue;
+                    }
+                    match cfg.miss_policy {
+                        MissPolicy::Hold => {}
+                        MissPolicy::Zero => applied = ActuatorCommand::default(),
+                        MissPolicy::Abort { after } => {
+                            if timing.deadline_misses() >= after {
+                                abort = Some(Abort::TooManyMisses(timing.deadline_misses()));
+                                continue;
+                            }
                         }
                     }
                 }
             }
-        }
         }
         if let Some(r) = recorder {
             let logged = r.record(&Record {
@@ -601,6 +602,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         faults: faults.report(),
         propulsion_diagnostics: plant.propulsion_diagnostics(),
         sensors_dropped: plant.sensors().map(|s| s.dropped()),
-        fsw_report: Some(fsw_monitor.finish()).filter(|r| r.boot_count > 0 || r.navigation_reported),
+        fsw_report: Some(fsw_monitor.finish())
+            .filter(|r| r.boot_count > 0 || r.navigation_reported),
     })
 }

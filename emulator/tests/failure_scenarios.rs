@@ -24,7 +24,11 @@ fn scenario(name: &str) -> RunConfig {
 /// Flies it; the report and what the flight software said of itself.
 fn run(cfg: &RunConfig) -> (RunReport, FswSelfReport) {
     let r = fly::fly(cfg);
-    let f = r.summary.fsw_report.clone().expect("the GNC reports itself");
+    let f = r
+        .summary
+        .fsw_report
+        .clone()
+        .expect("the GNC reports itself");
     eprintln!(
         "{:?} at {:.1} s, nav error at the end {:?}, boots {}, flags {:#x}, faults {:?}",
         r.summary.outcome,
@@ -42,7 +46,12 @@ fn run(cfg: &RunConfig) -> (RunReport, FswSelfReport) {
 }
 
 fn assert_landed_on_its_navigation(r: &RunReport, f: &FswSelfReport, faults: usize) {
-    assert_eq!(r.summary.outcome, Outcome::Landed, "{:?}", r.summary.touchdown);
+    assert_eq!(
+        r.summary.outcome,
+        Outcome::Landed,
+        "{:?}",
+        r.summary.touchdown
+    );
     assert_eq!(r.summary.faults.len(), faults, "every fault fired");
     assert!(f.from_sensors && f.nav_flags & NAV_FLAG_FROM_SENSORS != 0);
     let e = f.nav_error.expect("an estimate at the end");

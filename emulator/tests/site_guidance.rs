@@ -23,7 +23,8 @@ fn fly_to_site(cfg: &RunConfig) -> (Outcome, f64, f64) {
         longitude_deg: cfg.scenario.site.longitude_deg,
     };
     let fsw =
-        oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id, Some(site), cfg.gnc).unwrap();
+        oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id, Some(site), cfg.gnc)
+            .unwrap();
     let mut last = None;
     let mut observe = |_k: u64, plant: &Plant| {
         last = Some((plant.state().pos_mci_m, plant.time_ns() as f64 * 1e-9));

@@ -148,7 +148,14 @@ fn the_c_example_holds_its_weight_on_the_profile() {
     // the example commands gravity's thrust, shared by the four engines, and no torque.
     let dir = scratch("example");
     let lib = shared_library(&terminal_descent_c(), "terminal_descent", &dir, &[]);
-    let Ok(mut fsw) = build_fsw(&FswSpec::CLibrary(lib), None, None, 1, None, Default::default()) else {
+    let Ok(mut fsw) = build_fsw(
+        &FswSpec::CLibrary(lib),
+        None,
+        None,
+        1,
+        None,
+        Default::default(),
+    ) else {
         panic!("does not load")
     };
     let r_m = 1_737_400.0 + 1.2 + 2000.0;
@@ -189,7 +196,15 @@ fn a_library_is_hashed_and_refused_when_it_is_not_the_file_expected() {
     let fsw = CLibraryFsw::load_expecting(path, 0x22, "", Some(&hash)).unwrap();
     assert_eq!(fsw.blake3(), hash);
     let other = "0".repeat(64);
-    let err = match build_fsw_expecting(&spec, None, None, 0x22, Some(&other), None, Default::default()) {
+    let err = match build_fsw_expecting(
+        &spec,
+        None,
+        None,
+        0x22,
+        Some(&other),
+        None,
+        Default::default(),
+    ) {
         Ok(_) => panic!("a file with another hash loaded"),
         Err(e) => e.to_string(),
     };

@@ -597,7 +597,10 @@ mod tests {
             40 + 104 + 24 + 8 + 8 + 120 + size_of::<SensorFrame>(),
             size_of::<Telemetry>()
         );
-        assert_eq!(8 * (3 + 3 + 3 + 3 + 1 + 1) + 4 * 4 + 4 * 4, size_of::<FswReport>());
+        assert_eq!(
+            8 * (3 + 3 + 3 + 3 + 1 + 1) + 4 * 4 + 4 * 4,
+            size_of::<FswReport>()
+        );
         assert_eq!(
             40 + 32 + 16 + 24 + 8 + 64 + 4 + 4 + size_of::<FswReport>(),
             size_of::<Command>()

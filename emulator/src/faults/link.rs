@@ -108,9 +108,7 @@ impl LinkFaults {
                         corrupt(c, bits, &mut e.rng);
                     }
                 }
-                LinkAction::TelemetryDrop
-                | LinkAction::StubPause
-                | LinkAction::ComputerReset => {}
+                LinkAction::TelemetryDrop | LinkAction::StubPause | LinkAction::ComputerReset => {}
             }
         }
         cmd

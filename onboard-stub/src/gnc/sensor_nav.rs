@@ -161,7 +161,8 @@ impl SensorNav {
         report.nav_vel_sigma_m_s = est.sigma_vel_m_s;
         report.nav_altitude_m = altitude_m;
         report.nav_altitude_sigma_m = alt_sigma;
-        let used = |c: Channel| t_ns.saturating_sub(self.last_used_ns[c as usize]) <= USED_WINDOW_NS;
+        let used =
+            |c: Channel| t_ns.saturating_sub(self.last_used_ns[c as usize]) <= USED_WINDOW_NS;
         let mut flags = NAV_FLAG_VALID | NAV_FLAG_FROM_SENSORS;
         if used(Channel::StarTracker) {
             flags |= NAV_FLAG_STAR_TRACKER_USED;
