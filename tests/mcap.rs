@@ -267,8 +267,9 @@ fn the_same_run_gives_the_same_mcap_and_replays_from_it() {
     assert!(files[0].len() > 100_000, "{} bytes", files[0].len());
     assert_eq!(digests[0], digests[1]);
     // Two runs differ only where the log holds wall-clock measurements (the stub's
-    // compute time, as the digest leaves it out, and the step's round trip, wake error
-    // and transport): every message equal once those are removed.
+    // compute time and its rate groups' compute times and slips, as the digest leaves
+    // them out, and the step's round trip, wake error and transport): every message
+    // equal once those are removed.
     let strip = |path: &Path| -> Vec<(String, u64, serde_json::Value)> {
         let (msgs, _) = read_mcap(path);
         let mut out = Vec::new();
@@ -282,6 +283,11 @@ fn the_same_run_gives_the_same_mcap_and_replays_from_it() {
                         "transport_ns",
                     ] {
                         o.remove(wall_clock);
+                    }
+                    // The flight software's own wall-clock figures (FswReport).
+                    if let Some(f) = o.get_mut("fsw").and_then(|f| f.as_object_mut()) {
+                        f.remove("group_compute_ns");
+                        f.remove("cycle_slips");
                     }
                 }
                 out.push((topic.clone(), m.log_time, m.json));
