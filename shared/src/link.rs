@@ -348,16 +348,19 @@ impl EmulatorLink {
             .history_size(0)
             .create()
             .map_err(ice("create command service"))?;
-        let tlm_event = node
-            .service_builder(&service_name(names.telemetry_event().as_str())?)
-            .event()
-            .create_with_attributes(&attrs)
-            .map_err(ice("create telemetry event"))?;
         let cmd_event = node
             .service_builder(&service_name(names.command_event().as_str())?)
             .event()
             .create()
             .map_err(ice("create command event"))?;
+        // Created last: the telemetry event carries the announcement, and a client that
+        // finds it may open every other service at once (the stub does; a client that
+        // found it before the command event existed failed with `DoesNotExist`).
+        let tlm_event = node
+            .service_builder(&service_name(names.telemetry_event().as_str())?)
+            .event()
+            .create_with_attributes(&attrs)
+            .map_err(ice("create telemetry event"))?;
         Self::from_services(run_id, wait, tlm_service, cmd_service, tlm_event, cmd_event)
     }
 
