@@ -72,13 +72,15 @@ fn a_restarted_flight_software_aborts_the_run_naming_the_cause() {
     let id = run_id(11);
     let rep = dir.join("report.json");
     let mut emulator = realtime_emulator(&id, "6", &rep, &[]);
+    let mut watch = StderrWatch::take(&mut emulator);
     let mut first = stub(&id);
-    std::thread::sleep(Duration::from_millis(1500));
+    watch.wait_for(JOINED, 60);
+    std::thread::sleep(Duration::from_millis(500));
     first.kill().unwrap(); // SIGKILL: the flight software vanishes
     first.wait().unwrap();
     let mut second = stub(&id);
     let status = wait_with_deadline(&mut emulator, 20);
-    let err = stderr_of(&mut emulator);
+    let err = watch.rest();
     // The run ended when the first died; the second may still wait for services.
     let _ = second.kill();
     let _ = second.wait();
@@ -103,13 +105,15 @@ fn allow_reattach_lets_a_restarted_flight_software_fly_on_and_reports_it() {
     let id = run_id(12);
     let rep = dir.join("report.json");
     let mut emulator = realtime_emulator(&id, "5", &rep, &["--allow-reattach"]);
+    let mut watch = StderrWatch::take(&mut emulator);
     let mut first = stub(&id);
-    std::thread::sleep(Duration::from_millis(1500));
+    watch.wait_for(JOINED, 60);
+    std::thread::sleep(Duration::from_millis(500));
     first.kill().unwrap();
     first.wait().unwrap();
     let mut second = stub(&id);
     let status = wait_with_deadline(&mut emulator, 20);
-    let err = stderr_of(&mut emulator);
+    let err = watch.rest();
     assert!(wait_with_deadline(&mut second, 10).success());
     assert!(status.success(), "{err}");
     let r = report(&rep);
@@ -151,16 +155,18 @@ fn a_stub_gives_up_on_a_dead_emulator_promptly_even_at_a_crawl() {
             rep.to_str().unwrap(),
         ])
         .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    let mut watch = StderrWatch::take(&mut emulator);
     let mut stub = oils()
         .args(["stub", "--run-id", &id, "--timeout-ms", "155000"])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(2000)); // joined, answered step 0, waiting
+    watch.wait_for(JOINED, 60);
+    std::thread::sleep(Duration::from_millis(1000)); // answered step 0, waiting
     emulator.kill().unwrap(); // SIGKILL: no end-of-run telemetry
     emulator.wait().unwrap();
     // A hang guard only (its 155 s timeout is longer): the proof that the stub noticed

@@ -72,15 +72,16 @@ fn killed_stub_is_noticed_log_is_intact_and_the_next_run_starts_clean() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    let mut watch = StderrWatch::take(&mut emulator);
     let mut stub = oils().args(["stub", "--run-id", &id]).spawn().unwrap();
-    std::thread::sleep(Duration::from_millis(1500));
+    watch.wait_for(JOINED, 60);
+    std::thread::sleep(Duration::from_millis(1000)); // ~100 steps flown
     stub.kill().unwrap(); // SIGKILL: no cleanup of any kind
     stub.wait().unwrap();
     // A hang guard only (no timing asserted): the proof that the death was noticed,
     // not waited out, is the message below, which the link timeout never gives.
     let status = wait_with_deadline(&mut emulator, 60);
-    let mut err = String::new();
-    std::io::Read::read_to_string(emulator.stderr.as_mut().unwrap(), &mut err).unwrap();
+    let err = watch.rest();
     assert!(!status.success());
     // Its process is watched: noticed as gone, not waited out as silent.
     assert!(err.contains("exited without answering step"), "{err}");

@@ -118,6 +118,10 @@ pub struct Extras<'a> {
     /// Builds the propulsion models the core does not ([`propulsion::PropulsionKind::Fmu`]:
     /// the lab imports the user's FMU), from the run configuration, before tick 0.
     pub propulsion: Option<PropulsionBuilder<'a>>,
+    /// Called once when the flight software on the link has joined (its command
+    /// publisher, and the process that created it): `oils run --no-stub` says so, for the
+    /// user who started it by hand.
+    pub on_peer_joined: Option<&'a mut dyn FnMut(&oils_shared::link::PeerPort)>,
 }
 
 /// A builder of propulsion models the core does not build (see [`Extras::propulsion`]).
@@ -362,6 +366,9 @@ pub fn run(
                 .and_then(|pid| PeerProcess::watch(i32::try_from(pid).ok()?));
             let joined =
                 link.wait_for_peer_watching(cfg.startup_timeout_ms, stop, launched.as_ref())?;
+            if let Some(tell) = extras.on_peer_joined.take() {
+                tell(&joined);
+            }
             let mut link = BoundLink::new(link, joined, cfg.allow_reattach);
             realtime = pin_and_tell(&mut hygiene);
             let summary = run_and_close(

@@ -462,6 +462,12 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 spawned = Some(stub);
                 Ok(Some(pid))
             };
+            let by_hand = cfg.fsw == FswSpec::External;
+            let mut joined = |peer: &oils_shared::link::PeerPort| {
+                if by_hand {
+                    eprintln!("oils: run {run_id:016x}: flight software joined ({peer})");
+                }
+            };
             let result = session::run(
                 &cfg,
                 run_id,
@@ -470,6 +476,7 @@ pub fn run(args: &RunArgs) -> Result<()> {
                 Extras {
                     sinks: Some(&McapOpener),
                     propulsion: Some(&oils_lab::fmu::import::build_for_run),
+                    on_peer_joined: Some(&mut joined),
                     ..Default::default()
                 },
             );
@@ -625,6 +632,7 @@ fn fly_in_process(
         sinks: Some(&McapOpener),
         observer,
         propulsion: Some(&oils_lab::fmu::import::build_for_run),
+        on_peer_joined: None,
     };
     let Some(lib) = fsw_library else {
         return session::run(cfg, run_id, stop, Onboard::InProcess(fsw), extras(None));

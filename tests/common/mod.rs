@@ -120,3 +120,63 @@ pub fn report_across_processes(name: &str, config_toml: &str) -> serde_json::Val
     assert!(out.status.success(), "{}", text(&out));
     report(&rep)
 }
+
+/// The standard error of a running child, read line by line on a thread so a test can
+/// wait for a line (`oils run --no-stub` prints "flight software joined" once the stub it
+/// waits for has joined) and still read everything at the end.
+pub struct StderrWatch {
+    lines: std::sync::mpsc::Receiver<String>,
+    seen: String,
+}
+
+impl StderrWatch {
+    /// Takes `child`'s piped standard error.
+    pub fn take(child: &mut std::process::Child) -> Self {
+        let err = child.stderr.take().expect("stderr piped");
+        let (tx, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            use std::io::BufRead;
+            for line in std::io::BufReader::new(err).lines() {
+                let Ok(line) = line else { break };
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Self {
+            lines,
+            seen: String::new(),
+        }
+    }
+
+    /// Waits for a line containing `needle`. A hang guard only (`secs`): it panics with
+    /// what was printed if the line never comes or the stream ends first.
+    pub fn wait_for(&mut self, needle: &str, secs: u64) {
+        let until = std::time::Instant::now() + std::time::Duration::from_secs(secs);
+        loop {
+            let left = until.saturating_duration_since(std::time::Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) => {
+                    self.seen.push_str(&line);
+                    self.seen.push('\n');
+                    if line.contains(needle) {
+                        return;
+                    }
+                }
+                Err(_) => panic!("no line with `{needle}` within {secs} s:\n{}", self.seen),
+            }
+        }
+    }
+
+    /// Everything printed, once the stream has ended (the child has exited).
+    pub fn rest(mut self) -> String {
+        while let Ok(line) = self.lines.recv() {
+            self.seen.push_str(&line);
+            self.seen.push('\n');
+        }
+        self.seen
+    }
+}
+
+/// What `oils run --no-stub` prints once the flight software it waits for has joined.
+pub const JOINED: &str = "flight software joined";
