@@ -341,6 +341,7 @@ proptest! {
                 propellant_used_kg: x[5],
                 downrange_m: Some(x[6]),
                 crossrange_m: Some(x[7]),
+                nav_error: None,
                 fault_events: 0,
                 faults: vec![],
                 out_of_envelope: None,

@@ -62,6 +62,15 @@ pub struct SpecArgs {
     /// Wall-time budget of one case, seconds (overrides the spec).
     #[arg(long, value_name = "SECONDS")]
     pub case_timeout_s: Option<f64>,
+    /// What the reference GNC navigates from in every case (overrides the spec's
+    /// base): bench, or sensors (its own filter; the telemetry then carries the device
+    /// samples and the plant steps at 5 ms, as `oils run --telemetry sensors`).
+    #[arg(long, value_name = "bench|sensors")]
+    pub gnc_nav: Option<oils_shared::fsw::GncNavigation>,
+    /// What the reference GNC turns the vehicle with in every case (overrides the
+    /// spec's base): torque or thrusters.
+    #[arg(long, value_name = "torque|thrusters")]
+    pub gnc_attitude: Option<oils_shared::fsw::GncAttitude>,
 }
 
 /// `oils mc run`.
@@ -203,6 +212,19 @@ fn resolve(args: &SpecArgs, store: &Store) -> Result<CampaignSpec> {
     }
     if let Some(t) = args.case_timeout_s {
         spec.case_timeout_s = t;
+    }
+    if let Some(n) = args.gnc_nav {
+        spec.base.gnc.navigation = n;
+        if n == oils_shared::fsw::GncNavigation::Sensors && !spec.base.telemetry.sensors() {
+            spec.base.telemetry = oils_emulator::run_config::TelemetrySource::Sensors;
+            // The devices' periods (the IMU's 5 ms) need a base tick that divides them.
+            if spec.base.dt_ms == 10 {
+                spec.base.dt_ms = 5;
+            }
+        }
+    }
+    if let Some(a) = args.gnc_attitude {
+        spec.base.gnc.attitude = a;
     }
     spec.validate()?;
     campaign::case::check_targets(&spec)?;
@@ -430,6 +452,14 @@ fn print_summary(merged: &Merged, dir: &Path) {
             .join(", ")
     );
     println!(
+        "landed by faults: {}",
+        s.landed_by_faults
+            .iter()
+            .map(|(f, c)| format!("{f} {}/{}", c.landed, c.cases))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    println!(
         "nominal: {} (digest {})",
         s.nominal.outcome,
         &s.nominal.digest[..s.nominal.digest.len().min(16)]
@@ -440,13 +470,21 @@ fn print_summary(merged: &Merged, dir: &Path) {
         ("tilt_deg", "deg"),
         ("site_error_m", "m"),
         ("propellant_used_kg", "kg"),
+        ("nav_error_m", "m"),
+        ("nav_altitude_error_m", "m"),
     ] {
-        println!("{}", fmt_stat(merged, name, unit));
+        if s.figures.contains_key(name) {
+            println!("{}", fmt_stat(merged, name, unit));
+        }
     }
     if let Some(e) = &s.footprint_3sigma {
         println!(
-            "footprint 3-sigma      {:.0} m x {:.0} m at {:.0} deg",
-            e.semi_major_m, e.semi_minor_m, e.angle_deg
+            "footprint 3-sigma      {:.0} m x {:.0} m full axes (semi-axes {:.0} m x {:.0} m), major axis at {:.0} deg from downrange",
+            2.0 * e.semi_major_m,
+            2.0 * e.semi_minor_m,
+            e.semi_major_m,
+            e.semi_minor_m,
+            e.angle_deg
         );
     }
     if !s.missing.is_empty() {

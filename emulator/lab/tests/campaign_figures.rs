@@ -44,6 +44,7 @@ fn case(index: Option<u64>, landed: bool, at_m: (f64, f64), applied: &[(&str, f6
         propellant_used_kg: 890.0 + at_m.0 / 1000.0,
         downrange_m: Some(at_m.0),
         crossrange_m: Some(at_m.1),
+        nav_error: None,
         fault_events: 0,
         faults: vec![],
         out_of_envelope: None,

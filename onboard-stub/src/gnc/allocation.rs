@@ -6,7 +6,9 @@
 //! The total thrust is shared equally and clipped to the engines' throttle range; the
 //! differential part `d = B^+ [0, Mx, My]` (minimum norm, zero net force) is scaled down
 //! by the largest factor in [0, 1] that keeps every engine inside 40-100 %: thrust has
-//! priority, and whatever torque the engines cannot give goes to the attitude thrusters.
+//! priority, and whatever torque the engines cannot give goes to the attitude thrusters,
+//! up to 80 % of their limit. Beyond that, torque has priority: the total thrust is
+//! lowered (or raised, at the floor) until the engines can give the excess.
 //! With the diagonal pair only, `B` has rank 2: the pair can only twist about the axis
 //! perpendicular to its diagonal, and the other torque axis goes to the thrusters.
 
@@ -128,18 +130,34 @@ impl ThrustAllocator {
     ) -> Allocation {
         let m = self.matrices(set);
         let n = self.engine_count(set) as f64;
-        let total_n = force_n.clamp(n * self.min_thrust_n, n * self.max_thrust_n);
+        let mut total_n = force_n.clamp(n * self.min_thrust_n, n * self.max_thrust_n);
+        let diff = self.differential(m, torque_body_nm);
+        // Torque the thrusters cannot give (beyond `RCS_SHARE` of their limit, kept
+        // for the attitude loop's transients) must come from the engines, whatever it
+        // costs in thrust: thrust lost costs range, attitude lost costs the vehicle (a
+        // weak engine at full throttle with a centre-of-mass offset tumbled it).
+        let beyond_rcs = (torque_body_nm
+            - torque_body_nm.zip_map(&self.rcs_max_torque_nm, |t, max| {
+                t.clamp(-RCS_SHARE * max, RCS_SHARE * max)
+            }))
+        .xy();
+        if beyond_rcs != nalgebra::Vector2::zeros() {
+            let need = self.differential(m, Vector3::new(beyond_rcs.x, beyond_rcs.y, 0.0));
+            let (mut hi, mut lo) = (self.max_thrust_n, self.min_thrust_n);
+            for i in 0..ENGINE_COUNT {
+                if m.on[i] {
+                    hi = hi.min(self.max_thrust_n - need[i]);
+                    lo = lo.max(self.min_thrust_n - need[i]);
+                }
+            }
+            if lo <= hi {
+                total_n = total_n.clamp(n * lo, n * hi);
+            }
+        }
         let mut base = Vector4::zeros();
         for i in 0..ENGINE_COUNT {
             if m.on[i] {
                 base[i] = total_n / n;
-            }
-        }
-        let mut diff = m.b_pinv * Vector3::new(0.0, torque_body_nm.x, torque_body_nm.y);
-        for i in 0..ENGINE_COUNT {
-            if !m.on[i] {
-                // The SVD leaves round-off (~1e-31) on unlit engines: make them exactly off.
-                diff[i] = 0.0;
             }
         }
         // Largest scale keeping every lit engine in range.
@@ -167,7 +185,24 @@ impl ThrustAllocator {
             rcs_torque_body_nm: rcs,
         }
     }
+
+    /// The minimum-norm engine differential (zero net force) for an x/y torque; exactly
+    /// zero on unlit engines.
+    fn differential(&self, m: &SetMatrices, torque_body_nm: Vector3<f64>) -> Vector4<f64> {
+        let mut diff = m.b_pinv * Vector3::new(0.0, torque_body_nm.x, torque_body_nm.y);
+        for i in 0..ENGINE_COUNT {
+            if !m.on[i] {
+                // The SVD leaves round-off (~1e-31) on unlit engines: make them exactly off.
+                diff[i] = 0.0;
+            }
+        }
+        diff
+    }
 }
+
+/// The share of the attitude thrusters' torque limit the allocator counts on before it
+/// lowers the total thrust to twist with the engines.
+const RCS_SHARE: f64 = 0.8;
 
 #[cfg(test)]
 mod tests {
@@ -229,6 +264,26 @@ mod tests {
         );
         assert!((along.engine_torque_body_nm.x - 20.0).abs() < 1e-9);
         assert!(along.rcs_torque_body_nm.norm() < 1e-9);
+    }
+
+    #[test]
+    fn torque_beyond_the_thrusters_lowers_the_thrust_instead_of_being_dropped() {
+        let a = alloc();
+        // At full thrust, 150 N m about x: the thrusters give at most 116 N m.
+        let out = a.allocate(EngineSet::Four, 3200.0, Vector3::new(150.0, 0.0, 0.0));
+        let sum: f64 = out.thrust_cmd_n.iter().sum();
+        assert!(sum < 3200.0, "{sum}");
+        for t in out.thrust_cmd_n {
+            assert!((320.0 - 1e-9..=800.0 + 1e-9).contains(&t), "{t}");
+        }
+        // The engines give at least the excess over 80 % of the thrusters' limit, and
+        // engines plus thrusters give the whole demand.
+        let engines = out.engine_torque_body_nm.x;
+        assert!(engines >= 150.0 - 0.8 * 116.0 - 1e-9, "{engines}");
+        assert!((engines + out.rcs_torque_body_nm.x - 150.0).abs() < 1e-9);
+        // Within the thrusters' share, thrust keeps priority (as before).
+        let small = a.allocate(EngineSet::Four, 3200.0, Vector3::new(90.0, 0.0, 0.0));
+        assert!((small.thrust_cmd_n.iter().sum::<f64>() - 3200.0).abs() < 1e-9);
     }
 
     #[test]

@@ -6,17 +6,31 @@
 //! `w_ref = (wn / 2 zeta) e` (norm limited to `max_rate`), then
 //! `tau = I 2 zeta wn (w_ref - w) + w x I w`: a second-order loop of natural frequency
 //! `wn` and damping `zeta` for small errors, a constant-rate slew for large ones.
+//! Plus an integral of the error while it is small and steady (below `integral_band`,
+//! turning slower than 0.01 rad/s: a slew does not wind it up): `tau_i += I wn^2 e dt / T_i`, clamped per axis to the
+//! thrusters' torque limit. It learns a steady disturbance torque (a weak engine, a
+//! centre-of-mass offset) that a PD law only balances with a steady pointing error: a
+//! few degrees, as much as the final descent's whole tilt allowance.
 
 use super::navigation::NavSolution;
 use super::GncConfig;
 use nalgebra::Vector3;
 
-/// The attitude controller (stateless apart from its gains).
+/// The integral runs only while the body turns slower than this (a steady error, not a
+/// slew passing through the band), rad/s.
+const INTEGRAL_MAX_RATE_RAD_S: f64 = 0.01;
+
+/// The attitude controller: gains, and the integral of the small pointing errors.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AttitudeController {
     natural_freq_rad_s: f64,
     damping: f64,
     max_rate_rad_s: f64,
+    integral_time_s: f64,
+    integral_band_rad: f64,
+    integral_limit_nm: Vector3<f64>,
+    /// The learned disturbance-cancelling torque, body axes, N m (z stays zero).
+    integral_body_nm: Vector3<f64>,
 }
 
 impl AttitudeController {
@@ -26,7 +40,16 @@ impl AttitudeController {
             natural_freq_rad_s: cfg.attitude_natural_freq_rad_s,
             damping: cfg.attitude_damping,
             max_rate_rad_s: cfg.attitude_max_rate_rad_s,
+            integral_time_s: cfg.attitude_integral_time_s,
+            integral_band_rad: cfg.attitude_integral_band_deg.to_radians(),
+            integral_limit_nm: Vector3::from(cfg.rcs_max_torque_nm),
+            integral_body_nm: Vector3::zeros(),
         }
+    }
+
+    /// The integral torque learned so far, body axes, N m.
+    pub fn integral_body_nm(&self) -> Vector3<f64> {
+        self.integral_body_nm
     }
 
     /// Pointing error of body +Z from `desired_dir_mci` as a body rotation vector, rad.
@@ -53,14 +76,27 @@ impl AttitudeController {
         axis * (sin.atan2(cos) / sin)
     }
 
-    /// Torque demand, body axes, N m, for principal inertia `inertia_kg_m2`.
+    /// Torque demand, body axes, N m, for principal inertia `inertia_kg_m2`; `dt_s`
+    /// since the last call (integrates the error).
     pub fn torque_body_nm(
-        &self,
+        &mut self,
         nav: &NavSolution,
         desired_dir_mci: &Vector3<f64>,
         inertia_kg_m2: &Vector3<f64>,
+        dt_s: f64,
     ) -> Vector3<f64> {
         let err = Self::pointing_error_body(nav, desired_dir_mci);
+        let settled = err.norm() < self.integral_band_rad
+            && nav.rate_body_rad_s.xy().norm() < INTEGRAL_MAX_RATE_RAD_S;
+        if self.integral_time_s > 0.0 && settled {
+            let wn2 = self.natural_freq_rad_s * self.natural_freq_rad_s;
+            self.integral_body_nm +=
+                inertia_kg_m2.component_mul(&err) * (wn2 * dt_s / self.integral_time_s);
+            self.integral_body_nm = self
+                .integral_body_nm
+                .zip_map(&self.integral_limit_nm, |t, max| t.clamp(-max, max));
+            self.integral_body_nm.z = 0.0;
+        }
         let mut rate_ref = err * (self.natural_freq_rad_s / (2.0 * self.damping));
         let n = rate_ref.norm();
         if n > self.max_rate_rad_s {
@@ -69,7 +105,7 @@ impl AttitudeController {
         let w = nav.rate_body_rad_s;
         let gain = 2.0 * self.damping * self.natural_freq_rad_s;
         let h = inertia_kg_m2.component_mul(&w);
-        inertia_kg_m2.component_mul(&((rate_ref - w) * gain)) + w.cross(&h)
+        inertia_kg_m2.component_mul(&((rate_ref - w) * gain)) + w.cross(&h) + self.integral_body_nm
     }
 }
 
@@ -107,16 +143,16 @@ mod tests {
     #[test]
     fn small_step_settles_like_a_second_order_loop() {
         let cfg = GncConfig::default();
-        let ctl = AttitudeController::new(&cfg);
+        let mut ctl = AttitudeController::new(&cfg);
         let inertia = Vector3::new(1000.0, 1000.0, 900.0);
         let mut q = UnitQuaternion::identity();
         let mut w = Vector3::zeros();
         let target = Vector3::new(10f64.to_radians().sin(), 0.0, 10f64.to_radians().cos());
         let dt = 0.01;
         let mut max_overshoot: f64 = 0.0;
-        for k in 0..2000 {
+        for k in 0..6000 {
             let nav = nav_with(q, w);
-            let tau = ctl.torque_body_nm(&nav, &target, &inertia);
+            let tau = ctl.torque_body_nm(&nav, &target, &inertia, dt);
             w += tau.component_div(&inertia) * dt;
             q *= UnitQuaternion::from_scaled_axis(w * dt);
             let e = AttitudeController::pointing_error_body(&nav_with(q, w), &target);
@@ -125,8 +161,36 @@ mod tests {
             }
         }
         let e = AttitudeController::pointing_error_body(&nav_with(q, w), &target);
-        assert!(e.norm() < 1e-4, "residual {e}");
+        assert!(e.norm() < 1e-4, "residual {}", e.norm());
         assert!(max_overshoot < 0.02 * 10f64.to_radians(), "{max_overshoot}");
         assert!(w.norm() < 1e-4);
+    }
+
+    /// A steady disturbance torque: the PD law alone holds it with a steady error of
+    /// `tau / (I wn^2)`; with the integral the error goes to zero.
+    #[test]
+    fn a_steady_disturbance_torque_leaves_no_steady_pointing_error() {
+        let cfg = GncConfig::default();
+        let inertia = Vector3::new(1000.0, 1000.0, 900.0);
+        let disturbance = Vector3::new(0.0, 40.0, 0.0);
+        let target = Vector3::z();
+        let settle = |mut ctl: AttitudeController| {
+            let (mut q, mut w) = (UnitQuaternion::identity(), Vector3::zeros());
+            let dt = 0.01;
+            for _ in 0..12_000 {
+                let tau = ctl.torque_body_nm(&nav_with(q, w), &target, &inertia, dt);
+                w += (tau + disturbance).component_div(&inertia) * dt;
+                q *= UnitQuaternion::from_scaled_axis(w * dt);
+            }
+            AttitudeController::pointing_error_body(&nav_with(q, w), &target).norm()
+        };
+        let pd_only = settle(AttitudeController::new(&GncConfig {
+            attitude_integral_time_s: 0.0,
+            ..cfg.clone()
+        }));
+        // PD: e = 40 / (1000 * 1) = 0.04 rad.
+        assert!((pd_only - 0.04).abs() < 1e-3, "{pd_only}");
+        let with_integral = settle(AttitudeController::new(&cfg));
+        assert!(with_integral < 1e-4, "{with_integral}");
     }
 }

@@ -525,12 +525,18 @@ impl Guidance {
         tgo
     }
 
-    /// Without a reachable scenario site: a site on the ground track `V T / 2` ahead.
+    /// Without a reachable scenario site: a site `V T / 2` ahead on the shortest
+    /// feasible arc, towards the scenario's site when it lies ahead (landing long but on
+    /// the line to it, not wherever the track points), else along the ground track.
     fn choose_site_on_track(&mut self, nav: &NavSolution, max_accel: f64, min_accel: f64) {
         let c = &self.cfg;
         let v = nav.horizontal_velocity_mci_m_s().norm();
         let tgo = self.shortest_feasible_tgo(nav, max_accel, min_accel);
-        let down = downrange_unit(nav);
+        let track = downrange_unit(nav);
+        let down = match self.site_range(nav) {
+            Some(geo) if geo.to_site_mci.dot(&track) > 0.0 => geo.to_site_mci,
+            _ => track,
+        };
         let ground = nav.pos_mci_m + down * (0.5 * v * tgo);
         let up_site = ground.normalize();
         let surface_r = nav.pos_mci_m.norm() - nav.altitude_m;

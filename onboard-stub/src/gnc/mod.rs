@@ -225,6 +225,10 @@ pub struct GncConfig {
     pub attitude_damping: f64,
     /// Largest commanded slew rate, rad/s.
     pub attitude_max_rate_rad_s: f64,
+    /// Integral time of the attitude loop, seconds (0: PD only).
+    pub attitude_integral_time_s: f64,
+    /// The attitude error is integrated only while smaller than this, degrees.
+    pub attitude_integral_band_deg: f64,
 
     /// Engine lag the thrust loop assumes, seconds.
     pub thrust_lag_model_s: f64,
@@ -291,7 +295,7 @@ impl Default for GncConfig {
             fine_min_accel_margin: 1.1,
             fine_min_tgo_s: 20.0,
             fine_max_tgo_s: 900.0,
-            fine_hold_tgo_s: 2.0,
+            fine_hold_tgo_s: 4.0,
             fine_min_drop_m: 300.0,
 
             terminal_decel_m_s2: 0.4,
@@ -325,6 +329,8 @@ impl Default for GncConfig {
             attitude_natural_freq_rad_s: 1.0,
             attitude_damping: 0.8,
             attitude_max_rate_rad_s: 0.1,
+            attitude_integral_time_s: 10.0,
+            attitude_integral_band_deg: 5.0,
 
             thrust_lag_model_s: 0.1,
             thrust_efficiency_filter_s: 3.0,
@@ -407,6 +413,16 @@ impl GncConfig {
             if !(site.latitude_deg.abs() < 90.0 && site.longitude_deg.is_finite()) {
                 return err("site", "latitude within (-90, 90) deg, finite longitude");
             }
+        }
+        if !(self.attitude_integral_time_s.is_finite() && self.attitude_integral_time_s >= 0.0) {
+            return err(
+                "attitude_integral_time_s",
+                "finite and >= 0 (0: no integral)",
+            );
+        }
+        if !(self.attitude_integral_band_deg.is_finite() && self.attitude_integral_band_deg >= 0.0)
+        {
+            return err("attitude_integral_band_deg", "finite and >= 0");
         }
         if self.rough_gain_cross_speed_1_s.is_nan() || self.rough_gain_cross_speed_1_s < 0.0 {
             return err("rough_gain_cross_speed_1_s", ">= 0");
@@ -892,7 +908,7 @@ impl ReferenceGnc {
         let set = self.engine_set;
 
         let inertia = self.cfg.inertia_kg_m2(mass_kg);
-        let torque = self.attitude.torque_body_nm(&nav, &dir, &inertia);
+        let torque = self.attitude.torque_body_nm(&nav, &dir, &inertia, dt_s);
         self.pointing_error_rad = AttitudeController::pointing_error_body(&nav, &dir).norm();
         let alloc = self.allocator.allocate(set, wanted_n, torque);
         self.last_cmd_total_n = alloc.thrust_cmd_n.iter().sum();

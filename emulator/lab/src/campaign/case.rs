@@ -396,6 +396,10 @@ pub struct CaseResult {
     pub downrange_m: Option<f64>,
     /// Final position about the site across the approach azimuth, metres.
     pub crossrange_m: Option<f64>,
+    /// The flight software's navigation error at the end (estimate minus truth), when
+    /// it reports its navigation (the reference GNC does; absent otherwise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nav_error: Option<NavError>,
     /// Fault firings.
     pub fault_events: u64,
     /// Faults the case was given.
@@ -410,6 +414,23 @@ pub struct CaseResult {
     /// Wall time of the case, seconds (not in the merged results: it differs between
     /// machines, and the merged files are byte-identical for the same spec).
     pub wall_s: f64,
+}
+
+/// The flight software's navigation error at the end of a case.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NavError {
+    /// Position error norm, metres.
+    pub position_m: f64,
+    /// Horizontal part, metres.
+    pub horizontal_m: f64,
+    /// Height error (its altitude minus truth), metres.
+    pub altitude_m: f64,
+    /// Velocity error norm, m/s.
+    pub velocity_m_s: f64,
+    /// The filter's own position sigma (root of the trace), metres.
+    pub sigma_position_m: f64,
+    /// Whether it navigated from the sensors (false: the bench's navigation state).
+    pub from_sensors: bool,
 }
 
 /// Touchdown figures of a case.
@@ -445,6 +466,7 @@ pub fn run_case(
         propellant_used_kg: 0.0,
         downrange_m: None,
         crossrange_m: None,
+        nav_error: None,
         fault_events: 0,
         faults: setup.faults.clone(),
         out_of_envelope: None,
@@ -495,6 +517,17 @@ pub fn run_case(
             result.sim_time_s = s.sim_time_s;
             result.propellant_used_kg = s.propellant_used_kg;
             result.fault_events = s.faults.len() as u64;
+            result.nav_error = s.fsw_report.as_ref().and_then(|f| {
+                let e = f.nav_error?;
+                Some(NavError {
+                    position_m: e.position_m,
+                    horizontal_m: e.horizontal_m,
+                    altitude_m: e.altitude_m,
+                    velocity_m_s: e.velocity_m_s,
+                    sigma_position_m: e.sigma_position_m,
+                    from_sensors: f.from_sensors,
+                })
+            });
             result.out_of_envelope = s
                 .propulsion_diagnostics
                 .as_ref()

@@ -266,6 +266,7 @@ mod tests {
             propellant_used_kg: 900.0,
             downrange_m: Some(0.0),
             crossrange_m: Some(0.0),
+            nav_error: None,
             fault_events: 0,
             faults: vec![],
             out_of_envelope: None,

@@ -158,6 +158,9 @@ pub struct Summary {
     pub landed_fraction: f64,
     /// Cases by outcome.
     pub outcomes: BTreeMap<String, u64>,
+    /// Cases and landed cases by the faults they were given: `none` (fault-free), or
+    /// the fault kinds joined with `+` (`thrust-degraded`, `engine-off+telemetry-drop`).
+    pub landed_by_faults: BTreeMap<String, LandedCount>,
     /// The nominal run (no dispersions).
     pub nominal: NominalSummary,
     /// Statistics per figure (touchdown figures over the cases that touched down).
@@ -176,6 +179,31 @@ pub struct Summary {
     /// What drives the failures: each applied value's rank correlation with failure
     /// and with the touchdown figures, strongest first ([`super::drivers`]).
     pub drivers: Vec<super::drivers::Driver>,
+}
+
+/// Cases and how many of them landed.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct LandedCount {
+    /// Cases.
+    pub cases: u64,
+    /// Of which landed.
+    pub landed: u64,
+}
+
+/// The fault kinds of a case (`none` without faults): what comes before `:` or `@` in
+/// each fault, sorted, joined with `+`.
+pub fn fault_kinds(faults: &[String]) -> String {
+    let mut kinds: Vec<&str> = faults
+        .iter()
+        .map(|f| f.split([':', '@']).next().unwrap_or(f).trim())
+        .collect();
+    kinds.sort_unstable();
+    kinds.dedup();
+    if kinds.is_empty() {
+        "none".into()
+    } else {
+        kinds.join("+")
+    }
 }
 
 /// The nominal run in the summary.
@@ -230,7 +258,7 @@ fn text(s: &str) -> String {
 }
 
 /// The fixed columns of `cases.csv`, before the applied dispersion values.
-pub const CSV_COLUMNS: [&str; 16] = [
+pub const CSV_COLUMNS: [&str; 19] = [
     "index",
     "seed",
     "outcome",
@@ -247,6 +275,9 @@ pub const CSV_COLUMNS: [&str; 16] = [
     "fault_events",
     "faults",
     "digest",
+    "nav_error_m",
+    "nav_horizontal_error_m",
+    "nav_altitude_error_m",
 ];
 
 /// `cases.csv` text.
@@ -266,7 +297,7 @@ pub fn cases_csv(results: &[CaseResult], nominal: &CaseResult) -> String {
         let td = r.touchdown;
         let _ = write!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.index.map_or(String::new(), |i| i.to_string()),
             r.seed,
             r.outcome,
@@ -283,6 +314,9 @@ pub fn cases_csv(results: &[CaseResult], nominal: &CaseResult) -> String {
             r.fault_events,
             text(&r.faults.join(";")),
             r.digest,
+            opt(r.nav_error.map(|e| e.position_m)),
+            opt(r.nav_error.map(|e| e.horizontal_m)),
+            opt(r.nav_error.map(|e| e.altitude_m)),
         );
         for a in &applied {
             out.push(',');
@@ -310,6 +344,12 @@ pub fn summarise(
         *outcomes.entry(r.outcome.clone()).or_insert(0) += 1;
     }
     let landed = outcomes.get("landed").copied().unwrap_or(0);
+    let mut landed_by_faults: BTreeMap<String, LandedCount> = BTreeMap::new();
+    for r in results {
+        let c = landed_by_faults.entry(fault_kinds(&r.faults)).or_default();
+        c.cases += 1;
+        c.landed += u64::from(r.outcome == "landed");
+    }
     let touched: Vec<(&CaseResult, Derived)> = results
         .iter()
         .filter(|r| r.touchdown.is_some())
@@ -344,6 +384,17 @@ pub fn summarise(
         "crossrange_error_m",
         FigureStats::of(touched.iter().map(|(_, d)| d.crossrange_error_m)),
     );
+    // Navigation error at the end (touchdown for the cases that touched down).
+    let nav = |f: fn(&super::case::NavError) -> f64| {
+        FigureStats::of(
+            touched
+                .iter()
+                .filter_map(|(r, _)| r.nav_error.as_ref().map(f)),
+        )
+    };
+    put("nav_error_m", nav(|e| e.position_m));
+    put("nav_horizontal_error_m", nav(|e| e.horizontal_m));
+    put("nav_altitude_error_m", nav(|e| e.altitude_m.abs()));
     put(
         "propellant_used_kg",
         FigureStats::of(
@@ -404,6 +455,7 @@ pub fn summarise(
             landed as f64 / results.len() as f64
         },
         outcomes,
+        landed_by_faults,
         nominal: NominalSummary {
             outcome: nominal.outcome.clone(),
             digest: nominal.digest.clone(),
