@@ -87,6 +87,71 @@ fn rust_gnc_through_the_c_abi_gives_the_native_digest() {
     );
 }
 
+/// The same GNC flying on its own navigation filter (`--fsw-params` with `navigation =
+/// "sensors"`) gives the digest of the native `--gnc-nav sensors`; parameters it cannot
+/// read fail its init with the reason.
+#[test]
+fn rust_gnc_on_sensor_navigation_through_the_c_abi_gives_the_native_digest() {
+    let dir = scratch("cabi-gnc-sensors");
+    let native_rep = dir.join("native.json");
+    let out = run_oils(&[
+        "run",
+        "--no-log",
+        "--telemetry",
+        "sensors",
+        "--gnc-nav",
+        "sensors",
+        "--report",
+        native_rep.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let native = report(&native_rep);
+    assert_eq!(native["outcome"], "landed");
+    let params = dir.join("gnc.toml");
+    std::fs::write(&params, "navigation = \"sensors\"\n").unwrap();
+    let rep = dir.join("cabi.json");
+    let id = run_id(0xc4);
+    let mut stub = c_stub(&id, &cabi_gnc_library());
+    stub.arg("--fsw-params").arg(&params);
+    let (emulator, stub) = fly_with_client(
+        &[
+            "--no-log",
+            "--telemetry",
+            "sensors",
+            "--report",
+            rep.to_str().unwrap(),
+        ],
+        &id,
+        stub,
+    );
+    assert!(stub.status.success(), "stub: {}", text(&stub));
+    assert!(emulator.status.success(), "oils run: {}", text(&emulator));
+    let through_c = report(&rep);
+    assert_eq!(through_c["digest"], native["digest"]);
+
+    std::fs::write(&params, "navigation = \"gps\"\n").unwrap();
+    let id = run_id(0xc5);
+    let mut stub = c_stub(&id, &cabi_gnc_library());
+    stub.arg("--fsw-params").arg(&params);
+    let (_, stub) = fly_with_client(
+        &[
+            "--no-log",
+            "--telemetry",
+            "sensors",
+            "--startup-timeout-ms",
+            "3000",
+        ],
+        &id,
+        stub,
+    );
+    assert!(!stub.status.success());
+    assert!(
+        String::from_utf8_lossy(&stub.stderr).contains("liboils_cabi_gnc: --fsw-params"),
+        "{}",
+        text(&stub)
+    );
+}
+
 /// A C flight software that misbehaves at step `BAD_STEP` as `-D` says: SEGV (writes
 /// through NULL), LOOP (never returns), STATUS=n (returns n); before, it holds hover
 /// thrust.

@@ -8,13 +8,25 @@
 //!
 //! It proves the ABI carries a whole GNC: through it the default descent gives the same
 //! digest as the native `--fsw gnc` (tested in `tests/fsw_c_abi.rs` at the workspace root).
-//! It takes no parameters (`--fsw-params` must be absent or empty): it flies
-//! [`GncConfig::default`], like `--fsw gnc`.
+//! Without parameters it flies [`GncConfig::default`] (the default scenario's site, the
+//! bench's navigation, the ideal torque), like `--fsw gnc`. `--fsw-params FILE` takes a
+//! TOML file with the choices `oils run --gnc-nav/--gnc-attitude` make for the native GNC,
+//! and the site:
+//!
+//! ```toml
+//! navigation = "sensors"      # or "bench"; sensors needs `--telemetry sensors`
+//! attitude = "thrusters"      # or "torque"
+//! site_deg = [-69.373, 32.319] # latitude, east longitude; default: the default scenario's
+//! ```
+//!
+//! Anything else in the file, or a value it cannot read, fails `oils_fsw_init` with the
+//! reason on standard error.
 #![warn(missing_docs)]
 
 use oils_onboard_stub::fsw::FlightSoftware;
-use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
+use oils_onboard_stub::gnc::{ReferenceGnc, SiteTarget};
 use oils_shared::c_abi::{FswConfig, FSW_ABI_VERSION, FSW_LAYOUT_HASH, FSW_STATUS_OK};
+use oils_shared::fsw::{GncAttitude, GncNavigation, GncOptions};
 use oils_shared::{Command, Telemetry};
 use std::ffi::c_void;
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -36,8 +48,32 @@ pub extern "C" fn oils_fsw_layout_hash() -> u64 {
     FSW_LAYOUT_HASH
 }
 
-/// A boxed [`ReferenceGnc`] with the default configuration; NULL when `config` is NULL,
-/// from another ABI version, or carries parameters.
+/// The parameters `--fsw-params` may give (see the crate documentation).
+#[derive(Debug, Default, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Params {
+    navigation: Option<GncNavigation>,
+    attitude: Option<GncAttitude>,
+    site_deg: Option<[f64; 2]>,
+}
+
+/// The GNC the parameters text asks for.
+fn build(params: &str) -> Result<ReferenceGnc, String> {
+    let p: Params = toml::from_str(params).map_err(|e| format!("--fsw-params: {e}"))?;
+    let options = GncOptions {
+        navigation: p.navigation.unwrap_or_default(),
+        attitude: p.attitude.unwrap_or_default(),
+    };
+    let site = p.site_deg.map(|[latitude_deg, longitude_deg]| SiteTarget {
+        latitude_deg,
+        longitude_deg,
+    });
+    ReferenceGnc::new(oils_onboard_stub::build::gnc_config(site, options))
+        .map_err(|e| format!("--fsw-params: {e}"))
+}
+
+/// A boxed [`ReferenceGnc`] configured by the parameters; NULL when `config` is NULL,
+/// from another ABI version, or its parameters are refused (the reason on stderr).
 ///
 /// # Safety
 /// `config` is NULL or points to a valid [`FswConfig`] whose `params` holds `params_len`
@@ -48,11 +84,30 @@ pub unsafe extern "C" fn oils_fsw_init(config: *const FswConfig) -> *mut c_void 
     let Some(config) = (unsafe { config.as_ref() }) else {
         return std::ptr::null_mut();
     };
-    if config.abi_version != FSW_ABI_VERSION || config.params_len != 0 {
+    if config.abi_version != FSW_ABI_VERSION {
         return std::ptr::null_mut();
     }
-    match ReferenceGnc::new(GncConfig::default()) {
-        Ok(gnc) => Box::into_raw(Box::new(gnc)).cast(),
+    let params = if config.params.is_null() || config.params_len == 0 {
+        ""
+    } else {
+        // SAFETY: the loader passes `params_len` readable bytes at `params`.
+        let bytes = unsafe {
+            std::slice::from_raw_parts(config.params.cast::<u8>(), config.params_len as usize)
+        };
+        match std::str::from_utf8(bytes) {
+            Ok(t) => t,
+            Err(_) => {
+                eprintln!("liboils_cabi_gnc: --fsw-params is not UTF-8 text");
+                return std::ptr::null_mut();
+            }
+        }
+    };
+    match catch_unwind(|| build(params)) {
+        Ok(Ok(gnc)) => Box::into_raw(Box::new(gnc)).cast(),
+        Ok(Err(why)) => {
+            eprintln!("liboils_cabi_gnc: {why}");
+            std::ptr::null_mut()
+        }
         Err(_) => std::ptr::null_mut(),
     }
 }
