@@ -105,3 +105,19 @@ fn a_ten_percent_thrust_loss_on_one_engine_at_400_s_lands_in_the_zone() {
     assert_eq!(outcome, Outcome::Landed, "{down} {cross}");
     assert_in_zone("thrust loss at 400 s", down, cross);
 }
+
+/// Engine out: on the nominal descent, landing is physically possible only for failures
+/// from ~872 s on (docs/gnc.md, "Engine out": before, even the remaining diagonal pair at
+/// full thrust straight up from the instant of failure cannot stop the descent before
+/// the ground). The GNC lands from there on: failures at 875 s (at 160 m, descending
+/// 7 m/s) and 930 s (final descent) both land.
+#[test]
+fn an_engine_out_in_the_landable_window_lands() {
+    for t_s in [875, 930] {
+        let mut cfg = base(PropulsionKind::Surrogate);
+        cfg.faults = vec![format!("engine-off:2@t={t_s}").parse().unwrap()];
+        let (outcome, down, cross) = fly_to_site(&cfg);
+        assert_eq!(outcome, Outcome::Landed, "engine out at {t_s} s");
+        assert_in_zone(&format!("engine out at {t_s} s"), down, cross);
+    }
+}

@@ -568,9 +568,21 @@ impl Guidance {
             let r_f = site.turned(&site.target_mci_m, site.arrival_t_s, omega);
             let v_f = site.turned(&site.target_vel_mci_m_s, site.arrival_t_s, omega)
                 + Vector3::new(0.0, 0.0, omega).cross(&r_f);
-            let a = (r_f - r - v * tgo) * (6.0 / (tgo * tgo))
+            let mut a = (r_f - r - v * tgo) * (6.0 / (tgo * tgo))
                 - (v_f - v) * (2.0 / tgo)
                 - nav.gravity_mci_m_s2();
+            if tgo < self.cfg.fine_velocity_only_tgo_s {
+                // Near the end, horizontally only the velocity is flown to its target
+                // (constant acceleration, `(v_f - v) / t`): a late shift of the position
+                // estimate (a filter update, tens of metres) would otherwise be corrected
+                // with `6 / t^2` in a few seconds, tilting the vehicle towards horizontal
+                // (campaign case 47 on sensor navigation: 80 deg, 46 m/s sideways). What
+                // is left of the position error, the terminal descent takes in.
+                let up = nav.up_mci;
+                let vertical = up * a.dot(&up);
+                let dv = v_f - v;
+                a = vertical + (dv - up * dv.dot(&up)) / tgo;
+            }
             self.held_accel_mci_m_s2 = a;
         }
         GuidanceCommand {

@@ -161,6 +161,9 @@ pub struct GncConfig {
     pub fine_max_tgo_s: f64,
     /// Hold the last E-guidance command below this time-to-go, seconds.
     pub fine_hold_tgo_s: f64,
+    /// Below this time-to-go fine braking flies the horizontal velocity only, not the
+    /// position, seconds.
+    pub fine_velocity_only_tgo_s: f64,
     /// Start fine braking (rather than terminal descent) only this far above its target, m.
     pub fine_min_drop_m: f64,
 
@@ -296,6 +299,7 @@ impl Default for GncConfig {
             fine_min_tgo_s: 20.0,
             fine_max_tgo_s: 900.0,
             fine_hold_tgo_s: 4.0,
+            fine_velocity_only_tgo_s: 20.0,
             fine_min_drop_m: 300.0,
 
             terminal_decel_m_s2: 0.4,
