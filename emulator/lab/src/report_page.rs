@@ -255,7 +255,7 @@ pub fn write_campaign(
     head(&mut out, &title);
     let _ = writeln!(
         out,
-        "<h1>{}</h1>\n<p>Master seed {}; landed <b>{} of {}</b> ({:.1} %); nominal run {} (digest <code>{}</code>). Positions are about the {}.</p>",
+        "<h1>{}</h1>\n<p>Master seed {}; landed <b>{} of {}</b> ({:.1} %); nominal run {} (digest <code>{}</code>). Positions are about {}.</p>",
         escape(&title),
         s.seed,
         s.landed,

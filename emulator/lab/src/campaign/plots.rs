@@ -374,7 +374,7 @@ fn footprint(
     let lines = [
         format!("{title}: touchdown footprint"),
         format!(
-            "about the {REFERENCE_POINT}; equal scales; {} landed, {} did not land ({} beyond the view{})",
+            "about {REFERENCE_POINT}; equal scales; {} landed, {} did not land ({} beyond the view{})",
             landed_pts.len(),
             crashed_pts.len() + no_touchdown,
             beyond,
