@@ -107,42 +107,32 @@ fn rust_gnc_on_sensor_navigation_through_the_c_abi_gives_the_native_digest() {
     assert!(out.status.success(), "{}", text(&out));
     let native = report(&native_rep);
     assert_eq!(native["outcome"], "landed");
-    let params = dir.join("gnc.toml");
-    std::fs::write(&params, "navigation = \"sensors\"\n").unwrap();
+    // The library with `params` as its --fsw-params file, against `oils run --no-stub
+    // --telemetry sensors` and `extra`: the emulator's and the stub's outputs.
+    let fly_cabi = |params: &str, tag: u64, extra: &[&str]| {
+        let file = dir.join(format!("gnc-{tag:x}.toml"));
+        std::fs::write(&file, params).unwrap();
+        let id = run_id(tag);
+        let mut stub = c_stub(&id, &cabi_gnc_library());
+        stub.arg("--fsw-params").arg(&file);
+        let mut args = vec!["--no-log", "--telemetry", "sensors"];
+        args.extend_from_slice(extra);
+        fly_with_client(&args, &id, stub)
+    };
     let rep = dir.join("cabi.json");
-    let id = run_id(0xc4);
-    let mut stub = c_stub(&id, &cabi_gnc_library());
-    stub.arg("--fsw-params").arg(&params);
-    let (emulator, stub) = fly_with_client(
-        &[
-            "--no-log",
-            "--telemetry",
-            "sensors",
-            "--report",
-            rep.to_str().unwrap(),
-        ],
-        &id,
-        stub,
+    let (emulator, stub) = fly_cabi(
+        "navigation = \"sensors\"\n",
+        0xc4,
+        &["--report", rep.to_str().unwrap()],
     );
     assert!(stub.status.success(), "stub: {}", text(&stub));
     assert!(emulator.status.success(), "oils run: {}", text(&emulator));
-    let through_c = report(&rep);
-    assert_eq!(through_c["digest"], native["digest"]);
+    assert_eq!(report(&rep)["digest"], native["digest"]);
 
-    std::fs::write(&params, "navigation = \"gps\"\n").unwrap();
-    let id = run_id(0xc5);
-    let mut stub = c_stub(&id, &cabi_gnc_library());
-    stub.arg("--fsw-params").arg(&params);
-    let (_, stub) = fly_with_client(
-        &[
-            "--no-log",
-            "--telemetry",
-            "sensors",
-            "--startup-timeout-ms",
-            "3000",
-        ],
-        &id,
-        stub,
+    let (_, stub) = fly_cabi(
+        "navigation = \"gps\"\n",
+        0xc5,
+        &["--startup-timeout-ms", "3000"],
     );
     assert!(!stub.status.success());
     assert!(

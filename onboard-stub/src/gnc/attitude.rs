@@ -7,8 +7,8 @@
 //! `tau = I 2 zeta wn (w_ref - w) + w x I w`: a second-order loop of natural frequency
 //! `wn` and damping `zeta` for small errors, a constant-rate slew for large ones.
 //! Plus an integral of the error while it is small and steady (below `integral_band`,
-//! turning slower than 0.01 rad/s: a slew does not wind it up): `tau_i += I wn^2 e dt / T_i`, clamped per axis to the
-//! thrusters' torque limit. It learns a steady disturbance torque (a weak engine, a
+//! turning slower than 0.01 rad/s: a slew does not wind it up):
+//! `tau_i += I wn^2 e dt / T_i`, clamped per axis to the thrusters' torque limit. It learns a steady disturbance torque (a weak engine, a
 //! centre-of-mass offset) that a PD law only balances with a steady pointing error: a
 //! few degrees, as much as the final descent's whole tilt allowance.
 
@@ -45,11 +45,6 @@ impl AttitudeController {
             integral_limit_nm: Vector3::from(cfg.rcs_max_torque_nm),
             integral_body_nm: Vector3::zeros(),
         }
-    }
-
-    /// The integral torque learned so far, body axes, N m.
-    pub fn integral_body_nm(&self) -> Vector3<f64> {
-        self.integral_body_nm
     }
 
     /// Pointing error of body +Z from `desired_dir_mci` as a body rotation vector, rad.

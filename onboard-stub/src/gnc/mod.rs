@@ -424,6 +424,9 @@ impl GncConfig {
                 "finite and >= 0 (0: no integral)",
             );
         }
+        if !(self.fine_velocity_only_tgo_s.is_finite() && self.fine_velocity_only_tgo_s >= 0.0) {
+            return err("fine_velocity_only_tgo_s", "finite and >= 0 (0: never)");
+        }
         if !(self.attitude_integral_band_deg.is_finite() && self.attitude_integral_band_deg >= 0.0)
         {
             return err("attitude_integral_band_deg", "finite and >= 0");
