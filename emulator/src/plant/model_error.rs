@@ -29,6 +29,10 @@ pub struct ModelError {
     last_on: [bool; ENGINE_COUNT],
     /// Transients started so far (reported).
     transients: u64,
+    /// The step length the decay factor was worked out for, and the factor: the plant
+    /// steps at one length, so `exp` runs once a run, not once a step (the same
+    /// argument gives the same factor).
+    decay_for: (f64, f64),
 }
 
 impl ModelError {
@@ -43,6 +47,7 @@ impl ModelError {
             last_cmd_n: [0.0; ENGINE_COUNT],
             last_on: [false; ENGINE_COUNT],
             transients: 0,
+            decay_for: (f64::NAN, f64::NAN),
         }
     }
 
@@ -54,7 +59,10 @@ impl ModelError {
     /// Adds the error to what the model delivered for the step just taken with
     /// `engines`, lasting `dt_s`. No allocation.
     pub fn apply(&mut self, engines: &EngineCommand, out: &mut PropulsionOutput, dt_s: f64) {
-        let decay = (-dt_s / self.cfg.transient_tau_s).exp();
+        if self.decay_for.0 != dt_s {
+            self.decay_for = (dt_s, (-dt_s / self.cfg.transient_tau_s).exp());
+        }
+        let decay = self.decay_for.1;
         for e in 0..ENGINE_COUNT {
             let on = engines.on[e];
             let cmd_n = engines.thrust_cmd_n[e];
