@@ -6,13 +6,10 @@
 //! scaled, the active terms are summed, and the physical guards are applied.
 //!
 //! The four engines of a per-engine submodel share one row of coefficients: they are
-//! evaluated as the four lanes of one vector (features scaled as `f64x4` of the `wide`
-//! crate, terms summed over a plain four-lane array the compiler vectorises, both safe
-//! on stable Rust), every lane doing exactly the operations, in the order, that
-//! evaluating its engine alone does (no fused multiply-add, nothing reassociated), so
-//! the result is that evaluation's bit for bit. The step is built for the baseline
-//! x86-64 and for AVX2 and picked at run time ([`step_on_this_cpu`]); both builds are
-//! held to the same bits. The tests hold the engine-by-engine evaluation as
+//! evaluated as the four lanes of one vector (`f64x4` of the `wide` crate, safe SIMD on
+//! stable Rust), every lane doing exactly the operations, in the order, that evaluating
+//! its engine alone does (no fused multiply-add, nothing reassociated), so the result
+//! is that evaluation's bit for bit. The tests hold the engine-by-engine evaluation as
 //! the reference and compare bits (`lanes_equal_engine_by_engine_*`).
 //!
 //! [`FeatureSpec::fill`]: super::features::FeatureSpec::fill
@@ -23,7 +20,7 @@ use super::features::{
 use super::model::{eval_term, ActiveTerm, Model, OutputRow, Submodel, Term};
 use super::valve::{ValveState, ValveTrack};
 use oils_shared::ENGINE_COUNT;
-use wide::{f64x4, CmpGt, CmpLt};
+use wide::{f64x4, CmpEq, CmpGt, CmpLt};
 
 /// The last steps' inputs (as the model saw them), valve states and states; slot `head`
 /// is the latest step. Allocated once, overwritten in place.
@@ -97,7 +94,7 @@ pub struct Predictor {
     /// terms ([`eval_term`]).
     x: Vec<f64>,
     /// The same for the four engines of a per-engine submodel, as lanes.
-    lanes: Vec<Lanes>,
+    lanes: Vec<f64x4>,
     out_of_envelope_steps: u64,
     guards: crate::propulsion::diagnostics::SurrogateGuards,
     /// Per state output, the largest value a prediction may take ([`Limits`]).
@@ -162,7 +159,7 @@ impl Predictor {
                 .find_map(|s| s.features.valve)
                 .map(|f| ValveTrack::new(f, dt_s)),
             x: vec![0.0; max_dim + 1],
-            lanes: vec![[0.0; ENGINE_COUNT]; max_dim + 1],
+            lanes: vec![f64x4::ZERO; max_dim + 1],
             out_of_envelope_steps: 0,
             guards: Default::default(),
             upper: Limits::NONE.upper(),
@@ -233,13 +230,6 @@ impl Predictor {
 
     /// Predicts the state at the end of a step with `input` held, and makes it history.
     pub fn step(&mut self, input: &InputVec) -> StateVec {
-        step_on_this_cpu(self, input)
-    }
-
-    /// [`Predictor::step`] as the baseline x86-64 build does it (what a CPU without
-    /// AVX2 runs), for the tests that hold both builds to the same bits.
-    #[cfg(test)]
-    fn step_baseline(&mut self, input: &InputVec) -> StateVec {
         self.step_by(input, predict_engines)
     }
 
@@ -302,31 +292,12 @@ impl Predictor {
     }
 }
 
-/// [`Predictor::step`] compiled twice, for the baseline x86-64 and for AVX2, and the
-/// one this CPU can run picked at run time (`multiversion`). The sums' lanes are plain
-/// arrays ([`Lanes`]), so the AVX2 build does a term's four lanes in one 256-bit
-/// operation where the baseline does two 128-bit ones: the same IEEE operations on the
-/// same numbers, so the same bits (Rust never fuses a multiply and an add by itself).
-#[multiversion::multiversion(targets("x86_64+avx+avx2"))]
-fn step_on_this_cpu(p: &mut Predictor, input: &InputVec) -> StateVec {
-    // A closure, not the function item: it takes this build's target features, so the
-    // prediction is compiled into it rather than called in its baseline build.
-    #[allow(clippy::redundant_closure)]
-    p.step_by(input, |s, u, h, lanes| predict_engines(s, u, h, lanes))
-}
-
-/// One number for each of the four engines, a lane each. A plain array, not `wide`'s
-/// `f64x4`, for the sums: `wide` fixes its width when it is compiled (two 128-bit
-/// halves on the baseline x86-64, even inside an AVX2 function), while the compiler
-/// gives a loop over an array's lanes the width of the function it is compiled in.
-type Lanes = [f64; ENGINE_COUNT];
-
 /// What predicts a per-engine submodel's four engines in [`Predictor::step_by`].
 trait EnginePrediction:
-    FnMut(&Submodel, &EngineUse, &Ring, &mut [Lanes]) -> ([f64; ENGINE_COUNT], bool)
+    FnMut(&Submodel, &EngineUse, &Ring, &mut [f64x4]) -> ([f64; ENGINE_COUNT], bool)
 {
 }
-impl<F: FnMut(&Submodel, &EngineUse, &Ring, &mut [Lanes]) -> ([f64; ENGINE_COUNT], bool)>
+impl<F: FnMut(&Submodel, &EngineUse, &Ring, &mut [f64x4]) -> ([f64; ENGINE_COUNT], bool)>
     EnginePrediction for F
 {
 }
@@ -338,10 +309,13 @@ fn predict_engines(
     s: &Submodel,
     u: &EngineUse,
     h: &Ring,
-    lanes: &mut [Lanes],
+    lanes: &mut [f64x4],
 ) -> ([f64; ENGINE_COUNT], bool) {
     let outside = gather_engines(s, u, h, lanes);
-    (sum_engines(&s.rows[0], &u.groups, lanes), outside)
+    (
+        sum_engines(&s.rows[0], &u.groups, lanes).to_array(),
+        outside,
+    )
 }
 
 /// One feature's training envelope and scaling, as the model file gives them, with
@@ -580,7 +554,7 @@ fn gather(s: &Submodel, u: &MimoUse, h: &Ring, x: &mut [f64]) -> bool {
 /// again with the clamping ([`Clamped`]), which is then what the lanes hold.
 ///
 /// [`FeatureSpec::fill_engines`]: super::features::FeatureSpec::fill_engines
-fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut [Lanes]) -> bool {
+fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut [f64x4]) -> bool {
     let dim = s.features.dim();
     let mut fast = Unclamped {
         lanes,
@@ -603,14 +577,14 @@ fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut [Lanes]) ->
         s.features.fill_engines(h, &mut clamped);
         outside |= clamped.outside;
     }
-    lanes[dim] = [1.0; ENGINE_COUNT];
+    lanes[dim] = f64x4::ONE;
     outside
 }
 
 /// Scales features into their lanes without clamping, noting which lanes were outside
 /// the envelope (below it, above it), for [`gather_engines`].
 struct Unclamped<'a> {
-    lanes: &'a mut [Lanes],
+    lanes: &'a mut [f64x4],
     scaling: &'a [LaneScaling],
     /// The next feature.
     i: usize,
@@ -627,7 +601,7 @@ impl EngineLanes for Unclamped<'_> {
         let f = &self.scaling[self.i].scaling;
         self.below |= raw.cmp_lt(f.lo);
         self.above |= raw.cmp_gt(f.hi);
-        self.lanes[self.i] = ((raw - f.mean) * f.inv_std).to_array();
+        self.lanes[self.i] = (raw - f.mean) * f.inv_std;
         self.i += 1;
     }
 
@@ -638,7 +612,7 @@ impl EngineLanes for Unclamped<'_> {
             .iter_mut()
             .zip(&self.scaling[range])
         {
-            *l = f.zero.to_array();
+            *l = f.zero;
             self.zero_outside |= f.zero_outside;
         }
         self.i += n;
@@ -648,7 +622,7 @@ impl EngineLanes for Unclamped<'_> {
 /// Clamps and scales features into their lanes ([`Scaling::scale`]), for
 /// [`gather_engines`] when some lane left the envelope.
 struct Clamped<'a> {
-    lanes: &'a mut [Lanes],
+    lanes: &'a mut [f64x4],
     scaling: &'a [LaneScaling],
     i: usize,
     outside: bool,
@@ -656,10 +630,7 @@ struct Clamped<'a> {
 
 impl EngineLanes for Clamped<'_> {
     fn put(&mut self, raw: f64x4) {
-        self.lanes[self.i] = self.scaling[self.i]
-            .scaling
-            .scale(raw, &mut self.outside)
-            .to_array();
+        self.lanes[self.i] = self.scaling[self.i].scaling.scale(raw, &mut self.outside);
         self.i += 1;
     }
 }
@@ -710,6 +681,7 @@ impl TermGroup<f64> {
             .windows(2)
             .all(|w| degree(&w[0]) <= degree(&w[1]));
         for (&c, t) in self.coefs.iter().zip(&self.factors) {
+            let c = f64x4::splat(c);
             match (in_degree_order, degree(t)) {
                 (true, 1) => g.linear.push((c, t[0])),
                 (true, 2) => g.quadratic.push((c, [t[0], t[1]])),
@@ -720,17 +692,17 @@ impl TermGroup<f64> {
     }
 }
 
-/// A [`TermGroup`] of a per-engine row for four lanes: each coefficient (the same for
-/// every lane) beside its factors, and the terms by degree. The 1.0 pad makes `a * 1.0` = `a`
+/// A [`TermGroup`] of a per-engine row for four lanes: each coefficient in four lanes
+/// beside its factors, and the terms by degree. The 1.0 pad makes `a * 1.0` = `a`
 /// and `a * b * 1.0` = `a * b` bit for bit, so a term of one or two factors skips its
 /// pads; kept in file order, since the library lists terms by degree (a group whose
 /// terms are not in that order keeps them all, pads and all, in `cubic`).
 #[derive(Debug, Clone)]
 struct LaneGroup {
     gate: Option<usize>,
-    linear: Vec<(f64, u16)>,
-    quadratic: Vec<(f64, [u16; 2])>,
-    cubic: Vec<(f64, Term)>,
+    linear: Vec<(f64x4, u16)>,
+    quadratic: Vec<(f64x4, [u16; 2])>,
+    cubic: Vec<(f64x4, Term)>,
 }
 
 /// A row's intercept plus its active terms, group by group (see [`EngineUse`]),
@@ -760,41 +732,29 @@ fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &[f64]) -> f64 {
 /// get back the sum from before the group, as [`sum`] skipping it leaves it (adding
 /// its terms would add zeros, or not a number for a feature that is not one).
 #[inline(always)]
-fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &[Lanes]) -> Lanes {
-    let at = |f: u16| &x[usize::from(f)];
-    let mut y = [row.intercept; ENGINE_COUNT];
+fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &[f64x4]) -> f64x4 {
+    let at = |f: u16| x[usize::from(f)];
+    let mut y = f64x4::splat(row.intercept);
     for g in groups {
         let off = match g.gate {
-            Some(f) => x[f].map(|v| v == 0.0),
-            None => [false; ENGINE_COUNT],
+            Some(f) => x[f].cmp_eq(f64x4::ZERO),
+            None => f64x4::ZERO,
         };
-        if off.iter().all(|&o| o) {
+        if off.all() {
             continue;
         }
         let before = y;
-        // Each loop over `l` is one vector operation per term: a lane is an engine.
         for &(c, i) in &g.linear {
-            let a = at(i);
-            for l in 0..ENGINE_COUNT {
-                y[l] += c * a[l];
-            }
+            y += c * at(i);
         }
         for &(c, [i, j]) in &g.quadratic {
-            let (a, b) = (at(i), at(j));
-            for l in 0..ENGINE_COUNT {
-                y[l] += c * (a[l] * b[l]);
-            }
+            y += c * (at(i) * at(j));
         }
         for &(c, [i, j, k]) in &g.cubic {
-            let (a, b, d) = (at(i), at(j), at(k));
-            for l in 0..ENGINE_COUNT {
-                y[l] += c * (a[l] * b[l] * d[l]);
-            }
+            y += c * (at(i) * at(j) * at(k));
         }
-        for l in 0..ENGINE_COUNT {
-            if off[l] {
-                y[l] = before[l];
-            }
+        if off.any() {
+            y = off.blend(before, y);
         }
     }
     y
@@ -994,7 +954,7 @@ pub(crate) mod tests {
         s: &Submodel,
         _: &EngineUse,
         h: &Ring,
-        _: &mut [Lanes],
+        _: &mut [f64x4],
     ) -> ([f64; ENGINE_COUNT], bool) {
         let dim = s.features.dim();
         let used = used_features(s);
@@ -1019,21 +979,13 @@ pub(crate) mod tests {
         let mut lanes = Predictor::new(model);
         lanes.set_limits(limits);
         let mut reference = lanes.clone();
-        let mut baseline = lanes.clone();
         for (t, cmd) in cmds.iter().enumerate() {
-            // This CPU's build (AVX2 where it has it) and the baseline build.
             let got = lanes.step(cmd);
-            let got_baseline = baseline.step_baseline(cmd);
             let want = reference.step_by(cmd, engine_by_engine);
             assert_eq!(
                 got.map(f64::to_bits),
                 want.map(f64::to_bits),
                 "step {t} command {cmd:?}: {got:?} vs {want:?}"
-            );
-            assert_eq!(
-                got_baseline.map(f64::to_bits),
-                want.map(f64::to_bits),
-                "baseline build, step {t} command {cmd:?}: {got_baseline:?} vs {want:?}"
             );
         }
         assert_eq!(
@@ -1155,8 +1107,8 @@ pub(crate) mod tests {
         let lanes: Vec<_> = scalar.iter().cloned().map(|g| g.lanes(2)).collect();
         let gate = [0.0, 1.0, 1.0, 0.0];
         let partner = [f64::NAN, 2.0, f64::NAN, 4.0];
-        let x = [gate, partner, [1.0; ENGINE_COUNT]];
-        let got = sum_engines(&row, &lanes, &x);
+        let x = [f64x4::new(gate), f64x4::new(partner), f64x4::ONE];
+        let got = sum_engines(&row, &lanes, &x).to_array();
         for e in 0..ENGINE_COUNT {
             let want = sum(&row, &scalar, &[gate[e], partner[e], 1.0]);
             assert_eq!(got[e].to_bits(), want.to_bits(), "engine {e}: {got:?}");
