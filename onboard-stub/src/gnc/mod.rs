@@ -776,9 +776,10 @@ impl FlightSoftware for ReferenceGnc {
                 }
             }
         };
-        self.time_group(&mut report, 0, start_ns, self.cycle_ns());
+        // Group 2 starts where group 0 ended: one clock read for both.
+        let nav_done_ns = self.time_group(&mut report, 0, start_ns, self.cycle_ns());
         report.phase = self.guidance.phase() as u32;
-        let mut cmd = self.fly(tlm, &nav, &mut report);
+        let mut cmd = self.fly(tlm, &nav, &mut report, nav_done_ns);
         cmd.fsw = report;
         cmd
     }
@@ -792,9 +793,17 @@ impl ReferenceGnc {
 
     /// Records rate group `group`'s compute time since `start_ns` (wall clock, for the
     /// report only: nothing flown depends on it); over `period_ns` is a cycle slip.
-    fn time_group(&mut self, report: &mut FswReport, group: usize, start_ns: u64, period_ns: i64) {
-        let ns = monotonic_ns().saturating_sub(start_ns);
-        self.record_group(report, group, ns, period_ns);
+    /// Returns the clock's reading at the group's end.
+    fn time_group(
+        &mut self,
+        report: &mut FswReport,
+        group: usize,
+        start_ns: u64,
+        period_ns: i64,
+    ) -> u64 {
+        let now_ns = monotonic_ns();
+        self.record_group(report, group, now_ns.saturating_sub(start_ns), period_ns);
+        now_ns
     }
 
     fn record_group(&mut self, report: &mut FswReport, group: usize, ns: u64, period_ns: i64) {
@@ -833,14 +842,15 @@ impl ReferenceGnc {
     }
 
     /// Rate groups 1 (guidance) and 2 (control: thrust loop, attitude, allocation,
-    /// thrusters) on this cycle's navigation solution.
+    /// thrusters) on this cycle's navigation solution; `start_ns` is the clock's reading
+    /// when they start.
     fn fly(
         &mut self,
         tlm: &Telemetry,
         nav: &navigation::NavSolution,
         report: &mut FswReport,
+        start_ns: u64,
     ) -> Command {
-        let start_ns = monotonic_ns();
         let (cmd, guidance_ns) = self.control(tlm, nav, report);
         let ns = monotonic_ns()
             .saturating_sub(start_ns)

@@ -133,6 +133,11 @@ impl Model {
             if s.features.history == 0 || s.features.history > 64 {
                 return Err(ctx("history length must be 1..=64"));
             }
+            if dim > MAX_FEATURES {
+                return Err(ctx(&format!(
+                    "{dim} features: a submodel may have at most {MAX_FEATURES}"
+                )));
+            }
             if !(1..=MAX_DEGREE).contains(&s.degree) {
                 return Err(ctx("degree must be 1..=3"));
             }
@@ -353,6 +358,10 @@ pub fn active_terms_of(
 /// extended by one slot that always holds 1.0; lower-degree terms are padded with that slot.
 /// Highest supported polynomial degree.
 pub const MAX_DEGREE: usize = 3;
+/// The most features a submodel may have (a history of 64 steps gives a MIMO submodel
+/// about 720). The predictor keeps its feature buffers at a fixed `MAX_FEATURES + 1`
+/// slots, which lets it read a term's factors without a bounds check each.
+pub const MAX_FEATURES: usize = 1023;
 
 /// Largest magnitude of any number in a model (coefficients, intercepts, scaling,
 /// envelope, initial state). With features clamped to the envelope and scaled, and terms

@@ -17,7 +17,7 @@
 use super::features::{
     EngineLanes, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_MF, STATE_MO,
 };
-use super::model::{eval_term, ActiveTerm, Model, OutputRow, Submodel, Term};
+use super::model::{eval_term, ActiveTerm, Model, OutputRow, Submodel, Term, MAX_FEATURES};
 use super::valve::{ValveState, ValveTrack};
 use oils_shared::ENGINE_COUNT;
 use wide::{f64x4, CmpEq, CmpGt, CmpLt};
@@ -80,6 +80,27 @@ impl History for Ring {
     }
 }
 
+/// Slots of the feature buffers: every feature index, and the 1.0 pad after the
+/// features, is below it (`Model::check` holds a submodel to [`MAX_FEATURES`]). A
+/// factor's index masked with `SLOTS - 1` is then the index itself, and the compiler,
+/// seeing the mask keep it inside the array, drops the bounds check of each factor
+/// read: in the sums' inner loops, two reads a term, those checks were a fifth of the
+/// instructions. Safe code throughout; the buffers are allocated once.
+const SLOTS: usize = MAX_FEATURES + 1;
+const _: () = assert!(SLOTS.is_power_of_two());
+
+/// A factor's slot ([`SLOTS`]).
+#[inline(always)]
+fn slot(f: u16) -> usize {
+    debug_assert!(usize::from(f) < SLOTS);
+    usize::from(f) & (SLOTS - 1)
+}
+
+/// A MIMO submodel's scaled features, then the 1.0 pad ([`eval_term`]).
+type Features = [f64; SLOTS];
+/// The same for the four engines of a per-engine submodel, as lanes.
+type FeatureLanes = [f64x4; SLOTS];
+
 /// Free-running evaluation of a [`Model`]: its own predictions become its history.
 /// Every buffer is sized in [`Predictor::new`]; [`Predictor::step`] does not allocate.
 #[derive(Debug, Clone)]
@@ -92,9 +113,9 @@ pub struct Predictor {
     valve: Option<ValveTrack>,
     /// A MIMO submodel's scaled features, then the constant 1.0 that pads lower-degree
     /// terms ([`eval_term`]).
-    x: Vec<f64>,
+    x: Box<Features>,
     /// The same for the four engines of a per-engine submodel, as lanes.
-    lanes: Vec<f64x4>,
+    lanes: Box<FeatureLanes>,
     out_of_envelope_steps: u64,
     guards: crate::propulsion::diagnostics::SurrogateGuards,
     /// Per state output, the largest value a prediction may take ([`Limits`]).
@@ -147,7 +168,6 @@ impl Predictor {
         // The deepest lag any feature reads, and the step being predicted.
         let depth = subs.iter().map(|s| s.features.max_lag()).max().unwrap_or(1) + 1;
         let uses = subs.iter().map(SubmodelUse::of).collect();
-        let max_dim = subs.iter().map(|s| s.features.dim()).max().unwrap_or(0);
         let dt_s = model.sample_time_ns as f64 * 1e-9;
         let mut p = Self {
             model: model.clone(),
@@ -158,8 +178,8 @@ impl Predictor {
                 .filter(|s| s.features.valve_features() > 0)
                 .find_map(|s| s.features.valve)
                 .map(|f| ValveTrack::new(f, dt_s)),
-            x: vec![0.0; max_dim + 1],
-            lanes: vec![f64x4::ZERO; max_dim + 1],
+            x: Box::new([0.0; SLOTS]),
+            lanes: Box::new([f64x4::ZERO; SLOTS]),
             out_of_envelope_steps: 0,
             guards: Default::default(),
             upper: Limits::NONE.upper(),
@@ -294,10 +314,10 @@ impl Predictor {
 
 /// What predicts a per-engine submodel's four engines in [`Predictor::step_by`].
 trait EnginePrediction:
-    FnMut(&Submodel, &EngineUse, &Ring, &mut [f64x4]) -> ([f64; ENGINE_COUNT], bool)
+    FnMut(&Submodel, &EngineUse, &Ring, &mut FeatureLanes) -> ([f64; ENGINE_COUNT], bool)
 {
 }
-impl<F: FnMut(&Submodel, &EngineUse, &Ring, &mut [f64x4]) -> ([f64; ENGINE_COUNT], bool)>
+impl<F: FnMut(&Submodel, &EngineUse, &Ring, &mut FeatureLanes) -> ([f64; ENGINE_COUNT], bool)>
     EnginePrediction for F
 {
 }
@@ -309,7 +329,7 @@ fn predict_engines(
     s: &Submodel,
     u: &EngineUse,
     h: &Ring,
-    lanes: &mut [f64x4],
+    lanes: &mut FeatureLanes,
 ) -> ([f64; ENGINE_COUNT], bool) {
     let outside = gather_engines(s, u, h, lanes);
     (
@@ -534,13 +554,26 @@ impl SubmodelUse {
 /// others are never read) and the constant 1.0 after them; true when one was outside
 /// the envelope and clamped. A feature that is not a number stays one: the prediction
 /// is then not finite and [`guarded`] keeps the previous value.
-fn gather(s: &Submodel, u: &MimoUse, h: &Ring, x: &mut [f64]) -> bool {
+fn gather(s: &Submodel, u: &MimoUse, h: &Ring, x: &mut Features) -> bool {
     let mut outside = false;
     for r in &u.reads {
-        x[r.feature] = r.scaling.scale(r.source.read(h, 0), &mut outside);
+        x[r.feature] = r.scaling.scale(read_mimo(&r.source, h), &mut outside);
     }
     x[s.features.dim()] = 1.0;
     outside
+}
+
+/// [`Source::read`] of a MIMO feature: an input or a state at a lag (nearly all of a
+/// MIMO submodel's reads) read from the ring here, in line, the others by
+/// `Source::read`; the same value either way (a MIMO read is engine 0's, so a
+/// component gets no engine offset).
+#[inline(always)]
+fn read_mimo(source: &Source, h: &Ring) -> f64 {
+    match *source {
+        Source::Input { lag, comp, .. } => h.input(lag)[comp],
+        Source::State { lag, comp, .. } => h.state(lag)[comp],
+        other => other.read(h, 0),
+    }
 }
 
 /// The features of the four engines of a per-engine submodel, as lanes: each feature
@@ -554,7 +587,7 @@ fn gather(s: &Submodel, u: &MimoUse, h: &Ring, x: &mut [f64]) -> bool {
 /// again with the clamping ([`Clamped`]), which is then what the lanes hold.
 ///
 /// [`FeatureSpec::fill_engines`]: super::features::FeatureSpec::fill_engines
-fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut [f64x4]) -> bool {
+fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut FeatureLanes) -> bool {
     let dim = s.features.dim();
     let mut fast = Unclamped {
         lanes,
@@ -584,7 +617,7 @@ fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut [f64x4]) ->
 /// Scales features into their lanes without clamping, noting which lanes were outside
 /// the envelope (below it, above it), for [`gather_engines`].
 struct Unclamped<'a> {
-    lanes: &'a mut [f64x4],
+    lanes: &'a mut FeatureLanes,
     scaling: &'a [LaneScaling],
     /// The next feature.
     i: usize,
@@ -622,7 +655,7 @@ impl EngineLanes for Unclamped<'_> {
 /// Clamps and scales features into their lanes ([`Scaling::scale`]), for
 /// [`gather_engines`] when some lane left the envelope.
 struct Clamped<'a> {
-    lanes: &'a mut [f64x4],
+    lanes: &'a mut FeatureLanes,
     scaling: &'a [LaneScaling],
     i: usize,
     outside: bool,
@@ -707,7 +740,7 @@ struct LaneGroup {
 
 /// A row's intercept plus its active terms, group by group (see [`EngineUse`]),
 /// skipping a group whose phase or ignition feature is 0.
-fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &[f64]) -> f64 {
+fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &Features) -> f64 {
     let mut y = row.intercept;
     for g in groups {
         if g.gate.is_some_and(|f| x[f] == 0.0) {
@@ -719,7 +752,7 @@ fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &[f64]) -> f64 {
             }
         } else {
             for (c, &[i, j, _]) in g.coefs.iter().zip(&g.factors) {
-                y += c * (x[i as usize] * x[j as usize]);
+                y += c * (x[slot(i)] * x[slot(j)]);
             }
         }
     }
@@ -732,8 +765,8 @@ fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &[f64]) -> f64 {
 /// get back the sum from before the group, as [`sum`] skipping it leaves it (adding
 /// its terms would add zeros, or not a number for a feature that is not one).
 #[inline(always)]
-fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &[f64x4]) -> f64x4 {
-    let at = |f: u16| x[usize::from(f)];
+fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &FeatureLanes) -> f64x4 {
+    let at = |f: u16| x[slot(f)];
     let mut y = f64x4::splat(row.intercept);
     for g in groups {
         let off = match g.gate {
@@ -954,13 +987,13 @@ pub(crate) mod tests {
         s: &Submodel,
         _: &EngineUse,
         h: &Ring,
-        _: &mut [f64x4],
+        _: &mut FeatureLanes,
     ) -> ([f64; ENGINE_COUNT], bool) {
         let dim = s.features.dim();
         let used = used_features(s);
         let scaling: Vec<_> = (0..dim).map(|j| Scaling::of(s, j, used[j])).collect();
         let groups = groups_of(s, &s.rows[0]);
-        let mut x = vec![0.0; dim + 1];
+        let mut x = Box::new([0.0; SLOTS]);
         let mut outside = false;
         let y = std::array::from_fn(|engine| {
             s.features.fill(h, engine, &mut x[..dim]);
@@ -1107,10 +1140,13 @@ pub(crate) mod tests {
         let lanes: Vec<_> = scalar.iter().cloned().map(|g| g.lanes(2)).collect();
         let gate = [0.0, 1.0, 1.0, 0.0];
         let partner = [f64::NAN, 2.0, f64::NAN, 4.0];
-        let x = [f64x4::new(gate), f64x4::new(partner), f64x4::ONE];
+        let mut x = Box::new([f64x4::ZERO; SLOTS]);
+        x[..3].copy_from_slice(&[f64x4::new(gate), f64x4::new(partner), f64x4::ONE]);
         let got = sum_engines(&row, &lanes, &x).to_array();
         for e in 0..ENGINE_COUNT {
-            let want = sum(&row, &scalar, &[gate[e], partner[e], 1.0]);
+            let mut x = Box::new([0.0; SLOTS]);
+            x[..3].copy_from_slice(&[gate[e], partner[e], 1.0]);
+            let want = sum(&row, &scalar, &x);
             assert_eq!(got[e].to_bits(), want.to_bits(), "engine {e}: {got:?}");
         }
         assert_eq!(got[0], 1.5);
@@ -1119,6 +1155,42 @@ pub(crate) mod tests {
 
     /// The same over the switching trajectory and a long steady run (the ignition
     /// window, the stop phases and the running engine are all passed through).
+    /// The feature buffers' fixed slots ([`SLOTS`]) hold the largest feature vector the
+    /// model checks allow (every option on, every length at its limit), with room for
+    /// the 1.0 pad: raising a limit past them fails here (`Model::check` refuses a wider
+    /// submodel, a backstop the limits keep out of reach).
+    #[test]
+    fn largest_feature_vectors_fit_the_buffers() {
+        use crate::propulsion::surrogate::valve::TEST_IGNITION;
+        let valve = super::super::valve::ValveFilter {
+            ignition: Some(super::super::valve::IgnitionClock {
+                knots: 64,
+                ..TEST_IGNITION
+            }),
+            ..TEST_VALVE
+        };
+        let widest = [
+            FeatureSpec {
+                mass_features: true,
+                start_steps: 64,
+                stop_steps: 64,
+                command_sum: true,
+                valve: Some(valve),
+                valve_sum: true,
+                ..FeatureSpec::per_engine(64)
+            },
+            FeatureSpec::paper(64),
+        ];
+        for spec in widest {
+            assert!(
+                spec.dim() <= MAX_FEATURES,
+                "{:?}: {} features",
+                spec.layout,
+                spec.dim()
+            );
+        }
+    }
+
     #[test]
     fn lanes_equal_engine_by_engine_on_switching_and_steady_runs() {
         let (mut cmds, _) =
