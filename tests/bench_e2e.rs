@@ -357,6 +357,10 @@ fn realtime_report_says_what_was_obtained() {
         if s["memory_locked"] != true {
             assert!(said("memory not locked"), "{who}: {s} {warnings:?}");
         }
+        assert_eq!(s["wake_latency_requested"], true, "{who}: {s}");
+        if s["wake_latency_held"] != true {
+            assert!(said("wake-up latency not held"), "{who}: {s} {warnings:?}");
+        }
     }
 }
 
@@ -399,6 +403,8 @@ fn lockstep_report_says_nothing_was_asked() {
     let s = &r["realtime"]["emulator"];
     assert_eq!(s["memory_lock_requested"], false, "{s}");
     assert_eq!(s["memory_locked"], false, "{s}");
+    assert_eq!(s["wake_latency_requested"], false, "{s}");
+    assert_eq!(s["wake_latency_held"], false, "{s}");
     assert_eq!(s["cpu_requested"], serde_json::Value::Null, "{s}");
     assert_eq!(s["pinned"], false, "{s}");
     assert_eq!(r["realtime"]["onboard"], serde_json::Value::Null);

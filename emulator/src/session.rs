@@ -315,6 +315,7 @@ pub fn run(
     let mut hygiene = Hygiene::new();
     if cfg.realtime_memory() {
         hygiene.lock_memory();
+        hygiene.hold_wake_latency();
     }
     let pin_and_tell = |hygiene: &mut Hygiene| {
         if let Some(cpu) = cfg.emulator_cpu() {

@@ -160,6 +160,7 @@ fn join_and_serve(
     let mut hygiene = Hygiene::new();
     if args.lock_memory {
         hygiene.lock_memory();
+        hygiene.hold_wake_latency();
     }
     if let Some(cpu) = args.cpu {
         hygiene.pin_to(cpu);

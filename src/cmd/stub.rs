@@ -61,8 +61,9 @@ pub struct StubArgs {
     /// How long to wait for the emulator's services to appear, milliseconds.
     #[arg(long, default_value_t = 10000)]
     pub startup_timeout_ms: u64,
-    /// Lock memory (`mlockall`) and prefault the stack before the first step (`oils run`
-    /// passes it for realtime runs). Refused: a warning, and the outcome says so.
+    /// Lock memory (`mlockall`), prefault the stack and hold the CPUs' wake-up latency
+    /// at 0 (`/dev/cpu_dma_latency`) before the first step (`oils run` passes it for
+    /// realtime runs). Refused: a warning, and the outcome says so.
     #[arg(long)]
     pub lock_memory: bool,
     /// Pin the stepping thread to this CPU (`oils run --cpus E,S` passes S). Refused: a
