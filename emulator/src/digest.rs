@@ -1,15 +1,21 @@
-//! The run digest: one BLAKE3 hash over every packet exchanged, in order.
+//! The run digest: one XXH3-128 hash over every packet exchanged, in order.
+//!
+//! XXH3-128 (the `xxhash-rust` crate), not a cryptographic hash: the digest proves that
+//! two runs exchanged the same packets, where nothing is forged, and for that a 128-bit
+//! hash of good distribution suffices (two different streams give one digest with odds
+//! of about 2^-128). Chosen for its cost: BLAKE3, the digest until 2026-12-05, hashed the 1.5 KB a step at about 4 GB/s on the 2-core VM and took
+//! 11 % of an in-process surrogate descent (`perf`); XXH3 hashes the same bytes about
+//! 5.5x faster (35 ms against 6.3 ms for a descent's 145 MB).
 //!
 //! Fields that legitimately differ between identical runs are hashed as zeros: the run
 //! id (it names the services) and the flight software's measured compute times and
 //! cycle slips (wall clock). Everything else, every nav value, every command, is in:
 //! same inputs, same digest.
 //!
-//! The packets' bytes are gathered in a buffer and hashed a buffer at a time: BLAKE3
-//! hashes many 1 KiB chunks side by side (SIMD) when it is given them together, while a
-//! packet at a time it compresses one 64-byte block after another. The hash is over the
-//! same byte stream either way, so the digest is the same; per packet it costs about a
-//! quarter as much. The buffer is allocated once, in `new`.
+//! The packets' bytes are gathered in a buffer, their ignored fields zeroed there (one
+//! copy of a packet, none to zero it), and hashed a buffer at a time. The hash is over
+//! the same byte stream however it is cut, so the digest is that of the whole stream.
+//! The buffer is allocated once, in `new`.
 
 use core::mem::{offset_of, size_of};
 use core::ops::Range;
@@ -45,8 +51,7 @@ const COMMAND_ZEROED: [Range<usize>; 4] = [
     ),
 ];
 
-/// Bytes gathered before they are hashed: a multiple of BLAKE3's 1 KiB chunk, and
-/// enough chunks for the widest SIMD degree many times over.
+/// Bytes gathered before they are hashed: long updates keep XXH3 in its bulk loop.
 const BUFFER_LEN: usize = 64 * 1024;
 /// The buffer's capacity: room for the largest packet and its tag past `BUFFER_LEN`.
 const CAPACITY: usize = BUFFER_LEN + 1 + max(size_of::<Telemetry>(), size_of::<Command>());
@@ -61,7 +66,7 @@ const fn max(a: usize, b: usize) -> usize {
 
 /// Running digest of a run's packets.
 pub struct RunDigest {
-    hasher: blake3::Hasher,
+    hasher: xxhash_rust::xxh3::Xxh3,
     /// Bytes not yet hashed (fewer than `BUFFER_LEN` between packets).
     pending: Vec<u8>,
     packets: u64,
@@ -77,7 +82,7 @@ impl RunDigest {
     /// Empty digest.
     pub fn new() -> Self {
         Self {
-            hasher: blake3::Hasher::new(),
+            hasher: xxhash_rust::xxh3::Xxh3::new(),
             pending: Vec::with_capacity(CAPACITY),
             packets: 0,
         }
@@ -86,9 +91,8 @@ impl RunDigest {
     /// Appends a packet's bytes to the stream after its tag, with the byte ranges
     /// `zeroed` hashed as zeros: the packet is copied once, into the buffer, and zeroed
     /// there (no copy of a whole packet per step). Every full buffer is hashed and what
-    /// went past it moved to the front: BLAKE3 hashes a run of whole chunks side by
-    /// side only when it starts on a chunk boundary, so updates stay `BUFFER_LEN`
-    /// long. No allocation (the buffer has room for one packet past `BUFFER_LEN`).
+    /// went past it moved to the front. No allocation (the buffer has room for one
+    /// packet past `BUFFER_LEN`).
     fn feed(&mut self, tag: u8, bytes: &[u8], zeroed: &[Range<usize>]) {
         self.pending.push(tag);
         let at = self.pending.len();
@@ -120,11 +124,11 @@ impl RunDigest {
         self.packets
     }
 
-    /// The digest as lowercase hex.
+    /// The digest as 32 lowercase hex digits.
     pub fn hex(&self) -> String {
         let mut h = self.hasher.clone();
         h.update(&self.pending);
-        h.finalize().to_hex().to_string()
+        format!("{:032x}", h.digest128())
     }
 }
 
@@ -158,7 +162,7 @@ mod tests {
     /// The stream as it is defined: each packet copied, its ignored fields zeroed by
     /// name, and hashed after its tag.
     fn reference(packets: &[(Telemetry, Command)]) -> String {
-        let mut h = blake3::Hasher::new();
+        let mut h = xxhash_rust::xxh3::Xxh3::new();
         for (t, c) in packets {
             let mut t = *t;
             t.header.run_id = 0;
@@ -172,7 +176,7 @@ mod tests {
             h.update(b"C");
             h.update(c.as_bytes());
         }
-        h.finalize().to_hex().to_string()
+        format!("{:032x}", h.digest128())
     }
 
     #[test]
