@@ -108,6 +108,7 @@ fn allocations_over<L: Link + ?Sized>(
         link_timeout_ms: 10_000,
         max_thrust_n: scenario.propulsion.max_thrust_n,
         thresholds: TimingThresholds::default(),
+        time_exchanges: true,
     };
     let (mut at_from, mut at_last, mut last) = (0u64, 0u64, 0u64);
     let mut observe = |k: u64, _: &oils_emulator::plant::Plant| {

@@ -197,12 +197,31 @@ impl Link for BoundLink {
 pub struct InProcLink<F: FlightSoftware + ?Sized> {
     fsw: Box<F>,
     pending: Option<Command>,
+    /// Whether the flight software's compute time is measured ([`Self::untimed`]).
+    timed: bool,
 }
 
 impl<F: FlightSoftware + ?Sized> InProcLink<F> {
     /// Wraps a flight software (built before tick 0).
     pub fn new(fsw: Box<F>) -> Self {
-        Self { fsw, pending: None }
+        Self {
+            fsw,
+            pending: None,
+            timed: true,
+        }
+    }
+
+    /// The same, with nothing timed on the wall clock: the commands' `stub_compute_ns`
+    /// are 0 ([`oils_shared::fsw::answer_untimed`]) and the flight software is asked
+    /// not to time its own work ([`FlightSoftware::set_compute_timing`]). The commands
+    /// are otherwise the same, and so is the digest, which never covers those times.
+    pub fn untimed(mut fsw: Box<F>) -> Self {
+        fsw.set_compute_timing(false);
+        Self {
+            fsw,
+            pending: None,
+            timed: false,
+        }
     }
 
     /// The flight software, for inspection after a run.
@@ -217,7 +236,13 @@ impl<F: FlightSoftware + ?Sized> Link for InProcLink<F> {
         // a step has failed.
         self.pending = (tlm.header.flags & oils_shared::TLM_FLAG_END_OF_RUN == 0
             && self.fsw.failure().is_none())
-        .then(|| answer(self.fsw.as_mut(), tlm));
+        .then(|| {
+            if self.timed {
+                answer(self.fsw.as_mut(), tlm)
+            } else {
+                oils_shared::fsw::answer_untimed(self.fsw.as_mut(), tlm)
+            }
+        });
         Ok(())
     }
 

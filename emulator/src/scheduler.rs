@@ -142,6 +142,12 @@ pub struct SchedulerConfig {
     pub max_thrust_n: f64,
     /// Timing bounds; a broken one fails the run.
     pub thresholds: TimingThresholds,
+    /// Whether each exchange is timed on the wall clock (its round trip; the report's
+    /// `timing`). Off only for a lockstep run in process whose timing nobody reads (a
+    /// campaign case, [`crate::session::Extras::untimed`]): the two clock reads a step
+    /// are then not made, and the round trip is not recorded. Nothing simulated and
+    /// nothing in the digest depends on it.
+    pub time_exchanges: bool,
 }
 
 /// What a finished run reports (the report module turns it into JSON and a table).
@@ -384,7 +390,14 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         // A link fault may keep Telemetry(k) from the flight software: then nothing is
         // published, nothing can answer, and the step is a miss.
         let withheld = link.withheld();
-        let published_ns = monotonic_ns();
+        let now_ns = || {
+            if cfg.time_exchanges {
+                monotonic_ns()
+            } else {
+                0
+            }
+        };
+        let published_ns = now_ns();
         if link.publish(&tlm)? {
             digest.add_telemetry(&tlm);
             published = Some(k);
@@ -419,7 +432,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                 Err(e) => return Err(e.into()),
             }
         };
-        let received_ns = monotonic_ns();
+        let received_ns = now_ns();
         if abort.is_some() {
             continue;
         }
@@ -445,14 +458,17 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     continue;
                 }
                 last_command_ns = received_ns;
-                let round_trip_ns = received_ns - published_ns;
-                step_times.round_trip_ns = Some(round_trip_ns);
-                if with_transport {
-                    timing.record_exchange(round_trip_ns, cmd.stub_compute_ns);
-                    step_times.transport_ns =
-                        Some(round_trip_ns.saturating_sub(cmd.stub_compute_ns));
-                } else {
-                    timing.record_in_process(round_trip_ns, cmd.stub_compute_ns);
+                // Untimed (`time_exchanges` off), nothing was measured: nothing recorded.
+                if cfg.time_exchanges {
+                    let round_trip_ns = received_ns - published_ns;
+                    step_times.round_trip_ns = Some(round_trip_ns);
+                    if with_transport {
+                        timing.record_exchange(round_trip_ns, cmd.stub_compute_ns);
+                        step_times.transport_ns =
+                            Some(round_trip_ns.saturating_sub(cmd.stub_compute_ns));
+                    } else {
+                        timing.record_in_process(round_trip_ns, cmd.stub_compute_ns);
+                    }
                 }
                 digest.add_command(&cmd);
                 fsw_monitor.record(&cmd, &plant.truth(), t_ns);

@@ -325,6 +325,7 @@ fn the_reference_gnc_detects_the_failed_engine_from_telemetry() {
         link_timeout_ms: 1000,
         max_thrust_n: 800.0,
         thresholds: Default::default(),
+        time_exchanges: true,
     };
     run(
         &sched,

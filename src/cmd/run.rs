@@ -633,6 +633,7 @@ fn fly_in_process(
         observer,
         propulsion: Some(&oils_lab::fmu::import::build_for_run),
         on_peer_joined: None,
+        untimed: false,
     };
     let Some(lib) = fsw_library else {
         return session::run(cfg, run_id, stop, Onboard::InProcess(fsw), extras(None));

@@ -525,6 +525,9 @@ pub struct ReferenceGnc {
     monitor: EngineMonitor,
     /// A footpad touched: the engines stay off.
     touched_down: bool,
+    /// Whether the rate groups are timed on the wall clock
+    /// ([`FlightSoftware::set_compute_timing`]).
+    compute_timing: bool,
 }
 
 /// Detects a main engine that stopped delivering: lit and commanded for a while, yet
@@ -619,6 +622,7 @@ impl ReferenceGnc {
             cycle_slips: 0,
             monitor: EngineMonitor::default(),
             touched_down: false,
+            compute_timing: true,
             cfg,
         })
     }
@@ -723,6 +727,10 @@ impl FlightSoftware for ReferenceGnc {
         "gnc"
     }
 
+    fn set_compute_timing(&mut self, on: bool) {
+        self.compute_timing = on;
+    }
+
     fn computer_reset(&mut self) {
         // Everything but the configuration and the boot counter is lost (a real boot
         // counter lives in protected memory); nothing here allocates (fixed-size state).
@@ -732,11 +740,13 @@ impl FlightSoftware for ReferenceGnc {
         }
         let boots = self.boot_count;
         let slips = self.cycle_slips;
+        let timing = self.compute_timing;
         if let Ok(fresh) = Self::new(self.cfg.clone()) {
             *self = fresh;
         }
         self.boot_count = boots;
         self.cycle_slips = slips;
+        self.compute_timing = timing;
         self.down = true;
     }
 
@@ -751,7 +761,7 @@ impl FlightSoftware for ReferenceGnc {
             ..Default::default()
         };
         // Rate group 0, navigation: every cycle, all of its samples.
-        let start_ns = monotonic_ns();
+        let start_ns = self.clock_ns();
         let nav = match self.cfg.navigation {
             GncNavigation::Bench => {
                 let nav = self.nav.update(tlm);
@@ -786,6 +796,16 @@ impl FlightSoftware for ReferenceGnc {
 }
 
 impl ReferenceGnc {
+    /// The wall clock for the rate groups' compute times, ns; 0 when they are not timed
+    /// (every group then reports 1 ns, "ran", and no cycle slip).
+    fn clock_ns(&self) -> u64 {
+        if self.compute_timing {
+            monotonic_ns()
+        } else {
+            0
+        }
+    }
+
     /// The configured cycle, ns.
     fn cycle_ns(&self) -> i64 {
         (self.cfg.cycle_s * 1e9).round() as i64
@@ -801,7 +821,7 @@ impl ReferenceGnc {
         start_ns: u64,
         period_ns: i64,
     ) -> u64 {
-        let now_ns = monotonic_ns();
+        let now_ns = self.clock_ns();
         self.record_group(report, group, now_ns.saturating_sub(start_ns), period_ns);
         now_ns
     }
@@ -832,9 +852,9 @@ impl ReferenceGnc {
                 return (held, 0);
             }
         }
-        let start_ns = monotonic_ns();
+        let start_ns = self.clock_ns();
         let guid = self.guidance.update(nav, max_accel_m_s2, min_accel_m_s2);
-        let ns = monotonic_ns().saturating_sub(start_ns);
+        let ns = self.clock_ns().saturating_sub(start_ns);
         self.guidance_slot = Some(slot);
         self.held_guidance = Some(guid);
         self.record_group(report, 1, ns, self.guidance_period_ns);
@@ -852,7 +872,8 @@ impl ReferenceGnc {
         start_ns: u64,
     ) -> Command {
         let (cmd, guidance_ns) = self.control(tlm, nav, report);
-        let ns = monotonic_ns()
+        let ns = self
+            .clock_ns()
             .saturating_sub(start_ns)
             .saturating_sub(guidance_ns);
         self.record_group(report, 2, ns, self.cycle_ns());
