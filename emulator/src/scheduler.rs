@@ -307,7 +307,15 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     // is told, the summary is made, and the session names the writer's error.
     let mut recorder = recorder;
     clock.start();
-    let mut last_command_ns = monotonic_ns();
+    // Untimed (`time_exchanges` off), every exchange's clock reading is 0, this too.
+    let now_ns = || {
+        if cfg.time_exchanges {
+            monotonic_ns()
+        } else {
+            0
+        }
+    };
+    let mut last_command_ns = now_ns();
     let mut k: u64 = 0;
     // The last step whose telemetry went out mid-step (a replay must know whether the
     // end came before or after it: the end record says).
@@ -390,13 +398,6 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         // A link fault may keep Telemetry(k) from the flight software: then nothing is
         // published, nothing can answer, and the step is a miss.
         let withheld = link.withheld();
-        let now_ns = || {
-            if cfg.time_exchanges {
-                monotonic_ns()
-            } else {
-                0
-            }
-        };
         let published_ns = now_ns();
         if link.publish(&tlm)? {
             digest.add_telemetry(&tlm);
@@ -509,7 +510,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                     // Only a realtime run can miss a deadline on a live link: in lockstep
                     // a miss comes from a fault alone (simulated), and a dead peer is
                     // what `receive_until` waiting out the link timeout finds.
-                    let silent_ms = (received_ns - last_command_ns) / 1_000_000;
+                    let silent_ms = received_ns.saturating_sub(last_command_ns) / 1_000_000;
                     if clock.misses_allowed() && silent_ms >= cfg.link_timeout_ms {
                         abort = Some(Abort::StubSilent {
                             step: k,

@@ -14,6 +14,12 @@ fn config() -> RunConfig {
         link: LinkKind::Inproc,
         // Through powered descent into rough braking: every rate group runs.
         duration_s: 60.0,
+        // Lost commands and telemetry: steps with no command (misses), which the
+        // scheduler handles apart.
+        faults: vec![
+            "command-drop@t=0,for=0.5".parse().unwrap(),
+            "telemetry-drop@t=20,for=1".parse().unwrap(),
+        ],
         ..Default::default()
     };
     cfg.log.enabled = false;
@@ -45,9 +51,15 @@ fn an_untimed_run_is_the_same_run_with_nothing_timed() {
     assert_eq!(untimed.outcome, timed.outcome);
     assert_eq!(untimed.steps, timed.steps);
     assert_eq!(untimed.touchdown, timed.touchdown);
-    // The timed run measured every exchange; the untimed one none.
-    assert_eq!(timed.timing.round_trip_ns.count, timed.steps);
-    assert_eq!(timed.timing.stub_compute_ns.count, timed.steps);
+    assert_eq!(untimed.timing.deadline_misses, timed.timing.deadline_misses);
+    assert!(timed.timing.deadline_misses > 0, "the faults made no miss");
+    // The timed run measured its exchanges (all but those whose telemetry was lost);
+    // the untimed one none.
+    assert!(timed.timing.round_trip_ns.count + timed.timing.deadline_misses >= timed.steps);
+    assert_eq!(
+        timed.timing.stub_compute_ns.count,
+        timed.timing.round_trip_ns.count
+    );
     assert_eq!(untimed.timing.round_trip_ns.count, 0);
     assert_eq!(untimed.timing.stub_compute_ns.count, 0);
     // The reference GNC's rate groups ran as often, each reported as 1 ns ("ran", not
@@ -75,6 +87,7 @@ fn only_a_lockstep_run_in_process_may_be_untimed() {
     let mut cfg = config();
     cfg.mode = Mode::Realtime;
     cfg.duration_s = 0.1;
+    cfg.faults.clear();
     let err = fly(&cfg, true).unwrap_err().to_string();
     assert!(err.contains("lockstep and in process"), "{err}");
 }
