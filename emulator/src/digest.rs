@@ -3,9 +3,10 @@
 //! XXH3-128 (the `xxhash-rust` crate), not a cryptographic hash: the digest proves that
 //! two runs exchanged the same packets, where nothing is forged, and for that a 128-bit
 //! hash of good distribution suffices (two different streams give one digest with odds
-//! of about 2^-128). Chosen for its cost: BLAKE3, the digest until 2026-12-05, hashed the 1.5 KB a step at about 4 GB/s on the 2-core VM and took
-//! 11 % of an in-process surrogate descent (`perf`); XXH3 hashes the same bytes about
-//! 5.5x faster (35 ms against 6.3 ms for a descent's 145 MB).
+//! of about 2^-128). Chosen for its cost: BLAKE3, the digest until 2026-12-05, hashed
+//! the 1.5 KB a step at about 4 GB/s on the 2-core VM and took 11 % of an in-process
+//! surrogate descent (`perf`); XXH3 hashes the same bytes about 5.5x faster (35 ms
+//! against 6.3 ms for a descent's 145 MB, in 64 KiB updates).
 //!
 //! Fields that legitimately differ between identical runs are hashed as zeros: the run
 //! id (it names the services) and the flight software's measured compute times and

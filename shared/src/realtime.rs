@@ -1,12 +1,13 @@
 //! Realtime hygiene for a stepping thread: `SCHED_FIFO`, memory locked (`mlockall`),
 //! the stack prefaulted, the CPUs' wake-up latency held at 0 (PM QoS), the thread
-//! pinned to one core; and what was actually obtained,
-//! read back from the kernel, for the run report.
+//! pinned to one core; and what was actually obtained, read back from the kernel, for
+//! the run report.
 //!
 //! Both processes of a run use it: the emulator (`oils run`) and the onboard stub
 //! (`oils stub`). A refused priority is an error (the caller asked for it by name); a
-//! refused memory lock, latency hold or pin is a warning in [`RealtimeStatus::warnings`]: the run goes
-//! on and says so. The syscalls are `libc`'s, each `unsafe` block with its SAFETY note.
+//! refused memory lock, latency hold or pin is a warning in
+//! [`RealtimeStatus::warnings`]: the run goes on and says so. The syscalls are `libc`'s,
+//! each `unsafe` block with its SAFETY note.
 
 use serde::{Deserialize, Serialize};
 
