@@ -25,7 +25,7 @@ use crate::recorder::{
 };
 use crate::sanitize::sanitize;
 use crate::timing::{TimingMonitor, TimingThresholds};
-use oils_shared::clock::monotonic_ns;
+use oils_shared::clock::{monotonic_ns, monotonic_ns_if};
 use oils_shared::link::LinkError;
 use oils_shared::{Command, PacketHeader, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_END_OF_RUN};
 use serde::{Deserialize, Serialize};
@@ -308,13 +308,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     let mut recorder = recorder;
     clock.start();
     // Untimed (`time_exchanges` off), every exchange's clock reading is 0, this too.
-    let now_ns = || {
-        if cfg.time_exchanges {
-            monotonic_ns()
-        } else {
-            0
-        }
-    };
+    let now_ns = || monotonic_ns_if(cfg.time_exchanges);
     let mut last_command_ns = now_ns();
     let mut k: u64 = 0;
     // The last step whose telemetry went out mid-step (a replay must know whether the

@@ -75,10 +75,6 @@ fn an_untimed_run_is_the_same_run_with_nothing_timed() {
         assert_eq!(u.count, t.count, "group {g}");
         assert!(u.count > 0 && u.max == 1, "group {g}: {u:?}");
     }
-    assert!(
-        t.group_compute_ns[0].max > 1,
-        "the timed run timed its navigation"
-    );
     assert_eq!(u.cycle_slips, 0);
 }
 

@@ -15,6 +15,16 @@ pub fn monotonic_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
+/// [`monotonic_ns`] when `timed`, else 0 without reading the clock: for the figures a run
+/// may choose not to time (a campaign case's round trips and compute times).
+pub fn monotonic_ns_if(timed: bool) -> u64 {
+    if timed {
+        monotonic_ns()
+    } else {
+        0
+    }
+}
+
 /// Sleeps until the monotonic time `deadline_ns` (absolute), then spins for the last
 /// `spin_ns`: the kernel wakes us tens of microseconds late, the spin absorbs that.
 pub fn sleep_until_ns(deadline_ns: u64, spin_ns: u64) {

@@ -54,8 +54,9 @@ pub fn answer<F: FlightSoftware + ?Sized>(fsw: &mut F, tlm: &Telemetry) -> Comma
 }
 
 /// [`answer`] without reading the clock: `stub_compute_ns` is 0. For campaign cases in
-/// process, which report no compute time: the two clock reads a step were about 3 % of
-/// a case (`perf`, 2-core VM). The command is otherwise the same.
+/// process, which report no compute time (two of the nine clock reads of a cycle, which
+/// together were about 8 % of a case: `perf`, 2-core VM). The command is otherwise the
+/// same.
 pub fn answer_untimed<F: FlightSoftware + ?Sized>(fsw: &mut F, tlm: &Telemetry) -> Command {
     let mut cmd = if tlm.header.flags & TLM_FLAG_COMPUTER_RESET != 0 {
         // The computer is down: nothing runs, the emulator ignores what comes back.

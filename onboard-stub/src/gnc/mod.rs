@@ -20,7 +20,7 @@ use attitude::AttitudeController;
 use guidance::{Guidance, GuidanceCommand, Phase};
 use nalgebra::Vector3;
 use navigation::NavFilter;
-use oils_shared::clock::monotonic_ns;
+use oils_shared::clock::monotonic_ns_if;
 use oils_shared::{
     Command, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE, ATTITUDE_MODE_THRUSTERS,
     ENGINE_COUNT, NAV_FLAG_VALID, RATE_GROUPS, TLM_FLAG_FOOTPAD_CONTACT,
@@ -799,11 +799,7 @@ impl ReferenceGnc {
     /// The wall clock for the rate groups' compute times, ns; 0 when they are not timed
     /// (every group then reports 1 ns, "ran", and no cycle slip).
     fn clock_ns(&self) -> u64 {
-        if self.compute_timing {
-            monotonic_ns()
-        } else {
-            0
-        }
+        monotonic_ns_if(self.compute_timing)
     }
 
     /// The configured cycle, ns.

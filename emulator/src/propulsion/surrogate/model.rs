@@ -358,8 +358,8 @@ pub fn active_terms_of(
 /// extended by one slot that always holds 1.0; lower-degree terms are padded with that slot.
 /// Highest supported polynomial degree.
 pub const MAX_DEGREE: usize = 3;
-/// The most features a submodel may have (a history of 64 steps gives a MIMO submodel
-/// about 720). The predictor keeps its feature buffers at a fixed `MAX_FEATURES + 1`
+/// The most features a submodel may have (the widest the other limits allow: 714 for a
+/// MIMO submodel, 648 per engine, at a history of 64). The predictor keeps its feature buffers at a fixed `MAX_FEATURES + 1`
 /// slots, which lets it read a term's factors without a bounds check each.
 pub const MAX_FEATURES: usize = 1023;
 
