@@ -361,7 +361,7 @@ fn a_c_library_that_never_returns_is_reported_and_its_stub_ends_on_sigterm() {
         .contains("killed"));
 
     // By hand: the emulator gives up on it; SIGTERM then ends the stub, stuck as it is.
-    let id = run_id(0xc4);
+    let id = run_id(0xc6);
     let mut emulator = oils()
         .args([
             "run",

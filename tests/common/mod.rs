@@ -40,8 +40,18 @@ pub fn text(o: &Output) -> String {
     )
 }
 
-/// A unique run id for tests that start the two processes by hand.
+/// A unique run id for tests that start the two processes by hand. Tests of one binary
+/// run in parallel, so a tag taken twice would let two runs share services (the second
+/// stub then fails with `ExceedsMaxSupportedPublishers`, depending on timing): a reused
+/// tag fails here, every time.
 pub fn run_id(tag: u64) -> String {
+    static TAKEN: std::sync::Mutex<Vec<u64>> = std::sync::Mutex::new(Vec::new());
+    let mut taken = TAKEN.lock().unwrap_or_else(|e| e.into_inner());
+    assert!(
+        !taken.contains(&tag),
+        "run_id tag {tag:#x} is used twice in this test binary"
+    );
+    taken.push(tag);
     format!("{:016x}", (std::process::id() as u64) << 20 | tag)
 }
 
