@@ -237,6 +237,9 @@ pub struct Plant {
     /// The sensors on board, when the telemetry carries them: fed the truth after every
     /// step, drained into each telemetry's sensor frame.
     sensors: Option<Box<crate::sensors::SensorSuite>>,
+    /// The last [`Plant::altitude_m`]: its position, time and value. The scheduler and
+    /// the telemetry both ask for it after a step, and the terrain lookup is worth one.
+    altitude_memo: std::cell::Cell<Option<(Vector3<f64>, i64, f64)>>,
 }
 
 /// An engine fault acting on the command the engine gets.
@@ -336,6 +339,7 @@ impl Plant {
             thrusters: ThrusterBank::from_config(lander),
             step_start: (state, 0),
             sensors: None,
+            altitude_memo: std::cell::Cell::new(None),
         })
     }
 
@@ -864,7 +868,16 @@ impl Plant {
 
     /// True height of the footpads above the surface, metres.
     pub fn altitude_m(&self) -> f64 {
-        self.footpad_height_m(&self.state.pos_mci_m)
+        let (pos, t_ns) = (self.state.pos_mci_m, self.time_ns);
+        // Same position (bit for bit, so no NaN matches) and time: the same height.
+        if let Some((p, t, h)) = self.altitude_memo.get() {
+            if t == t_ns && p.iter().zip(pos.iter()).all(|(a, b)| a.to_bits() == b.to_bits()) {
+                return h;
+            }
+        }
+        let h = self.footpad_height_m(&pos);
+        self.altitude_memo.set(Some((pos, t_ns, h)));
+        h
     }
 
     /// Simulated time at the end of the last step, nanoseconds. After touchdown the

@@ -302,10 +302,7 @@ impl Guidance {
     /// Range control: predicted overshoot (metres, > 0: the braking arc would carry the
     /// vehicle past its aim) of rough braking at a constant `throttle` (a fraction of
     /// `thrust_n`, the thrust available now), then the attitude hold, then fine braking
-    /// covering `V T / 2` in its planned time `T`. Planar point mass: horizontal speed
-    /// relative to the ground, altitude on the reference profile (the vertical channel
-    /// tracks it, so the vertical thrust is `g - V^2/r`), mass falling with the flow of
-    /// the commanded thrust. Allocation-free: a fixed-step loop.
+    /// covering `V T / 2` in its planned time `T` ([`RoughArc`]).
     fn rough_overshoot_m(
         &self,
         throttle: f64,
@@ -313,53 +310,33 @@ impl Guidance {
         thrust_n: f64,
         range_go_m: f64,
     ) -> f64 {
-        let c = &self.cfg;
-        let (h0, v0) = self.rough_start;
-        let (h_end, v_end) = (c.rough_end_altitude_m, c.rough_end_speed_m_s);
-        let span = (v0 - v_end).max(1.0);
-        let radius = c.moon_radius_m;
-        let dt = c.rough_predict_step_s;
-        let force = throttle * thrust_n;
-        let mdot = force / (c.isp_s * 9.806_65);
-        let mut v = nav.horizontal_velocity_mci_m_s().norm();
-        let mut m = nav.mass_kg.max(c.dry_mass_kg);
-        let mut s = 0.0;
-        let mut a_h = 0.0;
-        let accel_h = |v: f64, m: f64| {
-            let frac = ((v - v_end) / span).clamp(0.0, 1.0);
-            let r = radius + h_end + (h0 - h_end) * frac;
-            let a_t = force / m;
-            let a_up =
-                (c.moon_mu_m3_s2 / (r * r) - v * v / r).clamp(0.0, c.rough_max_up_frac * a_t);
-            ((a_t * a_t - a_up * a_up).max(0.0).sqrt(), r)
-        };
-        // At most an hour of braking is predicted (the loop must end).
-        for _ in 0..(3600.0 / dt) as usize {
-            if v <= v_end {
+        let mut arc = RoughArc::new(self, throttle, nav, thrust_n);
+        while arc.advance() {}
+        arc.overshoot_m(range_go_m)
+    }
+
+    /// [`Guidance::rough_overshoot_m`] at two throttles, the two arcs flown side by side:
+    /// each is a chain of divisions and a square root, each step waiting on the last, so
+    /// two independent chains take about the time of one. Each arc does exactly what it
+    /// does alone.
+    fn rough_overshoot_pair_m(
+        &self,
+        throttles: [f64; 2],
+        nav: &NavSolution,
+        thrust_n: f64,
+        range_go_m: f64,
+    ) -> [f64; 2] {
+        let [a, b] = throttles;
+        let mut a = RoughArc::new(self, a, nav, thrust_n);
+        let mut b = RoughArc::new(self, b, nav, thrust_n);
+        loop {
+            let more_a = a.advance();
+            let more_b = b.advance();
+            if !(more_a || more_b) {
                 break;
             }
-            let (ah, r) = accel_h(v, m);
-            a_h = ah;
-            if a_h <= 1e-6 {
-                return f64::INFINITY;
-            }
-            let v_next = v - a_h * dt;
-            let scale = radius / r;
-            if v_next <= v_end {
-                let tau = (v - v_end) / a_h;
-                s += 0.5 * (v + v_end) * tau * scale;
-                v = v_end;
-                break;
-            }
-            s += 0.5 * (v + v_next) * dt * scale;
-            v = v_next;
-            m = (m - mdot * dt).max(c.dry_mass_kg);
         }
-        // The attitude hold flies on at the same deceleration.
-        let hold = c.attitude_hold_s;
-        let v_fine = (v - a_h * hold).max(0.0);
-        s += 0.5 * (v + v_fine) * hold;
-        s + 0.5 * v_fine * c.fine_plan_tgo_s - range_go_m
+        [a.overshoot_m(range_go_m), b.overshoot_m(range_go_m)]
     }
 
     /// The rough-braking throttle that puts fine braking's start `V T / 2` before the
@@ -367,8 +344,7 @@ impl Guidance {
     fn solve_rough_throttle(&self, nav: &NavSolution, thrust_n: f64, range_go_m: f64) -> f64 {
         let c = &self.cfg;
         let (mut lo, mut hi) = (c.rough_min_throttle_frac, c.rough_max_throttle_frac);
-        let mut f_lo = self.rough_overshoot_m(lo, nav, thrust_n, range_go_m);
-        let mut f_hi = self.rough_overshoot_m(hi, nav, thrust_n, range_go_m);
+        let [mut f_lo, mut f_hi] = self.rough_overshoot_pair_m([lo, hi], nav, thrust_n, range_go_m);
         if f_hi >= 0.0 {
             return hi; // even full thrust arrives long: brake as hard as allowed
         }
@@ -658,6 +634,117 @@ impl Guidance {
             accel_mci_m_s2: nav.up_mci * a_up + a_h,
             throttle_frac: None,
         }
+    }
+}
+
+/// Rough braking's arc at a constant throttle, flown by [`Guidance::rough_overshoot_m`]
+/// one fixed step at a time: planar point mass, horizontal speed relative to the
+/// ground, altitude on the reference profile (the vertical channel tracks it, so the
+/// vertical thrust is `g - V^2/r`), mass falling with the flow of the commanded thrust.
+/// Allocation-free; at most an hour of braking is predicted (the loop must end).
+struct RoughArc<'a> {
+    cfg: &'a GncConfig,
+    /// Reference profile: altitude and speed at its start and end, m and m/s.
+    h0: f64,
+    h_end: f64,
+    v_end: f64,
+    span: f64,
+    force: f64,
+    mdot: f64,
+    /// Horizontal speed, m/s; mass, kg; ground distance covered, m.
+    v: f64,
+    m: f64,
+    s: f64,
+    /// The last step's horizontal deceleration, m/s^2.
+    a_h: f64,
+    /// Steps left before the hour is up.
+    steps_left: usize,
+    /// No horizontal deceleration is left: the arc never ends (overshoot infinite).
+    stalled: bool,
+    done: bool,
+}
+
+impl<'a> RoughArc<'a> {
+    fn new(g: &'a Guidance, throttle: f64, nav: &NavSolution, thrust_n: f64) -> Self {
+        let c = &g.cfg;
+        let (h0, v0) = g.rough_start;
+        let v_end = c.rough_end_speed_m_s;
+        let force = throttle * thrust_n;
+        RoughArc {
+            cfg: c,
+            h0,
+            h_end: c.rough_end_altitude_m,
+            v_end,
+            span: (v0 - v_end).max(1.0),
+            force,
+            mdot: force / (c.isp_s * 9.806_65),
+            v: nav.horizontal_velocity_mci_m_s().norm(),
+            m: nav.mass_kg.max(c.dry_mass_kg),
+            s: 0.0,
+            a_h: 0.0,
+            steps_left: (3600.0 / c.rough_predict_step_s) as usize,
+            stalled: false,
+            done: false,
+        }
+    }
+
+    /// Horizontal deceleration at speed `v` and mass `m`, and the radius there.
+    #[inline(always)]
+    fn accel_h(&self, v: f64, m: f64) -> (f64, f64) {
+        let c = self.cfg;
+        let frac = ((v - self.v_end) / self.span).clamp(0.0, 1.0);
+        let r = c.moon_radius_m + self.h_end + (self.h0 - self.h_end) * frac;
+        let a_t = self.force / m;
+        let a_up = (c.moon_mu_m3_s2 / (r * r) - v * v / r).clamp(0.0, c.rough_max_up_frac * a_t);
+        ((a_t * a_t - a_up * a_up).max(0.0).sqrt(), r)
+    }
+
+    /// One step of the arc; false once it has ended (then it does nothing).
+    #[inline(always)]
+    fn advance(&mut self) -> bool {
+        if self.done {
+            return false;
+        }
+        if self.steps_left == 0 || self.v <= self.v_end {
+            self.done = true;
+            return false;
+        }
+        self.steps_left -= 1;
+        let dt = self.cfg.rough_predict_step_s;
+        let (ah, r) = self.accel_h(self.v, self.m);
+        self.a_h = ah;
+        if ah <= 1e-6 {
+            self.stalled = true;
+            self.done = true;
+            return false;
+        }
+        let v = self.v;
+        let v_next = v - ah * dt;
+        let scale = self.cfg.moon_radius_m / r;
+        if v_next <= self.v_end {
+            let tau = (v - self.v_end) / ah;
+            self.s += 0.5 * (v + self.v_end) * tau * scale;
+            self.v = self.v_end;
+            self.done = true;
+            return false;
+        }
+        self.s += 0.5 * (v + v_next) * dt * scale;
+        self.v = v_next;
+        self.m = (self.m - self.mdot * dt).max(self.cfg.dry_mass_kg);
+        true
+    }
+
+    /// The overshoot past `range_go_m` once the arc has ended: the attitude hold flies
+    /// on at the same deceleration, then fine braking covers `V T / 2`.
+    fn overshoot_m(&self, range_go_m: f64) -> f64 {
+        if self.stalled {
+            return f64::INFINITY;
+        }
+        let c = self.cfg;
+        let hold = c.attitude_hold_s;
+        let v_fine = (self.v - self.a_h * hold).max(0.0);
+        let s = self.s + 0.5 * (self.v + v_fine) * hold;
+        s + 0.5 * v_fine * c.fine_plan_tgo_s - range_go_m
     }
 }
 
