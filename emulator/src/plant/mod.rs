@@ -871,7 +871,11 @@ impl Plant {
         let (pos, t_ns) = (self.state.pos_mci_m, self.time_ns);
         // Same position (bit for bit, so no NaN matches) and time: the same height.
         if let Some((p, t, h)) = self.altitude_memo.get() {
-            if t == t_ns && p.iter().zip(pos.iter()).all(|(a, b)| a.to_bits() == b.to_bits()) {
+            if t == t_ns
+                && p.iter()
+                    .zip(pos.iter())
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+            {
                 return h;
             }
         }

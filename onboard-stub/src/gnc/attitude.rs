@@ -81,6 +81,20 @@ impl AttitudeController {
         dt_s: f64,
     ) -> Vector3<f64> {
         let err = Self::pointing_error_body(nav, desired_dir_mci);
+        self.torque_for_error_body_nm(nav, &err, inertia_kg_m2, dt_s)
+    }
+
+    /// [`AttitudeController::torque_body_nm`] for a pointing error already worked out
+    /// ([`AttitudeController::pointing_error_body`]): the GNC reports the error too, and
+    /// needs it once a cycle.
+    pub fn torque_for_error_body_nm(
+        &mut self,
+        nav: &NavSolution,
+        err: &Vector3<f64>,
+        inertia_kg_m2: &Vector3<f64>,
+        dt_s: f64,
+    ) -> Vector3<f64> {
+        let err = *err;
         let settled = err.norm() < self.integral_band_rad
             && nav.rate_body_rad_s.xy().norm() < INTEGRAL_MAX_RATE_RAD_S;
         if self.integral_time_s > 0.0 && settled {

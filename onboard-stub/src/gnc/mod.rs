@@ -942,8 +942,11 @@ impl ReferenceGnc {
         let set = self.engine_set;
 
         let inertia = self.cfg.inertia_kg_m2(mass_kg);
-        let torque = self.attitude.torque_body_nm(&nav, &dir, &inertia, dt_s);
-        self.pointing_error_rad = AttitudeController::pointing_error_body(&nav, &dir).norm();
+        let error_body = AttitudeController::pointing_error_body(&nav, &dir);
+        let torque = self
+            .attitude
+            .torque_for_error_body_nm(&nav, &error_body, &inertia, dt_s);
+        self.pointing_error_rad = error_body.norm();
         let alloc = self.allocator.allocate(set, wanted_n, torque);
         self.last_cmd_total_n = alloc.thrust_cmd_n.iter().sum();
         self.monitor.commanded(&alloc.thrust_cmd_n, &alloc.on);
