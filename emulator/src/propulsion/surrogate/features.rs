@@ -112,8 +112,7 @@ pub fn command_sum_of(input: &InputVec) -> f64 {
 /// ([`valve_sum_of`], [`FeatureSpec::valve_sum`]).
 #[inline]
 pub fn valve_sum_change_of<H: History + ?Sized>(h: &H, lag: usize) -> f64 {
-    valve_sum_of(h.input(lag), &h.valve(lag).valve_n)
-        - valve_sum_of(h.input(lag + 1), &h.valve(lag + 1).valve_n)
+    h.valve_sum(lag) - h.valve_sum(lag + 1)
 }
 
 /// The features a phase indicator is multiplied with in the library: the command, the
@@ -259,6 +258,13 @@ pub trait History {
     /// Valve filter state after step `t - lag` (lag 0: after the step being predicted,
     /// a function of the commands only). Only read by specs with [`FeatureSpec::valve`].
     fn valve(&self, lag: usize) -> &ValveState;
+    /// [`valve_sum_of`] after step `t - lag`. A history that keeps it (the runtime's
+    /// ring works it out once, as the step is written, where each of the `dT_vsum`
+    /// features would read it twice) returns the same number.
+    #[inline(always)]
+    fn valve_sum(&self, lag: usize) -> f64 {
+        valve_sum_of(self.input(lag), &self.valve(lag).valve_n)
+    }
 }
 
 impl FeatureSpec {

@@ -18,7 +18,7 @@ use super::features::{
     EngineLanes, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_MF, STATE_MO,
 };
 use super::model::{eval_term, ActiveTerm, Model, OutputRow, Submodel, Term, MAX_FEATURES};
-use super::valve::{ValveState, ValveTrack};
+use super::valve::{valve_sum_of, ValveState, ValveTrack};
 use oils_shared::ENGINE_COUNT;
 use wide::{f64x4, CmpEq, CmpGt, CmpLt};
 
@@ -28,6 +28,9 @@ use wide::{f64x4, CmpEq, CmpGt, CmpLt};
 struct Ring {
     inputs: Vec<InputVec>,
     valves: Vec<ValveState>,
+    /// [`valve_sum_of`] of each slot's input and valve state, worked out as the slot is
+    /// written ([`Ring::set_valve`]): the `dT_vsum` features read each twice.
+    valve_sums: Vec<f64>,
     states: Vec<StateVec>,
     head: usize,
 }
@@ -37,6 +40,7 @@ impl Ring {
         Self {
             inputs: vec![[0.0; INPUT_DIM]; depth],
             valves: vec![ValveState::default(); depth],
+            valve_sums: vec![0.0; depth],
             states: vec![[0.0; super::features::STATE_DIM]; depth],
             head: 0,
         }
@@ -58,6 +62,12 @@ impl Ring {
         }
     }
 
+    /// Sets slot `i`'s valve state (its input already set) and the sum it draws.
+    fn set_valve(&mut self, i: usize, valve: ValveState) {
+        self.valves[i] = valve;
+        self.valve_sums[i] = valve_sum_of(&self.inputs[i], &valve.valve_n);
+    }
+
     /// Makes room for a new latest step (the oldest is overwritten).
     fn advance(&mut self) {
         self.head = if self.head + 1 == self.depth() {
@@ -77,6 +87,9 @@ impl History for Ring {
     }
     fn valve(&self, lag: usize) -> &ValveState {
         &self.valves[self.slot(lag)]
+    }
+    fn valve_sum(&self, lag: usize) -> f64 {
+        self.valve_sums[self.slot(lag)]
     }
 }
 
@@ -202,6 +215,9 @@ impl Predictor {
         });
         self.ring.inputs.fill([0.0; INPUT_DIM]);
         self.ring.valves.fill(rest);
+        self.ring
+            .valve_sums
+            .fill(valve_sum_of(&[0.0; INPUT_DIM], &rest.valve_n));
         self.ring.states.fill(*state);
         self.ring.head = 0;
         self.out_of_envelope_steps = 0;
@@ -219,7 +235,7 @@ impl Predictor {
             self.ring.inputs[i] = *h.input(j + 1);
             self.ring.states[i] = *h.state(j + 1);
             if self.valve.is_some() {
-                self.ring.valves[i] = *h.valve(j + 1);
+                self.ring.set_valve(i, *h.valve(j + 1));
             }
         }
         if let Some(v) = &mut self.valve {
@@ -275,7 +291,7 @@ impl Predictor {
         let head = self.ring.head;
         self.ring.inputs[head] = u;
         if let Some(v) = &mut self.valve {
-            self.ring.valves[head] = *v.advance(&u);
+            self.ring.set_valve(head, *v.advance(&u));
         }
         // Not read (state lags start at 1) until the prediction replaces it.
         self.ring.states[head] = prev;
@@ -537,15 +553,16 @@ impl SubmodelUse {
                     .collect(),
                 rows: s.rows.iter().map(groups_of).collect(),
             }),
-            Layout::PerEngine => Self::PerEngine(EngineUse {
-                scaling: (0..dim)
+            Layout::PerEngine => {
+                let scaling: Vec<_> = (0..dim)
                     .map(|j| Scaling::of(s, j, used[j]).lanes())
-                    .collect(),
-                groups: groups_of(&s.rows[0])
+                    .collect();
+                let groups = groups_of(&s.rows[0])
                     .into_iter()
                     .map(|g| g.lanes(dim))
-                    .collect(),
-            }),
+                    .collect();
+                Self::PerEngine(EngineUse { scaling, groups })
+            }
         }
     }
 }
@@ -1020,6 +1037,12 @@ pub(crate) mod tests {
                 want.map(f64::to_bits),
                 "step {t} command {cmd:?}: {got:?} vs {want:?}"
             );
+            // The ring's valve sums are the ones the features would work out.
+            for lag in 0..lanes.ring.depth() {
+                let r = &lanes.ring;
+                let want = valve_sum_of(r.input(lag), &r.valve(lag).valve_n);
+                assert_eq!(r.valve_sum(lag).to_bits(), want.to_bits(), "lag {lag}");
+            }
         }
         assert_eq!(
             lanes.out_of_envelope_steps(),
