@@ -15,62 +15,87 @@
 //! [`FeatureSpec::fill`]: super::features::FeatureSpec::fill
 
 use super::features::{
-    EngineLanes, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_MF, STATE_MO,
+    EngineLanes, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_DIM, STATE_MF,
+    STATE_MO,
 };
 use super::model::{eval_term, ActiveTerm, Model, OutputRow, Submodel, Term, MAX_FEATURES};
 use super::valve::{valve_sum_of, ValveState, ValveTrack};
 use oils_shared::ENGINE_COUNT;
 use wide::{f64x4, CmpEq, CmpGt, CmpLt};
 
-/// The last steps' inputs (as the model saw them), valve states and states; slot `head`
-/// is the latest step. Allocated once, overwritten in place.
+/// The last steps' inputs (as the model saw them), valve states and states. Allocated
+/// once, overwritten in place. Each step is kept twice, at slots `s` and `s + depth`,
+/// so that step `t - lag` (`t` the latest) is always at `head + depth - lag`: a read is
+/// one subtraction, with no wrap around to test, and the reads of one lag across the
+/// steps are a fixed offset from `head` ([`MimoUse`]).
 #[derive(Debug, Clone)]
 struct Ring {
+    /// Steps kept (the deepest lag read, plus one).
+    depth: usize,
+    /// The latest step's lower slot, `0..depth`.
+    head: usize,
     inputs: Vec<InputVec>,
     valves: Vec<ValveState>,
     /// [`valve_sum_of`] of each slot's input and valve state, worked out as the slot is
     /// written ([`Ring::set_valve`]): the `dT_vsum` features read each twice.
     valve_sums: Vec<f64>,
     states: Vec<StateVec>,
-    head: usize,
 }
 
 impl Ring {
     fn new(depth: usize) -> Self {
+        let slots = 2 * depth;
         Self {
-            inputs: vec![[0.0; INPUT_DIM]; depth],
-            valves: vec![ValveState::default(); depth],
-            valve_sums: vec![0.0; depth],
-            states: vec![[0.0; super::features::STATE_DIM]; depth],
+            depth,
             head: 0,
+            inputs: vec![[0.0; INPUT_DIM]; slots],
+            valves: vec![ValveState::default(); slots],
+            valve_sums: vec![0.0; slots],
+            states: vec![[0.0; super::features::STATE_DIM]; slots],
         }
     }
 
     fn depth(&self) -> usize {
-        self.inputs.len()
+        self.depth
     }
 
-    /// The slot holding step `t - lag` (`t` the latest step). Every feature read comes
-    /// through here, so no division: an integer division per read is slow enough to
-    /// show in a whole descent.
+    /// The slot read for step `t - lag`.
+    #[inline(always)]
     fn slot(&self, lag: usize) -> usize {
-        debug_assert!(lag < self.depth(), "lag {lag} beyond the ring");
-        if lag <= self.head {
-            self.head - lag
-        } else {
-            self.head + self.depth() - lag
+        debug_assert!(lag < self.depth, "lag {lag} beyond the ring");
+        self.head + self.depth - lag
+    }
+
+    /// Both slots of step `t - lag`.
+    fn copies(&self, lag: usize) -> [usize; 2] {
+        let s = self.slot(lag);
+        let low = if s >= self.depth { s - self.depth } else { s };
+        [low, low + self.depth]
+    }
+
+    fn set_input(&mut self, lag: usize, input: InputVec) {
+        for i in self.copies(lag) {
+            self.inputs[i] = input;
         }
     }
 
-    /// Sets slot `i`'s valve state (its input already set) and the sum it draws.
-    fn set_valve(&mut self, i: usize, valve: ValveState) {
-        self.valves[i] = valve;
-        self.valve_sums[i] = valve_sum_of(&self.inputs[i], &valve.valve_n);
+    fn set_state(&mut self, lag: usize, state: StateVec) {
+        for i in self.copies(lag) {
+            self.states[i] = state;
+        }
+    }
+
+    /// Sets step `t - lag`'s valve state (its input already set) and the sum it draws.
+    fn set_valve(&mut self, lag: usize, valve: ValveState) {
+        for i in self.copies(lag) {
+            self.valves[i] = valve;
+            self.valve_sums[i] = valve_sum_of(&self.inputs[i], &valve.valve_n);
+        }
     }
 
     /// Makes room for a new latest step (the oldest is overwritten).
     fn advance(&mut self) {
-        self.head = if self.head + 1 == self.depth() {
+        self.head = if self.head + 1 == self.depth {
             0
         } else {
             self.head + 1
@@ -180,7 +205,7 @@ impl Predictor {
         let subs = &model.submodels;
         // The deepest lag any feature reads, and the step being predicted.
         let depth = subs.iter().map(|s| s.features.max_lag()).max().unwrap_or(1) + 1;
-        let uses = subs.iter().map(SubmodelUse::of).collect();
+        let uses = subs.iter().map(|s| SubmodelUse::of(s, depth)).collect();
         let dt_s = model.sample_time_ns as f64 * 1e-9;
         let mut p = Self {
             model: model.clone(),
@@ -231,11 +256,10 @@ impl Predictor {
         // After the next step's advance, the ring's lag j + 1 is the history's lag j + 1.
         self.ring.head = 0;
         for j in 0..self.ring.depth() {
-            let i = self.ring.slot(j);
-            self.ring.inputs[i] = *h.input(j + 1);
-            self.ring.states[i] = *h.state(j + 1);
+            self.ring.set_input(j, *h.input(j + 1));
+            self.ring.set_state(j, *h.state(j + 1));
             if self.valve.is_some() {
-                self.ring.set_valve(i, *h.valve(j + 1));
+                self.ring.set_valve(j, *h.valve(j + 1));
             }
         }
         if let Some(v) = &mut self.valve {
@@ -288,13 +312,12 @@ impl Predictor {
         self.guards.clamped_commands += u64::from(outside);
         let mut guard = Guard::default();
         self.ring.advance();
-        let head = self.ring.head;
-        self.ring.inputs[head] = u;
+        self.ring.set_input(0, u);
         if let Some(v) = &mut self.valve {
-            self.ring.set_valve(head, *v.advance(&u));
+            self.ring.set_valve(0, *v.advance(&u));
         }
-        // Not read (state lags start at 1) until the prediction replaces it.
-        self.ring.states[head] = prev;
+        // The latest state's slots still hold the oldest step's: state lags start at 1,
+        // and the prediction replaces it.
         let mut next = prev;
         for (s, u) in self.model.submodels.iter().zip(&self.subs) {
             match u {
@@ -323,7 +346,7 @@ impl Predictor {
         self.guards.clamped_predictions += u64::from(guard.clamped);
         self.guards.bounded_predictions += u64::from(guard.bounded);
         self.out_of_envelope_steps += u64::from(outside);
-        self.ring.states[head] = next;
+        self.ring.set_state(0, next);
         next
     }
 }
@@ -383,10 +406,11 @@ impl Scaling<f64> {
     /// feature was clamped. A value that is not a number stays one.
     #[inline(always)]
     fn scale(&self, raw: f64, outside: &mut bool) -> f64 {
-        *outside |= self.used & ((raw < self.lo) | (raw > self.hi));
         let clamped = if raw < self.lo {
+            *outside |= self.used;
             self.lo
         } else if raw > self.hi {
+            *outside |= self.used;
             self.hi
         } else {
             raw
@@ -456,11 +480,17 @@ enum SubmodelUse {
 }
 
 /// A MIMO submodel: the features its terms read, and its rows.
+///
+/// Only the features some active term reads are gathered (the committed model's MIMO
+/// terms read 28 of its 65). Nearly all are an input or a state at a lag: those are
+/// read straight from the ring's numbers, at a fixed offset from the latest step's
+/// ([`Ring`] keeps every step at `head + depth - lag`), the others through
+/// [`Source::read`].
 #[derive(Debug, Clone)]
 struct MimoUse {
-    /// Only the features some active term reads: the others are never gathered (the
-    /// committed model's MIMO terms read 28 of its 65).
-    reads: Vec<Read>,
+    input_reads: Vec<RingRead>,
+    state_reads: Vec<RingRead>,
+    other_reads: Vec<Read>,
     /// Per row, its terms in groups ([`TermGroup`]).
     rows: Vec<Vec<TermGroup<f64>>>,
 }
@@ -471,6 +501,51 @@ struct Read {
     feature: usize,
     source: Source,
     scaling: Scaling<f64>,
+}
+
+/// A MIMO feature that is an input or a state component at a lag: its offset among
+/// the ring's inputs (or states), as numbers, from the start of the slot `head`
+/// (`(depth - lag) * width + component`), its index, its scaling.
+#[derive(Debug, Clone, Copy)]
+struct RingRead {
+    at: usize,
+    feature: u16,
+    scaling: Scaling<f64>,
+}
+
+impl MimoUse {
+    fn of(s: &Submodel, used: &[bool], depth: usize) -> Self {
+        let mut u = MimoUse {
+            input_reads: Vec::new(),
+            state_reads: Vec::new(),
+            other_reads: Vec::new(),
+            rows: s.rows.iter().map(|r| groups_of(s, r)).collect(),
+        };
+        let sources = s.features.sources();
+        for (j, source) in sources.into_iter().enumerate().filter(|&(j, _)| used[j]) {
+            let scaling = Scaling::of(s, j, true);
+            let ring = |lag: usize, comp: usize, width: usize| RingRead {
+                at: (depth - lag) * width + comp,
+                feature: j as u16,
+                scaling,
+            };
+            // A MIMO read is engine 0's: a component gets no engine offset.
+            match source {
+                Source::Input { lag, comp, .. } if lag < depth && comp < INPUT_DIM => {
+                    u.input_reads.push(ring(lag, comp, INPUT_DIM));
+                }
+                Source::State { lag, comp, .. } if lag < depth && comp < STATE_DIM => {
+                    u.state_reads.push(ring(lag, comp, STATE_DIM));
+                }
+                source => u.other_reads.push(Read {
+                    feature: j,
+                    source,
+                    scaling,
+                }),
+            }
+        }
+        u
+    }
 }
 
 /// A per-engine submodel: every feature's scaling and the shared row's terms in groups,
@@ -533,26 +608,13 @@ fn groups_of(s: &Submodel, r: &OutputRow) -> Vec<TermGroup<f64>> {
 }
 
 impl SubmodelUse {
-    fn of(s: &Submodel) -> Self {
+    /// What the step reads of `s`, in a ring of `depth` steps.
+    fn of(s: &Submodel, depth: usize) -> Self {
         let dim = s.features.dim();
         let used = used_features(s);
         let groups_of = |r: &OutputRow| groups_of(s, r);
         match s.features.layout {
-            Layout::Mimo => Self::Mimo(MimoUse {
-                reads: s
-                    .features
-                    .sources()
-                    .into_iter()
-                    .enumerate()
-                    .filter(|&(j, _)| used[j])
-                    .map(|(j, source)| Read {
-                        feature: j,
-                        source,
-                        scaling: Scaling::of(s, j, true),
-                    })
-                    .collect(),
-                rows: s.rows.iter().map(groups_of).collect(),
-            }),
+            Layout::Mimo => Self::Mimo(MimoUse::of(s, &used, depth)),
             Layout::PerEngine => {
                 let scaling: Vec<_> = (0..dim)
                     .map(|j| Scaling::of(s, j, used[j]).lanes())
@@ -573,24 +635,20 @@ impl SubmodelUse {
 /// is then not finite and [`guarded`] keeps the previous value.
 fn gather(s: &Submodel, u: &MimoUse, h: &Ring, x: &mut Features) -> bool {
     let mut outside = false;
-    for r in &u.reads {
-        x[r.feature] = r.scaling.scale(read_mimo(&r.source, h), &mut outside);
+    let mut from_ring = |numbers: &[f64], width: usize, reads: &[RingRead]| {
+        let head = h.head * width;
+        for r in reads {
+            let raw = numbers.get(head + r.at).copied().unwrap_or(f64::NAN);
+            x[slot(r.feature)] = r.scaling.scale(raw, &mut outside);
+        }
+    };
+    from_ring(bytemuck::cast_slice(&h.inputs), INPUT_DIM, &u.input_reads);
+    from_ring(bytemuck::cast_slice(&h.states), STATE_DIM, &u.state_reads);
+    for r in &u.other_reads {
+        x[r.feature] = r.scaling.scale(r.source.read(h, 0), &mut outside);
     }
     x[s.features.dim()] = 1.0;
     outside
-}
-
-/// [`Source::read`] of a MIMO feature: an input or a state at a lag (nearly all of a
-/// MIMO submodel's reads) read from the ring here, in line, the others by
-/// `Source::read`; the same value either way (a MIMO read is engine 0's, so a
-/// component gets no engine offset).
-#[inline(always)]
-fn read_mimo(source: &Source, h: &Ring) -> f64 {
-    match *source {
-        Source::Input { lag, comp, .. } => h.input(lag)[comp],
-        Source::State { lag, comp, .. } => h.state(lag)[comp],
-        other => other.read(h, 0),
-    }
 }
 
 /// The features of the four engines of a per-engine submodel, as lanes: each feature
@@ -713,7 +771,7 @@ impl<C> Default for TermGroup<C> {
 impl TermGroup<f64> {
     /// The same group for four lanes ([`LaneGroup`]); `dim` is the pad's index.
     fn lanes(self, dim: usize) -> LaneGroup {
-        let pad = dim as u16;
+        let pad = lane_offset(dim as u16);
         // 1, 2 or 3: the factors before the trailing pads.
         let degree = |t: &Term| match t {
             [_, j, k] if *j == pad && *k == pad => 1,
@@ -732,18 +790,26 @@ impl TermGroup<f64> {
             .all(|w| degree(&w[0]) <= degree(&w[1]));
         for (&c, t) in self.coefs.iter().zip(&self.factors) {
             let c = f64x4::splat(c);
-            match (in_degree_order, degree(t)) {
+            let t = t.map(lane_offset);
+            match (in_degree_order, degree(&t)) {
                 (true, 1) => g.linear.push((c, t[0])),
                 (true, 2) => g.quadratic.push((c, [t[0], t[1]])),
-                _ => g.cubic.push((c, *t)),
+                _ => g.cubic.push((c, t)),
             }
         }
         g
     }
 }
 
+/// Where feature `f`'s four lanes start in the feature lanes read as one run of
+/// numbers ([`sum_engines`]).
+fn lane_offset(f: u16) -> u16 {
+    debug_assert!(usize::from(f) < SLOTS);
+    f.wrapping_mul(4)
+}
+
 /// A [`TermGroup`] of a per-engine row for four lanes: each coefficient in four lanes
-/// beside its factors, and the terms by degree. The 1.0 pad makes `a * 1.0` = `a`
+/// beside its factors (as [`lane_offset`]s), and the terms by degree. The 1.0 pad makes `a * 1.0` = `a`
 /// and `a * b * 1.0` = `a * b` bit for bit, so a term of one or two factors skips its
 /// pads; kept in file order, since the library lists terms by degree (a group whose
 /// terms are not in that order keeps them all, pads and all, in `cubic`).
@@ -781,9 +847,18 @@ fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &Features) -> f64 {
 /// skipped when its feature is 0 for every engine; when it is 0 for some, those lanes
 /// get back the sum from before the group, as [`sum`] skipping it leaves it (adding
 /// its terms would add zeros, or not a number for a feature that is not one).
-#[inline(always)]
+#[inline(never)]
 fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &FeatureLanes) -> f64x4 {
-    let at = |f: u16| x[slot(f)];
+    // The lanes as one run of numbers, read at a factor's lane offset (four times its
+    // index, [`lane_offset`]): an x86 address scales an index by at most 8, so an
+    // index of 32-byte lanes costs a shift a read, an offset in 8-byte numbers none.
+    // Masked to the buffer (the offsets are multiples of 4 below it), the compiler
+    // sees the four reads inside and checks no bound.
+    let flat: &[f64; 4 * SLOTS] = bytemuck::cast_ref(x);
+    let at = |p: u16| {
+        let p = usize::from(p) & (4 * SLOTS - 4);
+        f64x4::new([flat[p], flat[p + 1], flat[p + 2], flat[p + 3]])
+    };
     let mut y = f64x4::splat(row.intercept);
     for g in groups {
         let off = match g.gate {
@@ -797,7 +872,15 @@ fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &FeatureLanes) -> f64x4
         for &(c, i) in &g.linear {
             y += c * at(i);
         }
-        for &(c, [i, j]) in &g.quadratic {
+        // Two terms a turn (the same additions in the same order): the loop's own
+        // count, compare and branch are then half a term's, of some 17 instructions.
+        let mut pairs = g.quadratic.chunks_exact(2);
+        for pair in &mut pairs {
+            let [(c0, [i0, j0]), (c1, [i1, j1])] = [pair[0], pair[1]];
+            y += c0 * (at(i0) * at(j0));
+            y += c1 * (at(i1) * at(j1));
+        }
+        for &(c, [i, j]) in pairs.remainder() {
             y += c * (at(i) * at(j));
         }
         for &(c, [i, j, k]) in &g.cubic {
