@@ -136,8 +136,48 @@ fn slot(f: u16) -> usize {
 
 /// A MIMO submodel's scaled features, then the 1.0 pad ([`eval_term`]).
 type Features = [f64; SLOTS];
-/// The same for the four engines of a per-engine submodel, as lanes.
-type FeatureLanes = [f64x4; SLOTS];
+/// The same for the four engines of a per-engine submodel, as lanes, with the
+/// features that were handed over as zeros.
+#[derive(Debug, Clone)]
+struct FeatureLanes {
+    x: [f64x4; SLOTS],
+    zeros: ZeroRuns,
+}
+
+/// The features a gather was handed as zeros ([`EngineLanes::put_zeros`]): a phase no
+/// engine is in, an ignition clock no engine is inside. A group gated by such a feature
+/// is off in every lane, known without reading its lanes ([`sum_engines`]). A bit a
+/// feature slot, so that the check is a load and a bit test.
+#[derive(Debug, Clone, Copy)]
+struct ZeroRuns {
+    bits: [u64; SLOTS / 64],
+}
+
+impl ZeroRuns {
+    const NONE: Self = Self {
+        bits: [0; SLOTS / 64],
+    };
+
+    /// Features `start..start + n` were zeros.
+    fn note(&mut self, start: usize, n: usize) {
+        // A word at a time: the bits of `f..end` that fall in `f`'s word.
+        let end = start + n;
+        let mut f = start;
+        while f < end {
+            let word = f / 64;
+            let (lo, hi) = (f % 64, (end - word * 64).min(64));
+            let ones = u64::MAX >> (64 - (hi - lo));
+            self.bits[word % (SLOTS / 64)] |= ones << lo;
+            f = word * 64 + hi;
+        }
+    }
+
+    /// Whether feature `f` was handed over as zeros.
+    #[inline(always)]
+    fn covers(&self, f: usize) -> bool {
+        self.bits[(f / 64) % (SLOTS / 64)] & (1 << (f % 64)) != 0
+    }
+}
 
 /// Free-running evaluation of a [`Model`]: its own predictions become its history.
 /// Every buffer is sized in [`Predictor::new`]; [`Predictor::step`] does not allocate.
@@ -217,7 +257,10 @@ impl Predictor {
                 .find_map(|s| s.features.valve)
                 .map(|f| ValveTrack::new(f, dt_s)),
             x: Box::new([0.0; SLOTS]),
-            lanes: Box::new([f64x4::ZERO; SLOTS]),
+            lanes: Box::new(FeatureLanes {
+                x: [f64x4::ZERO; SLOTS],
+                zeros: ZeroRuns::NONE,
+            }),
             out_of_envelope_steps: 0,
             guards: Default::default(),
             upper: Limits::NONE.upper(),
@@ -372,7 +415,7 @@ fn predict_engines(
 ) -> ([f64; ENGINE_COUNT], bool) {
     let outside = gather_engines(s, u, h, lanes);
     (
-        sum_engines(&s.rows[0], &u.groups, lanes).to_array(),
+        sum_engines(&s.rows[0], &u.groups, &lanes.x, &lanes.zeros).to_array(),
         outside,
     )
 }
@@ -621,7 +664,7 @@ impl SubmodelUse {
                     .collect();
                 let groups = groups_of(&s.rows[0])
                     .into_iter()
-                    .map(|g| g.lanes(dim))
+                    .map(|g| g.lanes(dim, &scaling))
                     .collect();
                 Self::PerEngine(EngineUse { scaling, groups })
             }
@@ -664,8 +707,10 @@ fn gather(s: &Submodel, u: &MimoUse, h: &Ring, x: &mut Features) -> bool {
 /// [`FeatureSpec::fill_engines`]: super::features::FeatureSpec::fill_engines
 fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut FeatureLanes) -> bool {
     let dim = s.features.dim();
+    lanes.zeros = ZeroRuns::NONE;
     let mut fast = Unclamped {
-        lanes,
+        lanes: &mut lanes.x,
+        zeros: &mut lanes.zeros,
         scaling: &u.scaling,
         i: 0,
         below: f64x4::ZERO,
@@ -685,14 +730,15 @@ fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut FeatureLane
         s.features.fill_engines(h, &mut clamped);
         outside |= clamped.outside;
     }
-    lanes[dim] = f64x4::ONE;
+    lanes.x[dim] = f64x4::ONE;
     outside
 }
 
 /// Scales features into their lanes without clamping, noting which lanes were outside
 /// the envelope (below it, above it), for [`gather_engines`].
 struct Unclamped<'a> {
-    lanes: &'a mut FeatureLanes,
+    lanes: &'a mut [f64x4; SLOTS],
+    zeros: &'a mut ZeroRuns,
     scaling: &'a [LaneScaling],
     /// The next feature.
     i: usize,
@@ -715,6 +761,7 @@ impl EngineLanes for Unclamped<'_> {
 
     #[inline(always)]
     fn put_zeros(&mut self, n: usize) {
+        self.zeros.note(self.i, n);
         let range = self.i..self.i + n;
         for (l, f) in self.lanes[range.clone()]
             .iter_mut()
@@ -730,7 +777,7 @@ impl EngineLanes for Unclamped<'_> {
 /// Clamps and scales features into their lanes ([`Scaling::scale`]), for
 /// [`gather_engines`] when some lane left the envelope.
 struct Clamped<'a> {
-    lanes: &'a mut FeatureLanes,
+    lanes: &'a mut [f64x4; SLOTS],
     scaling: &'a [LaneScaling],
     i: usize,
     outside: bool,
@@ -770,7 +817,7 @@ impl<C> Default for TermGroup<C> {
 
 impl TermGroup<f64> {
     /// The same group for four lanes ([`LaneGroup`]); `dim` is the pad's index.
-    fn lanes(self, dim: usize) -> LaneGroup {
+    fn lanes(self, dim: usize, scaling: &[LaneScaling]) -> LaneGroup {
         let pad = lane_offset(dim as u16);
         // 1, 2 or 3: the factors before the trailing pads.
         let degree = |t: &Term| match t {
@@ -780,6 +827,10 @@ impl TermGroup<f64> {
         };
         let mut g = LaneGroup {
             gate: self.gate,
+            gate_zero_scales_to_zero: self
+                .gate
+                .and_then(|f| scaling.get(f))
+                .is_some_and(|f| f.zero.cmp_eq(f64x4::ZERO).all()),
             linear: Vec::new(),
             quadratic: Vec::new(),
             cubic: Vec::new(),
@@ -816,6 +867,9 @@ fn lane_offset(f: u16) -> u16 {
 #[derive(Debug, Clone)]
 struct LaneGroup {
     gate: Option<usize>,
+    /// The gate's 0.0 stays 0.0 once scaled (an indicator, not centred, with 0.0 in its
+    /// envelope): when it was handed over as zeros ([`ZeroRuns`]) the group is off.
+    gate_zero_scales_to_zero: bool,
     linear: Vec<(f64x4, u16)>,
     quadratic: Vec<(f64x4, [u16; 2])>,
     cubic: Vec<(f64x4, Term)>,
@@ -848,7 +902,12 @@ fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &Features) -> f64 {
 /// get back the sum from before the group, as [`sum`] skipping it leaves it (adding
 /// its terms would add zeros, or not a number for a feature that is not one).
 #[inline(never)]
-fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &FeatureLanes) -> f64x4 {
+fn sum_engines(
+    row: &OutputRow,
+    groups: &[LaneGroup],
+    x: &[f64x4; SLOTS],
+    zeros: &ZeroRuns,
+) -> f64x4 {
     // The lanes as one run of numbers, read at a factor's lane offset (four times its
     // index, [`lane_offset`]): an x86 address scales an index by at most 8, so an
     // index of 32-byte lanes costs a shift a read, an offset in 8-byte numbers none.
@@ -862,6 +921,8 @@ fn sum_engines(row: &OutputRow, groups: &[LaneGroup], x: &FeatureLanes) -> f64x4
     let mut y = f64x4::splat(row.intercept);
     for g in groups {
         let off = match g.gate {
+            // Handed over as zeros: 0.0 in every lane, without reading them.
+            Some(f) if g.gate_zero_scales_to_zero && zeros.covers(f) => continue,
             Some(f) => x[f].cmp_eq(f64x4::ZERO),
             None => f64x4::ZERO,
         };
@@ -1243,12 +1304,24 @@ pub(crate) mod tests {
                 cubic: false,
             },
         ];
-        let lanes: Vec<_> = scalar.iter().cloned().map(|g| g.lanes(2)).collect();
+        let unscaled = Scaling {
+            lo: f64::NEG_INFINITY,
+            hi: f64::INFINITY,
+            mean: 0.0,
+            inv_std: 1.0,
+            used: true,
+        }
+        .lanes();
+        let lanes: Vec<_> = scalar
+            .iter()
+            .cloned()
+            .map(|g| g.lanes(2, &[unscaled; 2]))
+            .collect();
         let gate = [0.0, 1.0, 1.0, 0.0];
         let partner = [f64::NAN, 2.0, f64::NAN, 4.0];
         let mut x = Box::new([f64x4::ZERO; SLOTS]);
         x[..3].copy_from_slice(&[f64x4::new(gate), f64x4::new(partner), f64x4::ONE]);
-        let got = sum_engines(&row, &lanes, &x).to_array();
+        let got = sum_engines(&row, &lanes, &x, &ZeroRuns::NONE).to_array();
         for e in 0..ENGINE_COUNT {
             let mut x = Box::new([0.0; SLOTS]);
             x[..3].copy_from_slice(&[gate[e], partner[e], 1.0]);
@@ -1257,6 +1330,31 @@ pub(crate) mod tests {
         }
         assert_eq!(got[0], 1.5);
         assert!(got[2].is_nan());
+    }
+
+    /// A run of zeros marks exactly its features, across word boundaries too.
+    #[test]
+    fn zero_runs_cover_exactly_their_features() {
+        for (start, n) in [
+            (0, 1),
+            (3, 10),
+            (60, 10),
+            (63, 1),
+            (64, 64),
+            (100, 200),
+            (1000, 23),
+        ] {
+            let mut z = ZeroRuns::NONE;
+            z.note(start, n);
+            z.note(2, 0);
+            for f in 0..SLOTS {
+                assert_eq!(
+                    z.covers(f),
+                    (start..start + n).contains(&f),
+                    "{start}+{n}: {f}"
+                );
+            }
+        }
     }
 
     /// The same over the switching trajectory and a long steady run (the ignition
