@@ -18,7 +18,7 @@ use super::features::{
     EngineLanes, History, InputVec, Layout, Source, StateVec, INPUT_DIM, STATE_DIM, STATE_MF,
     STATE_MO,
 };
-use super::model::{eval_term, ActiveTerm, Model, OutputRow, Submodel, Term, MAX_FEATURES};
+use super::model::{ActiveTerm, Model, OutputRow, Submodel, Term, MAX_FEATURES};
 use super::valve::{valve_sum_of, ValveState, ValveTrack};
 use oils_shared::ENGINE_COUNT;
 use wide::{f64x4, CmpEq, CmpGt, CmpLt};
@@ -134,7 +134,7 @@ fn slot(f: u16) -> usize {
     usize::from(f) & (SLOTS - 1)
 }
 
-/// A MIMO submodel's scaled features, then the 1.0 pad ([`eval_term`]).
+/// A MIMO submodel's scaled features, then the 1.0 pad ([`eval_term`](super::model::eval_term)).
 type Features = [f64; SLOTS];
 /// The same for the four engines of a per-engine submodel, as lanes, with the
 /// features that were handed over as zeros.
@@ -190,7 +190,7 @@ pub struct Predictor {
     /// The valve filter (and ignition clock) the features read, if any.
     valve: Option<ValveTrack>,
     /// A MIMO submodel's scaled features, then the constant 1.0 that pads lower-degree
-    /// terms ([`eval_term`]).
+    /// terms ([`eval_term`](super::model::eval_term)).
     x: Box<Features>,
     /// The same for the four engines of a per-engine submodel, as lanes.
     lanes: Box<FeatureLanes>,
@@ -377,7 +377,7 @@ impl Predictor {
                 SubmodelUse::Mimo(u) => {
                     outside |= gather(s, u, &self.ring, &mut self.x);
                     for (r, &o) in s.outputs.iter().enumerate() {
-                        let y = sum(&s.rows[r], &u.rows[r], &self.x);
+                        let y = sum_split(&s.rows[r], &u.rows[r], &self.x);
                         let v = s.target.apply(prev[o], y);
                         next[o] = guarded(o, v, prev[o], self.upper[o], &mut guard);
                     }
@@ -534,8 +534,8 @@ struct MimoUse {
     input_reads: Vec<RingRead>,
     state_reads: Vec<RingRead>,
     other_reads: Vec<Read>,
-    /// Per row, its terms in groups ([`TermGroup`]).
-    rows: Vec<Vec<TermGroup<f64>>>,
+    /// Per row, its terms in groups, split by degree ([`SplitGroup`]).
+    rows: Vec<Vec<SplitGroup<f64>>>,
 }
 
 /// One feature a MIMO submodel gathers: its index, where it is read from, its scaling.
@@ -562,7 +562,14 @@ impl MimoUse {
             input_reads: Vec::new(),
             state_reads: Vec::new(),
             other_reads: Vec::new(),
-            rows: s.rows.iter().map(|r| groups_of(s, r)).collect(),
+            rows: s
+                .rows
+                .iter()
+                .map(|r| {
+                    let split = |g: TermGroup| g.split(s.features.dim(), |c| c, |f| f);
+                    groups_of(s, r).into_iter().map(split).collect()
+                })
+                .collect(),
         };
         let sources = s.features.sources();
         for (j, source) in sources.into_iter().enumerate().filter(|&(j, _)| used[j]) {
@@ -621,7 +628,7 @@ fn used_features(s: &Submodel) -> Vec<bool> {
 
 /// A row's terms in groups ([`TermGroup`]): the every-step group first, then one per
 /// phase or ignition feature, each in file order.
-fn groups_of(s: &Submodel, r: &OutputRow) -> Vec<TermGroup<f64>> {
+fn groups_of(s: &Submodel, r: &OutputRow) -> Vec<TermGroup> {
     let dim = s.features.dim();
     let roles = s.features.roles();
     let gate_of = |t: &ActiveTerm| {
@@ -645,7 +652,6 @@ fn groups_of(s: &Submodel, r: &OutputRow) -> Vec<TermGroup<f64>> {
         };
         groups[g].coefs.push(t.coef);
         groups[g].factors.push(t.factors);
-        groups[g].cubic |= t.factors[2] as usize != dim;
     }
     groups
 }
@@ -791,46 +797,33 @@ impl EngineLanes for Clamped<'_> {
 }
 
 /// Some of a row's terms (coefficients and factors, in file order), and the phase or
-/// ignition feature they all have, if any. `C` is `f64`, or `f64x4` for a per-engine
-/// row (the coefficient in every lane).
-#[derive(Debug, Clone)]
-struct TermGroup<C> {
+/// ignition feature they all have, if any.
+#[derive(Debug, Clone, Default)]
+struct TermGroup {
     gate: Option<usize>,
-    coefs: Vec<C>,
+    coefs: Vec<f64>,
     factors: Vec<Term>,
-    /// Some term has a third factor that is a feature, not the 1.0 pad. Otherwise the
-    /// group's products skip the pad: `a * b * 1.0` is `a * b` bit for bit, and a
-    /// degree-2 model (the committed one) then does a third fewer loads and products.
-    cubic: bool,
 }
 
-impl<C> Default for TermGroup<C> {
-    fn default() -> Self {
-        Self {
-            gate: None,
-            coefs: Vec::new(),
-            factors: Vec::new(),
-            cubic: false,
-        }
-    }
-}
-
-impl TermGroup<f64> {
-    /// The same group for four lanes ([`LaneGroup`]); `dim` is the pad's index.
-    fn lanes(self, dim: usize, scaling: &[LaneScaling]) -> LaneGroup {
-        let pad = lane_offset(dim as u16);
+impl TermGroup {
+    /// The group with its terms by degree ([`SplitGroup`]): coefficients as `coef`
+    /// makes them, factors as `at` places them; `dim` is the pad's index.
+    fn split<C>(
+        self,
+        dim: usize,
+        coef: impl Fn(f64) -> C,
+        at: impl Fn(u16) -> u16,
+    ) -> SplitGroup<C> {
+        let pad = dim as u16;
         // 1, 2 or 3: the factors before the trailing pads.
         let degree = |t: &Term| match t {
             [_, j, k] if *j == pad && *k == pad => 1,
             [_, _, k] if *k == pad => 2,
             _ => 3,
         };
-        let mut g = LaneGroup {
+        let mut g = SplitGroup {
             gate: self.gate,
-            gate_zero_scales_to_zero: self
-                .gate
-                .and_then(|f| scaling.get(f))
-                .is_some_and(|f| f.zero.cmp_eq(f64x4::ZERO).all()),
+            gate_zero_scales_to_zero: false,
             linear: Vec::new(),
             quadratic: Vec::new(),
             cubic: Vec::new(),
@@ -840,15 +833,26 @@ impl TermGroup<f64> {
             .windows(2)
             .all(|w| degree(&w[0]) <= degree(&w[1]));
         for (&c, t) in self.coefs.iter().zip(&self.factors) {
-            let c = f64x4::splat(c);
-            let t = t.map(lane_offset);
-            match (in_degree_order, degree(&t)) {
+            let (c, d, t) = (coef(c), degree(t), t.map(&at));
+            match (in_degree_order, d) {
                 (true, 1) => g.linear.push((c, t[0])),
                 (true, 2) => g.quadratic.push((c, [t[0], t[1]])),
                 _ => g.cubic.push((c, t)),
             }
         }
         g
+    }
+
+    /// The group for four lanes ([`LaneGroup`]), with the features' `scaling`.
+    fn lanes(self, dim: usize, scaling: &[LaneScaling]) -> LaneGroup {
+        let zero_is_zero = self
+            .gate
+            .and_then(|f| scaling.get(f))
+            .is_some_and(|f| f.zero.cmp_eq(f64x4::ZERO).all());
+        SplitGroup {
+            gate_zero_scales_to_zero: zero_is_zero,
+            ..self.split(dim, f64x4::splat, lane_offset)
+        }
     }
 }
 
@@ -859,38 +863,62 @@ fn lane_offset(f: u16) -> u16 {
     f.wrapping_mul(4)
 }
 
-/// A [`TermGroup`] of a per-engine row for four lanes: each coefficient in four lanes
-/// beside its factors (as [`lane_offset`]s), and the terms by degree. The 1.0 pad makes `a * 1.0` = `a`
-/// and `a * b * 1.0` = `a * b` bit for bit, so a term of one or two factors skips its
-/// pads; kept in file order, since the library lists terms by degree (a group whose
-/// terms are not in that order keeps them all, pads and all, in `cubic`).
+/// A [`TermGroup`] with its terms by degree, each coefficient (`C`: `f64`, or
+/// `f64x4` for a per-engine row, the coefficient in every lane) beside its factors.
+/// The 1.0 pad makes `a * 1.0` = `a` and `a * b * 1.0` = `a * b` bit for bit, so a term
+/// of one or two factors skips its pads; kept in file order, since the library lists
+/// terms by degree (a group whose terms are not in that order keeps them all, pads and
+/// all, in `cubic`).
 #[derive(Debug, Clone)]
-struct LaneGroup {
+struct SplitGroup<C> {
     gate: Option<usize>,
     /// The gate's 0.0 stays 0.0 once scaled (an indicator, not centred, with 0.0 in its
     /// envelope): when it was handed over as zeros ([`ZeroRuns`]) the group is off.
+    /// Per-engine rows only.
     gate_zero_scales_to_zero: bool,
-    linear: Vec<(f64x4, u16)>,
-    quadratic: Vec<(f64x4, [u16; 2])>,
-    cubic: Vec<(f64x4, Term)>,
+    linear: Vec<(C, u16)>,
+    quadratic: Vec<(C, [u16; 2])>,
+    cubic: Vec<(C, Term)>,
 }
 
-/// A row's intercept plus its active terms, group by group (see [`EngineUse`]),
-/// skipping a group whose phase or ignition feature is 0.
-fn sum(row: &OutputRow, groups: &[TermGroup<f64>], x: &Features) -> f64 {
+/// A per-engine row's group for four lanes, its factors as [`lane_offset`]s.
+type LaneGroup = SplitGroup<f64x4>;
+
+/// [`sum`] of a MIMO row with its groups split by degree: the same operations on the
+/// same numbers, less the products with the 1.0 pad.
+fn sum_split(row: &OutputRow, groups: &[SplitGroup<f64>], x: &Features) -> f64 {
+    let at = |f: u16| x[slot(f)];
     let mut y = row.intercept;
     for g in groups {
         if g.gate.is_some_and(|f| x[f] == 0.0) {
             continue;
         }
-        if g.cubic {
-            for (c, t) in g.coefs.iter().zip(&g.factors) {
-                y += c * eval_term(t, x);
-            }
-        } else {
-            for (c, &[i, j, _]) in g.coefs.iter().zip(&g.factors) {
-                y += c * (x[slot(i)] * x[slot(j)]);
-            }
+        for &(c, i) in &g.linear {
+            y += c * at(i);
+        }
+        for &(c, [i, j]) in &g.quadratic {
+            y += c * (at(i) * at(j));
+        }
+        for &(c, [i, j, k]) in &g.cubic {
+            y += c * (at(i) * at(j) * at(k));
+        }
+    }
+    y
+}
+
+/// A row's intercept plus its active terms, group by group (see [`EngineUse`]),
+/// skipping a group whose phase or ignition feature is 0: the model's definition, which
+/// the tests hold [`sum_engines`] to, engine by engine, bit for bit.
+#[cfg(test)]
+fn sum(row: &OutputRow, groups: &[TermGroup], x: &Features) -> f64 {
+    use super::model::eval_term;
+    let mut y = row.intercept;
+    for g in groups {
+        if g.gate.is_some_and(|f| x[f] == 0.0) {
+            continue;
+        }
+        for (c, t) in g.coefs.iter().zip(&g.factors) {
+            y += c * eval_term(t, x);
         }
     }
     y
@@ -1301,7 +1329,6 @@ pub(crate) mod tests {
                 gate: Some(0),
                 coefs: vec![0.25],
                 factors: vec![[0, 1, 2]],
-                cubic: false,
             },
         ];
         let unscaled = Scaling {
