@@ -21,7 +21,7 @@ use super::features::{
 use super::model::{ActiveTerm, Model, OutputRow, Submodel, Term, MAX_FEATURES};
 use super::valve::{valve_sum_of, ValveState, ValveTrack};
 use oils_shared::ENGINE_COUNT;
-use wide::{f64x4, CmpEq, CmpGt, CmpLt};
+use wide::{f64x4, CmpEq, CmpGt, CmpLt, CmpNe};
 
 /// The last steps' inputs (as the model saw them), valve states and states. Allocated
 /// once, overwritten in place. Each step is kept twice, at slots `s` and `s + depth`,
@@ -719,14 +719,13 @@ fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut FeatureLane
         zeros: &mut lanes.zeros,
         scaling: &u.scaling,
         i: 0,
-        below: f64x4::ZERO,
-        above: f64x4::ZERO,
+        leaving: f64x4::ZERO,
         zero_outside: false,
     };
     s.features.fill_engines(h, &mut fast);
     debug_assert_eq!(fast.i, dim);
     let mut outside = fast.zero_outside;
-    if (fast.below | fast.above).any() {
+    if fast.leaving.any() {
         let mut clamped = Clamped {
             lanes: fast.lanes,
             scaling: &u.scaling,
@@ -741,15 +740,18 @@ fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut FeatureLane
 }
 
 /// Scales features into their lanes without clamping, noting which lanes were outside
-/// the envelope (below it, above it), for [`gather_engines`].
+/// the envelope, for [`gather_engines`].
 struct Unclamped<'a> {
     lanes: &'a mut [f64x4; SLOTS],
     zeros: &'a mut ZeroRuns,
     scaling: &'a [LaneScaling],
     /// The next feature.
     i: usize,
-    below: f64x4,
-    above: f64x4,
+    /// Lanes that may have left the envelope: held to it, the value changed (or it is
+    /// not a number, which some instruction sets flag). Only a step with one is
+    /// gathered again, with the clamping, which decides; a lane not flagged is inside,
+    /// where the clamping would have given the value itself.
+    leaving: f64x4,
     /// A run of zeros was outside the envelope of a used feature (its lanes hold the
     /// clamped value).
     zero_outside: bool,
@@ -759,8 +761,8 @@ impl EngineLanes for Unclamped<'_> {
     #[inline(always)]
     fn put(&mut self, raw: f64x4) {
         let f = &self.scaling[self.i].scaling;
-        self.below |= raw.cmp_lt(f.lo);
-        self.above |= raw.cmp_gt(f.hi);
+        // One compare where a test below and a test above took two.
+        self.leaving |= raw.fast_max(f.lo).fast_min(f.hi).cmp_ne(raw);
         self.lanes[self.i] = (raw - f.mean) * f.inv_std;
         self.i += 1;
     }
