@@ -27,7 +27,7 @@ use crate::sanitize::sanitize;
 use crate::timing::{TimingMonitor, TimingThresholds};
 use oils_shared::clock::{monotonic_ns, monotonic_ns_if};
 use oils_shared::link::LinkError;
-use oils_shared::{Command, PacketHeader, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_END_OF_RUN};
+use oils_shared::{Command, PacketHeader, Telemetry, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_END_OF_RUN};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -317,6 +317,8 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     // A computer reset was under way at the last step.
     let mut was_resetting = false;
     let mut fsw_monitor = FswMonitor::new();
+    // Telemetry(k), filled in place each step (`Plant::telemetry_into`).
+    let mut tlm = Telemetry::default();
 
     loop {
         let mut step_times = StepTimes::default();
@@ -359,7 +361,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             plant.uplink_state_vector();
         }
         was_resetting = resetting;
-        let mut tlm = plant.telemetry(header);
+        plant.telemetry_into(header, &mut tlm);
         sensor_faults.apply(&mut tlm, fired);
         let finished = abort.is_some()
             || matches!(status, PlantStatus::Touchdown(_))

@@ -354,6 +354,15 @@ impl Plant {
     /// the header is kept as given apart from OR-ing in [`TLM_FLAG_IDEAL_NAV`],
     /// [`TLM_FLAG_NAV_NOISE`] and [`TLM_FLAG_FOOTPAD_CONTACT`].
     pub fn telemetry(&mut self, header: PacketHeader) -> Telemetry {
+        let mut tlm = Telemetry::default();
+        self.telemetry_into(header, &mut tlm);
+        tlm
+    }
+
+    /// [`Plant::telemetry`] written over `tlm`, every field of it: the run's loop keeps
+    /// one packet and fills it each step, where a packet returned by value was copied
+    /// (a kilobyte, twice a step).
+    pub fn telemetry_into(&mut self, header: PacketHeader, tlm: &mut Telemetry) {
         let s = &self.state;
         let q = s.q_mci_from_body.quaternion();
         let mut engines = [EngineReading::default(); ENGINE_COUNT];
@@ -362,7 +371,7 @@ impl Plant {
             e.chamber_pressure_pa = self.prop_out.chamber_pressure_pa[i];
             e.valve_open = u32::from(self.last_engines.on[i]);
         }
-        let mut tlm = Telemetry {
+        *tlm = Telemetry {
             header,
             nav: NavState {
                 pos_mci_m: s.pos_mci_m.into(),
@@ -400,21 +409,20 @@ impl Plant {
                 tlm.altitude_m = 0.0;
                 self.state_vector.apply(&mut tlm.nav);
                 tlm.header.flags |= TLM_FLAG_STATE_VECTOR;
-                return tlm;
+                return;
             }
         }
         if !self.ideal_nav {
             tlm.nav = NavState::default();
             tlm.accel_body_m_s2 = [0.0; 3];
             tlm.altitude_m = 0.0;
-            return tlm;
+            return;
         }
         tlm.header.flags |= TLM_FLAG_IDEAL_NAV;
         if let Some(noise) = self.noise.as_mut() {
-            noise.apply(&mut tlm);
+            noise.apply(tlm);
             tlm.header.flags |= TLM_FLAG_NAV_NOISE;
         }
-        tlm
     }
 
     /// A computer reset ended: the ground uplinks a fresh state vector on the next
