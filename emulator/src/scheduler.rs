@@ -439,9 +439,9 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         }
 
         let mut flags = fault_flags;
-        let mut logged_cmd = Command::default();
-        let mut wire_cmd = None;
-        match received {
+        // What came off the wire; the link faults then make it what is delivered.
+        let mut wire_cmd = received;
+        match &wire_cmd {
             Some(cmd) => {
                 if let Err(m) = cmd.header.check_peer() {
                     abort = Some(Abort::Protocol(m.to_string()));
@@ -467,11 +467,9 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
                         timing.record_in_process(round_trip_ns, cmd.stub_compute_ns);
                     }
                 }
-                digest.add_command(&cmd);
-                fsw_monitor.record(&cmd, &plant.truth(), t_ns);
+                digest.add_command(cmd);
+                fsw_monitor.record(cmd, &plant.truth(), t_ns);
                 flags |= REC_COMMAND_RECEIVED;
-                logged_cmd = cmd;
-                wire_cmd = Some(cmd);
             }
             None if !withheld && !clock.misses_allowed() => {
                 abort = Some(Abort::StubSilent {
@@ -485,14 +483,16 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         // Link faults act between the wire and the sanitiser. While the computer
         // resets, what comes back is ignored: the main engines hold their command, the
         // attitude torque stops (held thruster pulses never fire twice).
+        // The command as received, for the log (copied only when there is one).
+        let logged_cmd = recorder.map(|_| wire_cmd.unwrap_or_default());
         if resetting {
-            let _ = link.deliver(None);
+            link.deliver(&mut None);
             applied.torque_cmd_body_nm = [0.0; 3];
         } else {
-            match link.deliver(wire_cmd) {
+            link.deliver(&mut wire_cmd);
+            match &wire_cmd {
                 Some(cmd) => {
-                    let (safe, rejected) =
-                        sanitize(&cmd, cfg.max_thrust_n, t_ns, cfg.fsw_period_ns);
+                    let (safe, rejected) = sanitize(cmd, cfg.max_thrust_n, t_ns, cfg.fsw_period_ns);
                     if rejected > 0 {
                         rejected_commands += 1;
                         rejected_values += rejected as u64;
@@ -531,7 +531,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             let logged = r.record(&Record {
                 flags,
                 telemetry: tlm,
-                command: logged_cmd,
+                command: logged_cmd.unwrap_or_default(),
                 applied,
                 truth: plant.truth(),
                 faults_active,
