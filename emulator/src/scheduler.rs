@@ -480,11 +480,11 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             }
             None => {}
         }
+        // The command as received, for the log (copied only when there is one).
+        let logged_cmd = recorder.map(|_| wire_cmd.unwrap_or_default());
         // Link faults act between the wire and the sanitiser. While the computer
         // resets, what comes back is ignored: the main engines hold their command, the
         // attitude torque stops (held thruster pulses never fire twice).
-        // The command as received, for the log (copied only when there is one).
-        let logged_cmd = recorder.map(|_| wire_cmd.unwrap_or_default());
         if resetting {
             link.deliver(&mut None);
             applied.torque_cmd_body_nm = [0.0; 3];

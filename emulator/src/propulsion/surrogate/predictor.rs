@@ -158,10 +158,11 @@ impl ZeroRuns {
         bits: [0; SLOTS / 64],
     };
 
-    /// Features `start..start + n` were zeros.
+    /// Features `start..start + n` were zeros (those beyond the slots are not noted: no
+    /// gate is there).
     fn note(&mut self, start: usize, n: usize) {
         // A word at a time: the bits of `f..end` that fall in `f`'s word.
-        let end = start + n;
+        let end = (start + n).min(SLOTS);
         let mut f = start;
         while f < end {
             let word = f / 64;
@@ -931,6 +932,9 @@ fn sum(row: &OutputRow, groups: &[TermGroup], x: &Features) -> f64 {
 /// skipped when its feature is 0 for every engine; when it is 0 for some, those lanes
 /// get back the sum from before the group, as [`sum`] skipping it leaves it (adding
 /// its terms would add zeros, or not a number for a feature that is not one).
+///
+/// Not in line: inside the whole step the compiler ran out of registers and reloaded
+/// the lanes' address from the stack for every term.
 #[inline(never)]
 fn sum_engines(
     row: &OutputRow,
@@ -964,7 +968,7 @@ fn sum_engines(
             y += c * at(i);
         }
         // Four terms a turn (the same additions in the same order): the loop's own
-        // count, compare and branch are then a quarter of a term's, of some 14
+        // count, compare and branch are then a quarter of a term's, of some 13.5
         // instructions.
         let mut fours = g.quadratic.chunks_exact(4);
         for four in &mut fours {
@@ -1373,6 +1377,7 @@ pub(crate) mod tests {
             (64, 64),
             (100, 200),
             (1000, 23),
+            (1020, 10),
         ] {
             let mut z = ZeroRuns::NONE;
             z.note(start, n);
