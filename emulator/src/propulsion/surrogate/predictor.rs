@@ -87,9 +87,11 @@ impl Ring {
 
     /// Sets step `t - lag`'s valve state (its input already set) and the sum it draws.
     fn set_valve(&mut self, lag: usize, valve: ValveState) {
+        let [low, _] = self.copies(lag);
+        let sum = valve_sum_of(&self.inputs[low], &valve.valve_n);
         for i in self.copies(lag) {
             self.valves[i] = valve;
-            self.valve_sums[i] = valve_sum_of(&self.inputs[i], &valve.valve_n);
+            self.valve_sums[i] = sum;
         }
     }
 
@@ -137,11 +139,17 @@ fn slot(f: u16) -> usize {
 /// A MIMO submodel's scaled features, then the 1.0 pad ([`eval_term`](super::model::eval_term)).
 type Features = [f64; SLOTS];
 /// The same for the four engines of a per-engine submodel, as lanes, with the
-/// features that were handed over as zeros.
+/// features that were handed over as zeros and the groups a step sums.
 #[derive(Debug, Clone)]
 struct FeatureLanes {
     x: [f64x4; SLOTS],
+    /// The features handed over as zeros by the latest gather; their lanes hold what a
+    /// zero scales to, which the next gather then need not write again.
     zeros: ZeroRuns,
+    /// The submodel ([`EngineUse::id`]) whose features `x` holds.
+    filled_for: Option<usize>,
+    /// The row's groups the latest gather left to sum ([`EngineUse::turned_off_below`]).
+    active: GroupSet,
 }
 
 /// The features a gather was handed as zeros ([`EngineLanes::put_zeros`]): a phase no
@@ -158,25 +166,84 @@ impl ZeroRuns {
         bits: [0; SLOTS / 64],
     };
 
-    /// Features `start..start + n` were zeros (those beyond the slots are not noted: no
-    /// gate is there).
+    /// Features `start..start + n` were zeros (those beyond the slots are not noted:
+    /// no feature is there).
     fn note(&mut self, start: usize, n: usize) {
-        // A word at a time: the bits of `f..end` that fall in `f`'s word.
+        Self::words_of(start, n, |word, ones| self.bits[word] |= ones);
+    }
+
+    /// Whether every feature of `start..start + n` was handed over as zeros.
+    fn covers_all(&self, start: usize, n: usize) -> bool {
+        let mut all = true;
+        Self::words_of(start, n, |word, ones| all &= self.bits[word] & ones == ones);
+        all
+    }
+
+    /// The bits of `start..start + n` (within the slots), a word at a time.
+    #[inline(always)]
+    fn words_of(start: usize, n: usize, mut each: impl FnMut(usize, u64)) {
         let end = (start + n).min(SLOTS);
         let mut f = start;
         while f < end {
             let word = f / 64;
             let (lo, hi) = (f % 64, (end - word * 64).min(64));
             let ones = u64::MAX >> (64 - (hi - lo));
-            self.bits[word % (SLOTS / 64)] |= ones << lo;
+            each(word % (SLOTS / 64), ones << lo);
             f = word * 64 + hi;
         }
     }
 
     /// Whether feature `f` was handed over as zeros.
-    #[inline(always)]
+    #[cfg(test)]
     fn covers(&self, f: usize) -> bool {
         self.bits[(f / 64) % (SLOTS / 64)] & (1 << (f % 64)) != 0
+    }
+}
+
+/// Words of a [`GroupSet`]: a row has at most one group per feature, and one more.
+const GROUP_WORDS: usize = SLOTS / 64;
+
+/// Some of a per-engine row's groups ([`EngineUse::groups`]), a bit each in the
+/// groups' order, so that the sum visits the groups it needs in that order without a
+/// test for each of the others.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct GroupSet {
+    bits: [u64; GROUP_WORDS],
+}
+
+impl GroupSet {
+    const NONE: Self = Self {
+        bits: [0; GROUP_WORDS],
+    };
+
+    /// Groups `0..n`.
+    fn first(n: usize) -> Self {
+        let mut s = Self::NONE;
+        for g in 0..n.min(GROUP_WORDS * 64) {
+            s.insert(g);
+        }
+        s
+    }
+
+    fn insert(&mut self, g: usize) {
+        self.bits[(g / 64) % GROUP_WORDS] |= 1 << (g % 64);
+    }
+
+    /// Takes out the groups in one of `a` and `b` but not both (a run of zeros between
+    /// two features, [`EngineUse::turned_off_below`]), looking at the first `words`
+    /// words (the others hold no group).
+    #[inline(always)]
+    fn remove_between(&mut self, a: &Self, b: &Self, words: usize) {
+        for w in 0..words.min(GROUP_WORDS) {
+            self.bits[w] &= !(a.bits[w] ^ b.bits[w]);
+        }
+    }
+
+    /// The groups in one but not both.
+    fn symmetric_difference(&self, other: &Self) -> Self {
+        Self {
+            bits: std::array::from_fn(|w| self.bits[w] ^ other.bits[w]),
+        }
     }
 }
 
@@ -246,7 +313,11 @@ impl Predictor {
         let subs = &model.submodels;
         // The deepest lag any feature reads, and the step being predicted.
         let depth = subs.iter().map(|s| s.features.max_lag()).max().unwrap_or(1) + 1;
-        let uses = subs.iter().map(|s| SubmodelUse::of(s, depth)).collect();
+        let uses = subs
+            .iter()
+            .enumerate()
+            .map(|(id, s)| SubmodelUse::of(s, id, depth))
+            .collect();
         let dt_s = model.sample_time_ns as f64 * 1e-9;
         let mut p = Self {
             model: model.clone(),
@@ -261,6 +332,8 @@ impl Predictor {
             lanes: Box::new(FeatureLanes {
                 x: [f64x4::ZERO; SLOTS],
                 zeros: ZeroRuns::NONE,
+                filled_for: None,
+                active: GroupSet::NONE,
             }),
             out_of_envelope_steps: 0,
             guards: Default::default(),
@@ -416,7 +489,7 @@ fn predict_engines(
 ) -> ([f64; ENGINE_COUNT], bool) {
     let outside = gather_engines(s, u, h, lanes);
     (
-        sum_engines(&s.rows[0], &u.groups, &lanes.x, &lanes.zeros).to_array(),
+        sum_engines(&s.rows[0], &u.groups, &lanes.x, &lanes.active).to_array(),
         outside,
     )
 }
@@ -612,6 +685,22 @@ struct EngineUse {
     /// check is once per feature, where a check per term in file order would
     /// mispredict its branch.
     groups: Vec<LaneGroup>,
+    /// The submodel's index in the model.
+    id: usize,
+    /// All of `groups`.
+    all_groups: GroupSet,
+    /// The words of a [`GroupSet`] that hold `groups`.
+    group_words: usize,
+    /// Per feature `f` (and the pad's index, `dim`), the groups a zero at a feature
+    /// below `f` turns off, as an exclusive or: a group has one gate, so a run of zeros
+    /// `a..b` turns off `turned_off_below[b] ^ turned_off_below[a]`. A group is turned
+    /// off by its gate's zero when that zero scales to 0.0 (an indicator, not centred,
+    /// with 0.0 in its envelope): every lane of the gate is then 0.0.
+    turned_off_below: Vec<GroupSet>,
+    /// Per feature `f` (and `dim`), how many features below `f` are used and have 0.0
+    /// outside their envelope: a run of zeros `a..b` leaves the envelope when the
+    /// counts at `a` and `b` differ.
+    zero_outside_below: Vec<u16>,
 }
 
 /// Per feature of a submodel, whether some active term reads it.
@@ -658,23 +747,53 @@ fn groups_of(s: &Submodel, r: &OutputRow) -> Vec<TermGroup> {
 }
 
 impl SubmodelUse {
-    /// What the step reads of `s`, in a ring of `depth` steps.
-    fn of(s: &Submodel, depth: usize) -> Self {
-        let dim = s.features.dim();
+    /// What the step reads of `s`, submodel `id` of its model, in a ring of `depth`
+    /// steps.
+    fn of(s: &Submodel, id: usize, depth: usize) -> Self {
         let used = used_features(s);
-        let groups_of = |r: &OutputRow| groups_of(s, r);
         match s.features.layout {
             Layout::Mimo => Self::Mimo(MimoUse::of(s, &used, depth)),
-            Layout::PerEngine => {
-                let scaling: Vec<_> = (0..dim)
-                    .map(|j| Scaling::of(s, j, used[j]).lanes())
-                    .collect();
-                let groups = groups_of(&s.rows[0])
-                    .into_iter()
-                    .map(|g| g.lanes(dim, &scaling))
-                    .collect();
-                Self::PerEngine(EngineUse { scaling, groups })
+            Layout::PerEngine => Self::PerEngine(EngineUse::of(s, id, &used)),
+        }
+    }
+}
+
+impl EngineUse {
+    fn of(s: &Submodel, id: usize, used: &[bool]) -> Self {
+        let dim = s.features.dim();
+        let scaling: Vec<_> = (0..dim)
+            .map(|j| Scaling::of(s, j, used[j]).lanes())
+            .collect();
+        let groups: Vec<_> = groups_of(s, &s.rows[0])
+            .into_iter()
+            .map(|g| g.lanes(dim))
+            .collect();
+        // The groups each feature's zero turns off.
+        let mut turned_off_by = vec![GroupSet::NONE; dim];
+        for (k, g) in groups.iter().enumerate() {
+            let gate = g.gate.and_then(|f| Some((f, scaling.get(f)?)));
+            if let Some((f, gate)) = gate {
+                if gate.zero.cmp_eq(f64x4::ZERO).all() {
+                    turned_off_by[f].insert(k);
+                }
             }
+        }
+        let mut turned_off_below = vec![GroupSet::NONE];
+        let mut zero_outside_below = vec![0u16];
+        for (off, f) in turned_off_by.iter().zip(&scaling) {
+            let below = turned_off_below[turned_off_below.len() - 1];
+            turned_off_below.push(below.symmetric_difference(off));
+            let count = zero_outside_below[zero_outside_below.len() - 1];
+            zero_outside_below.push(count + u16::from(f.zero_outside));
+        }
+        EngineUse {
+            scaling,
+            all_groups: GroupSet::first(groups.len()),
+            group_words: groups.len().div_ceil(64),
+            groups,
+            id,
+            turned_off_below,
+            zero_outside_below,
         }
     }
 }
@@ -714,11 +833,20 @@ fn gather(s: &Submodel, u: &MimoUse, h: &Ring, x: &mut Features) -> bool {
 /// [`FeatureSpec::fill_engines`]: super::features::FeatureSpec::fill_engines
 fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut FeatureLanes) -> bool {
     let dim = s.features.dim();
+    // The runs of zeros the latest gather of this submodel left in place.
+    let kept = match lanes.filled_for {
+        Some(id) if id == u.id => lanes.zeros,
+        _ => ZeroRuns::NONE,
+    };
+    lanes.filled_for = Some(u.id);
     lanes.zeros = ZeroRuns::NONE;
+    lanes.active = u.all_groups;
     let mut fast = Unclamped {
         lanes: &mut lanes.x,
         zeros: &mut lanes.zeros,
-        scaling: &u.scaling,
+        kept,
+        active: &mut lanes.active,
+        u,
         i: 0,
         leaving: f64x4::ZERO,
         zero_outside: false,
@@ -745,7 +873,10 @@ fn gather_engines(s: &Submodel, u: &EngineUse, h: &Ring, lanes: &mut FeatureLane
 struct Unclamped<'a> {
     lanes: &'a mut [f64x4; SLOTS],
     zeros: &'a mut ZeroRuns,
-    scaling: &'a [LaneScaling],
+    /// The runs of zeros already in `lanes`.
+    kept: ZeroRuns,
+    active: &'a mut GroupSet,
+    u: &'a EngineUse,
     /// The next feature.
     i: usize,
     /// Lanes that may have left the envelope: held to it, the value changed (or it is
@@ -761,25 +892,34 @@ struct Unclamped<'a> {
 impl EngineLanes for Unclamped<'_> {
     #[inline(always)]
     fn put(&mut self, raw: f64x4) {
-        let f = &self.scaling[self.i].scaling;
+        let f = &self.u.scaling[self.i].scaling;
         // One compare where a test below and a test above took two.
         self.leaving |= raw.fast_max(f.lo).fast_min(f.hi).cmp_ne(raw);
         self.lanes[self.i] = (raw - f.mean) * f.inv_std;
         self.i += 1;
     }
 
+    /// A run of zeros: its lanes get what a zero scales to, unless the latest gather
+    /// left them so (most steps: a phase no engine is in stays so), and the groups
+    /// they turn off are taken out of the step's sum.
     #[inline(always)]
     fn put_zeros(&mut self, n: usize) {
-        self.zeros.note(self.i, n);
-        let range = self.i..self.i + n;
-        for (l, f) in self.lanes[range.clone()]
-            .iter_mut()
-            .zip(&self.scaling[range])
-        {
-            *l = f.zero;
-            self.zero_outside |= f.zero_outside;
+        let (start, end) = (self.i, self.i + n);
+        if !self.kept.covers_all(start, n) {
+            for (l, f) in self.lanes[start..end]
+                .iter_mut()
+                .zip(&self.u.scaling[start..end])
+            {
+                *l = f.zero;
+            }
         }
-        self.i += n;
+        self.zeros.note(start, n);
+        let below = &self.u.turned_off_below;
+        self.active
+            .remove_between(&below[start], &below[end], self.u.group_words);
+        let outside = &self.u.zero_outside_below;
+        self.zero_outside |= outside[end] != outside[start];
+        self.i = end;
     }
 }
 
@@ -826,7 +966,6 @@ impl TermGroup {
         };
         let mut g = SplitGroup {
             gate: self.gate,
-            gate_zero_scales_to_zero: false,
             linear: Vec::new(),
             quadratic: Vec::new(),
             cubic: Vec::new(),
@@ -846,16 +985,9 @@ impl TermGroup {
         g
     }
 
-    /// The group for four lanes ([`LaneGroup`]), with the features' `scaling`.
-    fn lanes(self, dim: usize, scaling: &[LaneScaling]) -> LaneGroup {
-        let zero_is_zero = self
-            .gate
-            .and_then(|f| scaling.get(f))
-            .is_some_and(|f| f.zero.cmp_eq(f64x4::ZERO).all());
-        SplitGroup {
-            gate_zero_scales_to_zero: zero_is_zero,
-            ..self.split(dim, f64x4::splat, lane_offset)
-        }
+    /// The group for four lanes ([`LaneGroup`]).
+    fn lanes(self, dim: usize) -> LaneGroup {
+        self.split(dim, f64x4::splat, lane_offset)
     }
 }
 
@@ -875,10 +1007,6 @@ fn lane_offset(f: u16) -> u16 {
 #[derive(Debug, Clone)]
 struct SplitGroup<C> {
     gate: Option<usize>,
-    /// The gate's 0.0 stays 0.0 once scaled (an indicator, not centred, with 0.0 in its
-    /// envelope): when it was handed over as zeros ([`ZeroRuns`]) the group is off.
-    /// Per-engine rows only.
-    gate_zero_scales_to_zero: bool,
     linear: Vec<(C, u16)>,
     quadratic: Vec<(C, [u16; 2])>,
     cubic: Vec<(C, Term)>,
@@ -928,10 +1056,12 @@ fn sum(row: &OutputRow, groups: &[TermGroup], x: &Features) -> f64 {
 }
 
 /// [`sum`] for the four engines of a per-engine row at once, each engine a lane: the
-/// same operations in the same order as [`sum`] of that engine alone. A group is
-/// skipped when its feature is 0 for every engine; when it is 0 for some, those lanes
-/// get back the sum from before the group, as [`sum`] skipping it leaves it (adding
-/// its terms would add zeros, or not a number for a feature that is not one).
+/// same operations in the same order as [`sum`] of that engine alone. It visits the
+/// `active` groups, in order: the others were turned off by a run of zeros, their
+/// feature 0 in every lane ([`EngineUse::turned_off_below`]). A group is skipped when
+/// its feature is 0 for every engine; when it is 0 for some, those lanes get back the
+/// sum from before the group, as [`sum`] skipping it leaves it (adding its terms would
+/// add zeros, or not a number for a feature that is not one).
 ///
 /// Not in line: inside the whole step the compiler ran out of registers and reloaded
 /// the lanes' address from the stack for every term.
@@ -940,7 +1070,7 @@ fn sum_engines(
     row: &OutputRow,
     groups: &[LaneGroup],
     x: &[f64x4; SLOTS],
-    zeros: &ZeroRuns,
+    active: &GroupSet,
 ) -> f64x4 {
     // The lanes as one run of numbers, read at a factor's lane offset (four times its
     // index, [`lane_offset`]): an x86 address scales an index by at most 8, so an
@@ -953,37 +1083,44 @@ fn sum_engines(
         f64x4::new([flat[p], flat[p + 1], flat[p + 2], flat[p + 3]])
     };
     let mut y = f64x4::splat(row.intercept);
-    for g in groups {
-        let off = match g.gate {
-            // Handed over as zeros: 0.0 in every lane, without reading them.
-            Some(f) if g.gate_zero_scales_to_zero && zeros.covers(f) => continue,
-            Some(f) => x[f].cmp_eq(f64x4::ZERO),
-            None => f64x4::ZERO,
-        };
-        if off.all() {
-            continue;
-        }
-        let before = y;
-        for &(c, i) in &g.linear {
-            y += c * at(i);
-        }
-        // Four terms a turn (the same additions in the same order): the loop's own
-        // count, compare and branch are then a quarter of a term's, of some 13.5
-        // instructions.
-        let mut fours = g.quadratic.chunks_exact(4);
-        for four in &mut fours {
-            for &(c, [i, j]) in four {
+    let words = groups.len().div_ceil(64).min(GROUP_WORDS);
+    for (w, &word) in active.bits[..words].iter().enumerate() {
+        // The word's groups, lowest first.
+        let mut left = word;
+        while left != 0 {
+            let Some(g) = groups.get(w * 64 + left.trailing_zeros() as usize) else {
+                break;
+            };
+            left &= left - 1;
+            let off = match g.gate {
+                Some(f) => x[f].cmp_eq(f64x4::ZERO),
+                None => f64x4::ZERO,
+            };
+            if off.all() {
+                continue;
+            }
+            let before = y;
+            for &(c, i) in &g.linear {
+                y += c * at(i);
+            }
+            // Four terms a turn (the same additions in the same order): the loop's own
+            // count, compare and branch are then a quarter of a term's, of some 13.5
+            // instructions.
+            let mut fours = g.quadratic.chunks_exact(4);
+            for four in &mut fours {
+                for &(c, [i, j]) in four {
+                    y += c * (at(i) * at(j));
+                }
+            }
+            for &(c, [i, j]) in fours.remainder() {
                 y += c * (at(i) * at(j));
             }
-        }
-        for &(c, [i, j]) in fours.remainder() {
-            y += c * (at(i) * at(j));
-        }
-        for &(c, [i, j, k]) in &g.cubic {
-            y += c * (at(i) * at(j) * at(k));
-        }
-        if off.any() {
-            y = off.blend(before, y);
+            for &(c, [i, j, k]) in &g.cubic {
+                y += c * (at(i) * at(j) * at(k));
+            }
+            if off.any() {
+                y = off.blend(before, y);
+            }
         }
     }
     y
@@ -1338,24 +1475,12 @@ pub(crate) mod tests {
                 factors: vec![[0, 1, 2]],
             },
         ];
-        let unscaled = Scaling {
-            lo: f64::NEG_INFINITY,
-            hi: f64::INFINITY,
-            mean: 0.0,
-            inv_std: 1.0,
-            used: true,
-        }
-        .lanes();
-        let lanes: Vec<_> = scalar
-            .iter()
-            .cloned()
-            .map(|g| g.lanes(2, &[unscaled; 2]))
-            .collect();
+        let lanes: Vec<_> = scalar.iter().cloned().map(|g| g.lanes(2)).collect();
         let gate = [0.0, 1.0, 1.0, 0.0];
         let partner = [f64::NAN, 2.0, f64::NAN, 4.0];
         let mut x = Box::new([f64x4::ZERO; SLOTS]);
         x[..3].copy_from_slice(&[f64x4::new(gate), f64x4::new(partner), f64x4::ONE]);
-        let got = sum_engines(&row, &lanes, &x, &ZeroRuns::NONE).to_array();
+        let got = sum_engines(&row, &lanes, &x, &GroupSet::first(lanes.len())).to_array();
         for e in 0..ENGINE_COUNT {
             let mut x = Box::new([0.0; SLOTS]);
             x[..3].copy_from_slice(&[gate[e], partner[e], 1.0]);
@@ -1388,6 +1513,57 @@ pub(crate) mod tests {
                     (start..start + n).contains(&f),
                     "{start}+{n}: {f}"
                 );
+            }
+            let end = (start + n).min(SLOTS);
+            assert!(z.covers_all(start, n) && z.covers_all(start + 1, n - 1));
+            assert!(z.covers_all(SLOTS, 5), "nothing to cover past the slots");
+            if start > 0 {
+                assert!(!z.covers_all(start - 1, n));
+            }
+            if end < SLOTS {
+                assert!(!z.covers_all(start, n + 1));
+            }
+        }
+    }
+
+    /// A run of zeros turns off exactly the groups gated by one of its features whose
+    /// zero scales to 0.0, and counts a zero outside an envelope exactly when one of its
+    /// features has it.
+    #[test]
+    fn a_run_of_zeros_turns_off_the_groups_its_features_gate() {
+        for model in lane_models() {
+            let (id, s) = model
+                .submodels
+                .iter()
+                .enumerate()
+                .find(|(_, s)| s.features.layout == Layout::PerEngine)
+                .unwrap();
+            let u = EngineUse::of(s, id, &used_features(s));
+            let dim = s.features.dim();
+            let runs = [
+                (0, 1),
+                (0, dim),
+                (dim / 2, dim - dim / 2),
+                (3, 7),
+                (dim - 1, 1),
+            ];
+            for (a, n) in runs {
+                let b = a + n;
+                let mut active = u.all_groups;
+                active.remove_between(
+                    &u.turned_off_below[a],
+                    &u.turned_off_below[b],
+                    u.group_words,
+                );
+                for (k, g) in u.groups.iter().enumerate() {
+                    let off = g.gate.is_some_and(|f| {
+                        (a..b).contains(&f) && u.scaling[f].zero.cmp_eq(f64x4::ZERO).all()
+                    });
+                    let on = active.bits[k / 64] & (1 << (k % 64)) != 0;
+                    assert_eq!(on, !off, "group {k} gated by {:?}, run {a}..{b}", g.gate);
+                }
+                let outside = (a..b).any(|f| u.scaling[f].zero_outside);
+                assert_eq!(u.zero_outside_below[b] != u.zero_outside_below[a], outside);
             }
         }
     }
