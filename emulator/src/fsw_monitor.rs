@@ -67,15 +67,11 @@ pub struct FswMonitor {
     with_sigma: u64,
     nees_sum: f64,
     groups: Vec<Histogram<u64>>,
-    /// Whether the flight software's compute times are wall-clock readings to keep.
-    timed: bool,
 }
 
 impl FswMonitor {
-    /// An empty monitor (allocates its histograms). Untimed (a campaign case, whose
-    /// flight software reads no clock and reports 1 ns for a group that ran), the
-    /// compute times are not kept: there is nothing measured to report.
-    pub fn new(timed: bool) -> Self {
+    /// An empty monitor (allocates its histograms).
+    pub fn new() -> Self {
         let groups = (0..RATE_GROUPS)
             .map(|_| {
                 Histogram::new_with_bounds(1, 60_000_000_000, 2)
@@ -88,15 +84,13 @@ impl FswMonitor {
             with_sigma: 0,
             nees_sum: 0.0,
             groups,
-            timed,
         }
     }
 
     /// Folds in Command(k) as received and the truth at t_k.
     pub fn record(&mut self, cmd: &Command, truth: &TruthState, t_ns: i64) {
         let f: &FswReport = &cmd.fsw;
-        let compute_ns = f.group_compute_ns.iter().filter(|_| self.timed);
-        for (h, &ns) in self.groups.iter_mut().zip(compute_ns) {
+        for (h, &ns) in self.groups.iter_mut().zip(f.group_compute_ns.iter()) {
             if ns > 0 {
                 h.saturating_record(u64::from(ns));
             }
@@ -166,7 +160,7 @@ impl FswMonitor {
 
 impl Default for FswMonitor {
     fn default() -> Self {
-        Self::new(true)
+        Self::new()
     }
 }
 
@@ -184,7 +178,7 @@ mod tests {
 
     #[test]
     fn error_is_estimate_minus_truth_split_about_the_vertical() {
-        let mut m = FswMonitor::new(true);
+        let mut m = FswMonitor::new();
         let mut c = Command::default();
         c.fsw.nav_flags = NAV_FLAG_VALID | NAV_FLAG_FROM_SENSORS;
         // 3 m up, 4 m across, sigma 2 m per axis: x within 3 sigma, y not.
@@ -205,7 +199,7 @@ mod tests {
 
     #[test]
     fn no_estimate_no_error_and_compute_times_by_group() {
-        let mut m = FswMonitor::new(true);
+        let mut m = FswMonitor::new();
         let mut c = Command::default();
         c.fsw.group_compute_ns = [1000, 2000, 0, 0];
         c.fsw.boot_count = 2;
@@ -215,11 +209,5 @@ mod tests {
         assert_eq!(r.boot_count, 2);
         assert_eq!(r.group_compute_ns.len(), 2);
         assert_eq!(r.group_compute_ns[1].count, 1);
-        // Untimed, the same packet leaves no compute times.
-        let mut m = FswMonitor::new(false);
-        m.record(&c, &truth_at([1_737_500.0, 0.0, 0.0]), 0);
-        let r = m.finish();
-        assert!(r.group_compute_ns.is_empty());
-        assert_eq!(r.boot_count, 2);
     }
 }

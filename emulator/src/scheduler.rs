@@ -316,7 +316,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     let mut published: Option<u64> = None;
     // A computer reset was under way at the last step.
     let mut was_resetting = false;
-    let mut fsw_monitor = FswMonitor::new(cfg.time_exchanges);
+    let mut fsw_monitor = FswMonitor::new();
     // Telemetry(k), filled in place each step (`Plant::telemetry_into`).
     let mut tlm = Telemetry::default();
 
