@@ -7,6 +7,7 @@
 
 pub mod allocation;
 pub mod attitude;
+pub mod covariance;
 pub mod guidance;
 pub mod nav_filter;
 pub mod navigation;

@@ -14,16 +14,8 @@
 use nalgebra::{Matrix3, Quaternion, SMatrix, SVector, UnitQuaternion, Vector3};
 use oils_shared::{AltimeterSample, Telemetry, VELOCIMETER_BEAMS};
 
-/// Error-state dimension.
-pub const N: usize = 15;
-type Mat = SMatrix<f64, N, N>;
-type Row = SMatrix<f64, 1, N>;
-
-const I_R: usize = 0;
-const I_V: usize = 3;
-const I_TH: usize = 6;
-const I_BG: usize = 9;
-const I_BA: usize = 12;
+pub use super::covariance::N;
+use super::covariance::{self, Mat, Row, Transition, I_BA, I_BG, I_R, I_TH, I_V};
 
 /// Nominal states kept for delayed measurements (one per IMU sample: 64 x 5 ms = 320 ms).
 const HISTORY: usize = 64;
@@ -497,18 +489,14 @@ impl NavFilter {
         let rn = r_mid.norm();
         let u = r_mid / rn;
         let gg = (u * u.transpose() * 3.0 - Matrix3::identity()) * (self.cfg.mu_m3_s2 / rn.powi(3));
-        let mut f = Mat::identity();
-        f.fixed_view_mut::<3, 3>(I_R, I_V)
-            .copy_from(&(Matrix3::identity() * dt));
-        f.fixed_view_mut::<3, 3>(I_V, I_R).copy_from(&(gg * dt));
-        f.fixed_view_mut::<3, 3>(I_V, I_TH)
-            .copy_from(&(-rot * skew(&dvc)));
-        f.fixed_view_mut::<3, 3>(I_V, I_BA).copy_from(&(-rot * dt));
-        f.fixed_view_mut::<3, 3>(I_TH, I_TH)
-            .copy_from(&(Matrix3::identity() - skew(&dth)));
-        f.fixed_view_mut::<3, 3>(I_TH, I_BG)
-            .copy_from(&(-Matrix3::identity() * dt));
-        self.p = f * self.p * f.transpose();
+        let phi = Transition {
+            dt_s: dt,
+            v_from_r: gg * dt,
+            v_from_theta: -rot * skew(&dvc),
+            v_from_ba: -rot * dt,
+            theta_from_theta: Matrix3::identity() - skew(&dth),
+        };
+        self.p = phi.propagate(&self.p);
         let c = &self.cfg;
         for i in 0..3 {
             self.p[(I_V + i, I_V + i)] += c.accel_vrw_m_s_rt_s.powi(2) * dt;
@@ -605,15 +593,9 @@ impl NavFilter {
     }
 
     fn update_scalar(&mut self, h: &Row, y: f64, r: f64) {
-        let ph = self.p * h.transpose();
-        let s = (h * ph)[(0, 0)] + r;
-        let k = ph / s;
-        let dx = k * y;
-        // Joseph form.
-        let ikh = Mat::identity() - k * h;
-        self.p = ikh * self.p * ikh.transpose() + k * k.transpose() * r;
-        self.p = (self.p + self.p.transpose()) * 0.5;
-        self.inject(&dx);
+        let (k, _, p) = covariance::scalar_update(&self.p, h, r);
+        self.p = p;
+        self.inject(&(k * y));
     }
 
     fn update_altimeter(&mut self, ch: Channel, a: &AltimeterSample) {
