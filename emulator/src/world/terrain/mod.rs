@@ -7,7 +7,7 @@
 //! projection about the site ([`MapProjection`]); the surface is at radius `R + h(e, n)`.
 //!
 //! Modules: [`frame`] (site <-> `mcmf`), [`map`] (projection), [`grid`] (bilinear DEM),
-//! [`surface`] (point queries), [`ray`] (beam casts), [`spec`] (configuration),
+//! [`surface`] (point queries), [`ray`] (beam casts), [`pyramid`] (height bounds for them), [`spec`] (configuration),
 //! [`synthetic`] (seeded craters), [`geotiff`] (DEM files) and [`cache`] (build once).
 
 pub mod cache;
@@ -16,6 +16,7 @@ pub mod frame;
 pub mod geotiff;
 pub mod grid;
 pub mod map;
+pub mod pyramid;
 pub mod ray;
 pub mod spec;
 pub mod surface;

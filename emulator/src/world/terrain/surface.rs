@@ -3,6 +3,7 @@
 
 use super::grid::{Grid, Sample};
 use super::map::MapProjection;
+use super::pyramid::MaxPyramid;
 use nalgebra::Vector3;
 
 /// The Moon's surface about a site: a sphere of `radius_m` (or a flat world) plus
@@ -15,6 +16,19 @@ pub struct Terrain {
     /// Bound on |d(height above ground)/d(range)| along any unit ray: the ray-march
     /// step `height / lipschitz` cannot cross the surface.
     pub(super) lipschitz: f64,
+    /// Maximum heights over the grid's tiles, for ray casts to skip open air.
+    pub(super) pyramid: Option<MaxPyramid>,
+}
+
+/// Bound on the map distance moved per metre of 3D displacement. Curvature factors (map
+/// scale theta/sin(theta) and R/(R + h_min), each within 1e-4 of 1 for DEMs of tens of km
+/// and depths of km) are covered by 1 %.
+pub(super) fn map_scale(map: &MapProjection) -> f64 {
+    if map.is_flat() {
+        1.0
+    } else {
+        1.01
+    }
 }
 
 impl Terrain {
@@ -26,14 +40,14 @@ impl Terrain {
         }
         let map = MapProjection { radius_m };
         let slope = grid.as_ref().map_or(0.0, Grid::max_gradient);
-        // Curvature factors (map scale theta/sin(theta) and R/(R + h_min), each within
-        // 1e-4 of 1 for DEMs of tens of km and depths of km) are covered by 1 %.
-        let curvature = if map.is_flat() { 1.0 } else { 1.01 };
+        let curvature = map_scale(&map);
         let lipschitz = (1.0 + slope * slope).sqrt() * curvature;
+        let pyramid = grid.as_ref().map(MaxPyramid::new);
         Some(Self {
             map,
             grid,
             lipschitz,
+            pyramid,
         })
     }
 
