@@ -10,6 +10,7 @@
 
 use super::action::LinkAction;
 use crate::link::{ExchangeError, Link};
+use core::mem::{offset_of, size_of};
 use oils_shared::{AsBytes, Command, Telemetry};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -174,8 +175,7 @@ impl<'a, L: Link + ?Sized> FaultyLink<'a, L> {
     }
 
     /// Turns the command that came off the wire (`None`: nothing arrived) into what
-    /// reaches the sanitiser, in place (a command is 336 bytes: moved in and out, it was
-    /// copied twice a step).
+    /// reaches the sanitiser, in place (no copy of the packet on the way).
     pub fn deliver(&mut self, cmd: &mut Option<Command>) {
         self.faults.deliver(cmd)
     }
@@ -186,16 +186,173 @@ impl<'a, L: Link + ?Sized> FaultyLink<'a, L> {
     }
 }
 
-/// Flips `bits` random bits of a command's payload (thrusts, switches, torques: bytes
-/// 40..112), as a damaged packet would arrive.
+/// The byte range of a command the plant acts on: from `thrust_cmd_n` to the end of
+/// `attitude_mode` (thrusts, on/off switches, torques, the stub's compute time, thruster
+/// on-times, attitude mode), taken from the packet layout. The header is the link's
+/// framing (a damaged one is a stale or foreign packet, not a corrupt command) and the
+/// flight software's self-report after it is read before delivery, not by the plant.
+pub const COMMAND_PAYLOAD_BYTES: core::ops::Range<usize> =
+    offset_of!(Command, thrust_cmd_n)..offset_of!(Command, attitude_mode) + size_of::<u32>();
+
+/// Flips `bits` random bits of a command's payload ([`COMMAND_PAYLOAD_BYTES`]), as a
+/// damaged packet would arrive.
 fn corrupt(cmd: &mut Command, bits: u32, rng: &mut ChaCha8Rng) {
-    let mut bytes = [0u8; core::mem::size_of::<Command>()];
+    let mut bytes = [0u8; size_of::<Command>()];
     bytes.copy_from_slice(cmd.as_bytes());
+    let range = COMMAND_PAYLOAD_BYTES.start * 8..COMMAND_PAYLOAD_BYTES.end * 8;
     for _ in 0..bits {
-        let bit = rng.gen_range(40 * 8..112 * 8);
+        let bit = rng.gen_range(range.clone());
         bytes[bit / 8] ^= 1 << (bit % 8);
     }
     if let Some(c) = Command::from_bytes(&bytes) {
         *cmd = c;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sanitize::sanitize;
+    use oils_shared::{ATTITUDE_MODE_THRUSTERS, ENGINE_COUNT, THRUSTER_COUNT};
+
+    /// Every field of the payload, by its offset and size in the layout.
+    fn payload_fields() -> Vec<(&'static str, usize, usize)> {
+        vec![
+            (
+                "thrust_cmd_n",
+                offset_of!(Command, thrust_cmd_n),
+                size_of::<[f64; ENGINE_COUNT]>(),
+            ),
+            (
+                "engine_on",
+                offset_of!(Command, engine_on),
+                size_of::<[u32; ENGINE_COUNT]>(),
+            ),
+            (
+                "torque_cmd_body_nm",
+                offset_of!(Command, torque_cmd_body_nm),
+                size_of::<[f64; 3]>(),
+            ),
+            (
+                "stub_compute_ns",
+                offset_of!(Command, stub_compute_ns),
+                size_of::<u64>(),
+            ),
+            (
+                "thruster_on_time_ns",
+                offset_of!(Command, thruster_on_time_ns),
+                size_of::<[u64; THRUSTER_COUNT]>(),
+            ),
+            (
+                "attitude_mode",
+                offset_of!(Command, attitude_mode),
+                size_of::<u32>(),
+            ),
+        ]
+    }
+
+    #[test]
+    fn the_payload_range_is_exactly_the_fields_the_plant_acts_on() {
+        let fields = payload_fields();
+        let mut end = COMMAND_PAYLOAD_BYTES.start;
+        for (name, offset, size) in &fields {
+            assert_eq!(*offset, end, "{name} does not follow the field before it");
+            end = offset + size;
+        }
+        assert_eq!(end, COMMAND_PAYLOAD_BYTES.end);
+    }
+
+    /// A clean command of the thrusters' mode, mid-throttle, thrusters firing briefly.
+    fn clean() -> Command {
+        let mut c = Command::default();
+        c.thrust_cmd_n = [400.0; ENGINE_COUNT];
+        c.engine_on = [1; ENGINE_COUNT];
+        c.torque_cmd_body_nm = [1.0, -2.0, 0.5];
+        c.thruster_on_time_ns = [1_000_000; THRUSTER_COUNT];
+        c.attitude_mode = ATTITUDE_MODE_THRUSTERS;
+        c
+    }
+
+    /// Flips the bit 0x80 of one byte of a clean command; returns the sanitiser's count of
+    /// replaced values, its answer and the corrupt command.
+    fn flip(byte: usize) -> (u32, crate::plant::ActuatorCommand, Command) {
+        let mut bytes = [0u8; size_of::<Command>()];
+        bytes.copy_from_slice(clean().as_bytes());
+        bytes[byte] ^= 0x80;
+        let cmd = Command::from_bytes(&bytes).unwrap();
+        let (safe, rejected) = sanitize(&cmd, 800.0, 0, 10_000_000);
+        (rejected, safe, cmd)
+    }
+
+    #[test]
+    fn a_corrupt_bit_reaches_every_field_and_the_sanitiser_answers_for_each() {
+        let (clean_safe, clean_rejected) = sanitize(&clean(), 800.0, 0, 10_000_000);
+        assert_eq!(clean_rejected, 0);
+        for (name, offset, _) in payload_fields() {
+            // The top byte of the field's first element (little-endian).
+            let elem = match name {
+                "engine_on" | "attitude_mode" => 4,
+                _ => 8,
+            };
+            let (rejected, safe, cmd) = flip(offset + elem - 1);
+            assert_ne!(cmd, clean(), "{name}: the flip changed nothing");
+            match name {
+                // Sign bit: a negative thrust becomes 0 N, counted.
+                "thrust_cmd_n" => {
+                    assert_eq!(rejected, 1, "{name}");
+                    assert_eq!(safe.engines.thrust_cmd_n[0], 0.0);
+                }
+                // 0x80000001 is neither off nor on: off, counted.
+                "engine_on" => {
+                    assert_eq!(rejected, 1, "{name}");
+                    assert!(!safe.engines.on[0]);
+                }
+                // A finite torque of the other sign is a valid command: passed through.
+                "torque_cmd_body_nm" => {
+                    assert_eq!(rejected, 0, "{name}");
+                    assert_eq!(safe.torque_cmd_body_nm[0], -1.0);
+                }
+                // Timing only: the actuators are untouched.
+                "stub_compute_ns" => {
+                    assert_eq!(rejected, 0, "{name}");
+                    assert_eq!(safe, clean_safe);
+                }
+                // An on-time beyond the cycle is clamped to the cycle, counted.
+                "thruster_on_time_ns" => {
+                    assert_eq!(rejected, 1, "{name}");
+                    assert_eq!(safe.thruster_on_time_ns[0], 10_000_000);
+                }
+                // An unknown attitude mode: ideal torque with zero torque, counted.
+                "attitude_mode" => {
+                    assert_eq!(rejected, 1, "{name}");
+                    assert!(!safe.use_thrusters);
+                    assert_eq!(safe.torque_cmd_body_nm, [0.0; 3]);
+                }
+                other => panic!("no expectation for {other}"),
+            }
+        }
+    }
+
+    #[test]
+    fn random_corruption_lands_in_every_field() {
+        let mut rng = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(3);
+        let fields = payload_fields();
+        let mut hit = vec![0usize; fields.len()];
+        for _ in 0..2000 {
+            let mut c = clean();
+            corrupt(&mut c, 1, &mut rng);
+            let (a, b) = (clean(), c);
+            let (a, b) = (a.as_bytes(), b.as_bytes());
+            let byte = (0..a.len())
+                .find(|&i| a[i] != b[i])
+                .expect("one bit flipped");
+            assert!(COMMAND_PAYLOAD_BYTES.contains(&byte));
+            let k = fields
+                .iter()
+                .position(|(_, o, s)| (*o..o + s).contains(&byte))
+                .unwrap();
+            hit[k] += 1;
+        }
+        assert!(hit.iter().all(|&n| n > 0), "{hit:?}");
     }
 }
