@@ -199,7 +199,8 @@ fn export(a: &ExportArgs) -> anyhow::Result<()> {
         let (layout, whose) = match header.get("layout") {
             Some(l) => (l.clone(), "the log's header"),
             None => {
-                let site = oils_emulator::log_fields::Site::of_log_header(&log.header_json);
+                let site = oils_emulator::log_fields::Site::of_log_header(&log.header_json)
+                    .map_err(|why| anyhow::anyhow!("the log's header names no site: {why}"))?;
                 (
                     oils_emulator::log_layout::layout(&site)?,
                     "this build (the log's header has none)",

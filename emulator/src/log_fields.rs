@@ -269,13 +269,11 @@ impl Site {
         }
     }
 
-    /// The site of the run whose log header is `header_json`; the default scenario's
-    /// when the header cannot be read.
-    pub fn of_log_header(header_json: &str) -> Self {
-        match crate::session::read_log_header(header_json) {
-            Ok((cfg, _)) => Self::of_scenario(&cfg.scenario),
-            Err(_) => Self::of_scenario(&ScenarioConfig::default()),
-        }
+    /// The site of the run whose log header is `header_json`, or why the header does not
+    /// say (a log's site-relative figures from another site would be silently wrong).
+    pub fn of_log_header(header_json: &str) -> Result<Self, String> {
+        let (cfg, _) = crate::session::read_log_header(header_json)?;
+        Ok(Self::of_scenario(&cfg.scenario))
     }
 
     /// An MCI position at `t_s` in site coordinates (east, north, up), metres.
@@ -1314,6 +1312,20 @@ mod tests {
     use super::*;
     use crate::recorder::TRUTH_VALUES;
     use std::collections::HashSet;
+
+    /// A log's site comes from its header or not at all: a header that does not parse is
+    /// an error, never the default site in disguise.
+    #[test]
+    fn the_site_of_a_log_header_is_its_scenarios_or_an_error() {
+        let mut cfg = crate::run_config::RunConfig::default();
+        cfg.scenario.site.latitude_deg = 12.5;
+        let header = crate::session::log_header(&cfg, 7);
+        let site = Site::of_log_header(&header).unwrap();
+        assert_eq!(site.frame.lat_rad, 12.5f64.to_radians());
+        for bad in ["", "{}", r#"{"run_id":"0000000000000007"}"#, "not json"] {
+            assert!(Site::of_log_header(bad).is_err(), "{bad:?}");
+        }
+    }
 
     /// Every slot of the binary record's values is one field's, exactly once.
     #[test]

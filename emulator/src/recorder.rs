@@ -759,7 +759,8 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
 /// number: flags 1/0, ids in decimal, an absent figure `NaN`.
 pub fn export_csv(log: &Log, out: &mut impl Write) -> std::io::Result<()> {
     writeln!(out, "{}", log_fields::csv_columns().join(","))?;
-    let site = Site::of_log_header(&log.header_json);
+    let site = Site::of_log_header(&log.header_json)
+        .map_err(|why| std::io::Error::new(std::io::ErrorKind::InvalidData, why))?;
     let mut line = String::new();
     for r in &log.records {
         let derived = Derived::of(&r.truth, r.telemetry.header.t_ns as f64 * 1e-9, &site);

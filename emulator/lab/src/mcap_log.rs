@@ -494,7 +494,11 @@ const CH_EVENTS: usize = 8;
 const CH_SCENE: usize = 9;
 
 impl Encoder {
-    fn new<W: Write + Seek>(w: &mut Writer<W>, header_json: &str) -> mcap::McapResult<Self> {
+    fn new<W: Write + Seek>(
+        w: &mut Writer<W>,
+        header_json: &str,
+        site: Site,
+    ) -> mcap::McapResult<Self> {
         let mut metadata = BTreeMap::new();
         metadata.insert("header_json".to_string(), header_json.to_string());
         metadata.insert("format".to_string(), format!("oils-mcap-{MESSAGE_FORMAT}"));
@@ -511,7 +515,7 @@ impl Encoder {
         Ok(Self {
             ids,
             seq: vec![0; n],
-            site: Site::of_log_header(header_json),
+            site,
             started: false,
             contact: false,
             buf: Vec::with_capacity(4096),
@@ -822,7 +826,11 @@ impl McapSink {
             source,
         };
         let mut writer = write_options().create(file).map_err(mcap_err)?;
-        let enc = Encoder::new(&mut writer, header_json).map_err(mcap_err)?;
+        let site = Site::of_log_header(header_json).map_err(|why| McapLogError::NotOils {
+            path: path.to_path_buf(),
+            why,
+        })?;
+        let enc = Encoder::new(&mut writer, header_json, site).map_err(mcap_err)?;
         Ok(Self {
             writer: Some(writer),
             enc,
