@@ -7,8 +7,11 @@
 #
 #   tools/rt-compare.sh                      # 3 x 60 s each
 #   RT_SECONDS=20 tools/rt-compare.sh        # shorter, on a busy machine
+#   RT_BENCH_ARGS="--telemetry sensors --gnc-nav sensors" tools/rt-compare.sh
+#                                            # the bench flying on its sensors
 #
-# Environment: RT_SECONDS (60), RT_RUNS (3), RT_PRIO (80), RT_CPU (0: cyclictest's
+# Environment: RT_BENCH_ARGS (more `oils run` flags for both bench rows), RT_SECONDS
+# (60), RT_RUNS (3), RT_PRIO (80), RT_CPU (0: cyclictest's
 # thread and the emulator's stepping thread), RT_STUB_CPU (1: the onboard stub's),
 # OILS (the oils binary; default target/release/oils, built if missing), RT_OUT (where
 # the raw outputs go; default a fresh temporary directory), RT_REPORT_ONLY=1 (measure
@@ -52,7 +55,7 @@ fi
 
 if [ -z "${RT_REPORT_ONLY:-}" ]; then
     echo "# $(date -u +%FT%TZ)  $(uname -r)  $(nproc) CPUs  load: $(cut -d' ' -f1-3 /proc/loadavg)" | tee "$OUT/machine.txt"
-    echo "# period 1 ms, SCHED_FIFO $PRIO, CPU $CPU (stub on $STUB_CPU), $RUNS x $SECONDS_PER_RUN s each, interleaved; raw outputs in $OUT" | tee -a "$OUT/machine.txt"
+    echo "# period 1 ms, SCHED_FIFO $PRIO, CPU $CPU (stub on $STUB_CPU), $RUNS x $SECONDS_PER_RUN s each, interleaved; bench flags: ${RT_BENCH_ARGS:-none}; raw outputs in $OUT" | tee -a "$OUT/machine.txt"
 else
     cat "$OUT/machine.txt"
 fi
@@ -62,7 +65,7 @@ bench() { # name, extra args...
     shift
     "$OILS" run --mode realtime --dt-ms 1 --fsw-period-ms 1 --duration "$SECONDS_PER_RUN" \
         --rt-priority "$PRIO" --cpus "$CPU,$STUB_CPU" --no-log \
-        --report "$OUT/$name-$i.json" "$@" >"$OUT/$name-$i.txt" 2>&1 ||
+        --report "$OUT/$name-$i.json" ${RT_BENCH_ARGS:-} "$@" >"$OUT/$name-$i.txt" 2>&1 ||
         echo "  ($name run $i exited non-zero: see $OUT/$name-$i.txt)" >&2
 }
 
