@@ -360,24 +360,34 @@ impl NavFilter {
             self.initialise(tlm);
         }
         let s = &tlm.sensors;
+        // Strapdown per IMU sample; the covariance once for all of this telemetry's
+        // samples, with their transitions summed (`Transition::then`).
+        let mut phi: Option<Transition> = None;
         for imu in s.imu.iter().take(s.imu_count as usize) {
             if imu.t_ns <= self.t_ns {
                 continue;
             }
             let dt = (imu.t_ns - self.t_ns) as f64 * 1e-9;
-            if imu.valid == 0 {
+            let period = if imu.valid == 0 {
                 // A lost IMU sample: hold the last valid sample's rates over its period.
                 let (dth, dv) = (self.held_rates.0 * dt, self.held_rates.1 * dt);
-                self.propagate(dt, &dth, &dv);
+                self.strapdown(dt, &dth, &dv)
             } else {
                 let (dth, dv) = (v3(imu.delta_theta_body_rad), v3(imu.delta_v_body_m_s));
                 if dt > 0.0 {
                     self.held_rates = (dth / dt, dv / dt);
                 }
-                self.propagate(dt, &dth, &dv);
-            }
+                self.strapdown(dt, &dth, &dv)
+            };
+            phi = Some(match phi {
+                Some(before) => before.then(&period),
+                None => period,
+            });
             self.t_ns = imu.t_ns;
             self.push_hist();
+        }
+        if let Some(phi) = phi {
+            self.propagate_covariance(&phi);
         }
         for st in s.star_tracker.iter().take(s.star_tracker_count as usize) {
             if st.valid != 0 {
@@ -471,8 +481,8 @@ impl NavFilter {
         -r * (self.cfg.mu_m3_s2 / (n * n * n))
     }
 
-    /// Strapdown over one IMU period and the covariance with `Φ = I + F dt`.
-    fn propagate(&mut self, dt: f64, dtheta: &Vector3<f64>, dv: &Vector3<f64>) {
+    /// Strapdown over one IMU period; returns the period's error transition `Φ = I + F dt`.
+    fn strapdown(&mut self, dt: f64, dtheta: &Vector3<f64>, dv: &Vector3<f64>) -> Transition {
         let dth = dtheta - self.bg * dt;
         let dvc = dv - self.ba * dt;
         let rot = self.q.to_rotation_matrix().into_inner();
@@ -489,13 +499,18 @@ impl NavFilter {
         let rn = r_mid.norm();
         let u = r_mid / rn;
         let gg = (u * u.transpose() * 3.0 - Matrix3::identity()) * (self.cfg.mu_m3_s2 / rn.powi(3));
-        let phi = Transition {
+        Transition {
             dt_s: dt,
             v_from_r: gg * dt,
             v_from_theta: -rot * skew(&dvc),
             v_from_ba: -rot * dt,
             theta_from_theta: Matrix3::identity() - skew(&dth),
-        };
+        }
+    }
+
+    /// `P = Φ P Φ^T + Q T` over the transition's period `T`.
+    fn propagate_covariance(&mut self, phi: &Transition) {
+        let dt = phi.dt_s;
         self.p = phi.propagate(&self.p);
         let c = &self.cfg;
         for i in 0..3 {
