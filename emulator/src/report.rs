@@ -138,15 +138,26 @@ impl RunReport {
     pub fn table(&self) -> String {
         let s = &self.summary;
         let mut out = String::new();
+        // What the telemetry carries and what the reference GNC navigates from, when
+        // they are not the defaults (nav; the ideal navigation source).
+        let mut fsw = self.fsw.clone();
+        if self.config.fsw == oils_shared::fsw::FswSpec::Gnc
+            && self.config.gnc.navigation == oils_shared::fsw::GncNavigation::Sensors
+        {
+            fsw.push_str(" (navigating on its own filter)");
+        }
+        let telemetry = match self.config.telemetry {
+            crate::run_config::TelemetrySource::Nav => String::new(),
+            t => format!("  telemetry {}", t.as_str()),
+        };
         let _ = writeln!(
             out,
-            "oils run {}  link {}  mode {:?}  dt {} ms  propulsion {}  fsw {}  wait {}  seed {}",
+            "oils run {}  link {}  mode {:?}  dt {} ms  propulsion {}{telemetry}  fsw {fsw}  wait {}  seed {}",
             self.run_id,
             self.link,
             self.mode,
             self.dt_ms,
             self.propulsion,
-            self.fsw,
             self.wait,
             self.seed
         );
