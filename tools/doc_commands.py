@@ -5,9 +5,17 @@ In every ```sh block, each line that starts with `oils ` or `cargo run` is run (
 trailing `# comment` dropped; `oils` is the release binary), in a scratch directory, one
 after the other, and must exit 0. A ```text block right after the comment
 `<!-- output of: COMMAND -->` is COMMAND's shown output: COMMAND is run and every shown
-line but `...` must be one of the lines it printed, run ids (16 hex digits) aside.
+line but `...` must be one of the lines it printed, run ids (16 hex digits) aside; a
+`...` inside a line stands for a figure that varies from run to run (a size that holds
+wall-clock timings).
+
+With `--flags`, the pages' commands are not run (campaigns, training, two processes
+by hand, placeholders such as `<id>`): each command shown in any code block, usage
+synopses included, names its subcommand, and every `--flag` it shows must be one that
+subcommand's `--help` lists.
 
     tools/doc_commands.py README.md [docs/X.md ...]   (needs target/release/oils built)
+    tools/doc_commands.py --flags docs/*.md
 """
 import os
 import re
@@ -65,7 +73,8 @@ def check(page, cwd):
             for line in body:
                 if line.strip() == "...":
                     continue
-                if RUN_ID.sub("<id>", line.rstrip()) not in printed:
+                want = re.escape(RUN_ID.sub("<id>", line.rstrip())).replace(re.escape("..."), ".+")
+                if not any(re.fullmatch(want, p) for p in printed):
                     raise SystemExit(f"{page}: `{command}` no longer prints:\n  {line}\nit printed:\n" + "\n".join(sorted(printed)))
             ran += 1
             print(f"{page}: output of `{command}` as shown")
@@ -78,7 +87,72 @@ def check(page, cwd):
     return ran
 
 
+HELP = {}
+
+
+def help_of(words):
+    """The `--help` text of the longest subcommand path at the start of `words`."""
+    path = []
+    for w in words:
+        if w.startswith("-") or not re.fullmatch(r"[a-z][a-z0-9-]*", w):
+            break
+        path.append(w)
+    while path:
+        key = tuple(path)
+        if key not in HELP:
+            out = subprocess.run([OILS, *path, "--help"], capture_output=True, text=True)
+            HELP[key] = out.stdout if out.returncode == 0 else None
+        if HELP[key] is not None:
+            return key, HELP[key]
+        path.pop()
+    return (), None
+
+
+def shown_commands(text):
+    """Each `oils ...` or `cargo run ... -- ...` command in a code block (continued
+    lines joined), as the words after `oils`."""
+    for _, body, _ in blocks(text):
+        joined, line = [], ""
+        for raw in body:
+            line += raw.rstrip().rstrip("\\")
+            if raw.rstrip().endswith("\\"):
+                line += " "
+                continue
+            joined.append(line.strip())
+            line = ""
+        for command in joined:
+            for part in re.split(r"\s(?:&&|\|)\s", command):
+                words = part.lstrip("$ ").split("#")[0].split()
+                if words[:1] == ["oils"]:
+                    yield part, words[1:]
+                elif words[:2] == ["cargo", "run"] and "--" in words and not {"--example", "-p", "--bin"} & set(words[: words.index("--")]):
+                    rest = words[words.index("--") + 1 :]
+                    if not rest[:1] or rest[0].startswith("-"):
+                        continue
+                    yield part, rest
+
+
+def check_flags(page):
+    checked = 0
+    for command, words in shown_commands(open(page).read()):
+        sub, text = help_of(words)
+        if text is None:
+            raise SystemExit(f"{page}: `{command}`: no such oils subcommand")
+        for flag in re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", " ".join(words)):
+            if not re.search(rf"(?<![\w-]){re.escape(flag)}(?![\w-])", text):
+                raise SystemExit(f"{page}: `{command}`: `oils {' '.join(sub)}` has no {flag}")
+        checked += 1
+    print(f"{page}: {checked} commands name only flags their subcommand has")
+    return checked
+
+
 def main():
+    if sys.argv[1:2] == ["--flags"]:
+        pages = sys.argv[2:]
+        total = sum(check_flags(p) for p in pages)
+        if total == 0:
+            raise SystemExit("no command found: the pages show none, or the script lost them")
+        return
     pages = sys.argv[1:] or ["README.md"]
     with tempfile.TemporaryDirectory(prefix="oils-doc-") as cwd:
         total = sum(check(os.path.join(REPO, p) if not os.path.isabs(p) else p, cwd) for p in pages)
