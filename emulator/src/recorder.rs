@@ -543,18 +543,40 @@ impl Sink for File {
 pub fn pack_frame(raw: &[u8], n: usize, out: &mut Vec<u8>) {
     out.clear();
     out.resize(n * RECORD_SIZE, 0);
+    let word_at = |r: usize, j: usize| {
+        let at = r * RECORD_SIZE + j * 8;
+        let mut word = [0u8; 8];
+        word.copy_from_slice(&raw[at..at + 8]);
+        u64::from_le_bytes(word)
+    };
     for j in 0..RECORD_SIZE / 8 {
         let (mut prev1, mut prev2) = (0u64, 0u64);
-        for r in 0..n {
-            let at = r * RECORD_SIZE + j * 8;
-            let mut word = [0u8; 8];
-            word.copy_from_slice(&raw[at..at + 8]);
-            let v = u64::from_le_bytes(word);
-            let d2 = v.wrapping_sub(prev1.wrapping_mul(2)).wrapping_add(prev2);
-            (prev2, prev1) = (prev1, v);
-            for (b, byte) in d2.to_le_bytes().into_iter().enumerate() {
-                out[(j * 8 + b) * n + r] = byte;
+        let mut r = 0;
+        // Eight records at a time: their eight differences, transposed as an 8x8 byte
+        // block, become eight bytes of each of the word's eight planes (one store each,
+        // not 64 byte stores).
+        while r < n {
+            let count = (n - r).min(8);
+            let mut d2 = [0u64; 8];
+            for (k, d) in d2.iter_mut().enumerate().take(count) {
+                let v = word_at(r + k, j);
+                *d = v.wrapping_sub(prev1.wrapping_mul(2)).wrapping_add(prev2);
+                (prev2, prev1) = (prev1, v);
             }
+            for b in 0..8 {
+                let plane = (j * 8 + b) * n + r;
+                let mut bytes = [0u8; 8];
+                for (k, byte) in bytes.iter_mut().enumerate() {
+                    *byte = (d2[k] >> (8 * b)) as u8;
+                }
+                if count == 8 {
+                    // A fixed length: a store, not a call to memmove.
+                    out[plane..plane + 8].copy_from_slice(&bytes);
+                } else {
+                    out[plane..plane + count].copy_from_slice(&bytes[..count]);
+                }
+            }
+            r += count;
         }
     }
 }
