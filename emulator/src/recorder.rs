@@ -28,8 +28,8 @@
 //! masses, times) leave differences with few significant bytes, and the planes put equal
 //! bytes next to each other: zstd level 3 then makes the default descent's 198.9 MB of
 //! records 28 MB (docs/performance.md, "Log"). Frames hold up to [`FRAME_RECORDS`]
-//! records and are written when full and when the log is closed; a crash loses at most
-//! the frame being filled.
+//! records and are written when full, when no record came for `IDLE_FLUSH` (a stalled
+//! run) and when the log is closed; a crash loses at most the frame being filled.
 //!
 //! A log without its trailer (or whose trailer counts other records than it holds) is
 //! read, with a warning: the run was interrupted (kill -9, a full disk) or the file was
@@ -48,7 +48,7 @@
 
 use crate::log_fields::{self, Access, Derived, Sample, Site, Value};
 use crate::plant::{ActuatorCommand, TruthState};
-use crossbeam::channel::{bounded, Receiver, Sender, TrySendError};
+use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, Sender, TrySendError};
 use oils_shared::{AsBytes, Command, Telemetry};
 use serde::{Deserialize, Serialize};
 use std::fs::File;
@@ -79,6 +79,10 @@ pub const FRAME_RECORDS: usize = 1024;
 /// zstd level: 3 (zstd's default) packs a frame in a few milliseconds on the writer
 /// thread; level 19 gains 3 % for twenty times the time (docs/performance.md, "Log").
 const ZSTD_LEVEL: i32 = 3;
+/// No record for this long: the writer writes the frame it is filling (the writer
+/// thread's own timer; nothing in the loop reads it). A run recording at 100 Hz or more
+/// never waits this long between records, so its frames stay full.
+const IDLE_FLUSH: std::time::Duration = std::time::Duration::from_millis(200);
 /// Bytes of the trailer.
 pub const TRAILER_SIZE: usize = 20;
 /// Magic of the format before per-step timing, refused with a clear message.
@@ -685,7 +689,18 @@ fn write_records(
         *written += n as u64;
         Ok(())
     };
-    while let Ok(rec) = rx.recv() {
+    loop {
+        let rec = match rx.recv_timeout(IDLE_FLUSH) {
+            Ok(rec) => rec,
+            // The run stalled (a flight software that never returns, a paused realtime
+            // run): what it recorded goes to the file now, as a short frame, so a run
+            // then killed keeps every step.
+            Err(RecvTimeoutError::Timeout) => {
+                flush(&mut raw, first_step, &mut written, out.as_mut())?;
+                continue;
+            }
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
         if raw.is_empty() {
             first_step = rec.telemetry.header.step;
         }
@@ -902,7 +917,7 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
         None
     } else {
         trailer_count(body, TRAILER_MAGIC_V6)
-            .filter(|_| (body.len() - TRAILER_SIZE) % RECORD_SIZE == 0)
+            .filter(|_| (body.len() - TRAILER_SIZE).is_multiple_of(RECORD_SIZE))
     };
     if trailer.is_some() {
         body = &body[..body.len() - TRAILER_SIZE];

@@ -247,10 +247,6 @@ impl RunArgs {
         }
         if let Some(n) = self.gnc_nav {
             cfg.gnc.navigation = n;
-        } else if self.telemetry == Some(TelemetrySource::Sensors) && cfg.fsw == FswSpec::Gnc {
-            // Sensors only, no ideal navigation source: the reference GNC flies on its own
-            // filter (an explicit --gnc-nav bench still asks for the refusal).
-            cfg.gnc.navigation = oils_shared::fsw::GncNavigation::Sensors;
         }
         if let Some(a) = self.gnc_attitude {
             cfg.gnc.attitude = a;
@@ -335,6 +331,15 @@ impl RunArgs {
             cfg.allow_reattach = true;
         }
         cfg.faults.extend(self.faults.iter().cloned());
+        if self.telemetry == Some(TelemetrySource::Sensors)
+            && self.gnc_nav.is_none()
+            && cfg.fsw == FswSpec::Gnc
+        {
+            // Sensors only, no ideal navigation source: the reference GNC flies on its own
+            // filter (an explicit --gnc-nav bench still asks for the refusal). Decided
+            // last, once --fsw and --no-stub have said who flies.
+            cfg.gnc.navigation = oils_shared::fsw::GncNavigation::Sensors;
+        }
         cfg.validate()?;
         Ok(cfg)
     }
