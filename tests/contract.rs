@@ -169,7 +169,7 @@ fn contract_record_equals_replay() {
     // An edited header (the run's configuration) is refused by its CRC; one whose CRC
     // was recomputed no longer matches its records and does not replay.
     let bytes = std::fs::read(&log).unwrap();
-    assert_eq!(&bytes[..8], b"OILSLOG6");
+    assert_eq!(&bytes[..8], b"OILSLOG7");
     let header_len = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
     let mut header: serde_json::Value =
         serde_json::from_slice(&bytes[16..16 + header_len]).unwrap();
@@ -287,11 +287,21 @@ fn contract_the_log_holds_the_truth_and_checks_itself() {
     // The true mass falls by the ejected propellant.
     assert!(rows[0][col("truth.mass_kg")] > last[col("truth.mass_kg")]);
 
-    // A record damaged on disk is named by its step, not exported as data.
+    // Records damaged on disk are named by their steps, not exported as data: a byte
+    // of the second frame's compressed records flipped damages its records, from step
+    // 1024 on.
     let mut bytes = std::fs::read(&log).unwrap();
     let header_len = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
-    let record_size = oils_emulator::recorder::RECORD_SIZE;
-    let at = 16 + header_len + 1234 * record_size + 100;
+    let body = 16 + header_len;
+    let second = oils_emulator::recorder::frames(&bytes[body..]).0[1];
+    assert_eq!(
+        second.records as usize,
+        oils_emulator::recorder::FRAME_RECORDS
+    );
+    let at = body
+        + second.offset
+        + oils_emulator::recorder::FRAME_HEADER_SIZE
+        + second.packed_len as usize / 2;
     bytes[at] ^= 0x40;
     let damaged = dir.join("damaged.oilslog");
     std::fs::write(&damaged, bytes).unwrap();
@@ -303,7 +313,10 @@ fn contract_the_log_holds_the_truth_and_checks_itself() {
     ]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("damaged") && err.contains("1234"), "{err}");
+    assert!(
+        err.contains("1024 damaged records") && err.contains("at steps 1024, 1025"),
+        "{err}"
+    );
 }
 
 /// Multi-rate (#32): plant at 5 ms, the surrogate sampled every 10 ms and held, the

@@ -178,17 +178,50 @@ fn devices_that_do_not_fit_the_schedule_are_refused_naming_them() {
     let e = text(&out);
     assert!(e.contains("imu") && e.contains("plant step"), "{e}");
 
+    // Asked for explicitly, the reference GNC on the ideal navigation source with no
+    // such source in the telemetry is refused.
     let out = run_oils(&[
         "run",
         "--link",
         "inproc",
         "--telemetry",
         "sensors",
+        "--gnc-nav",
+        "bench",
         "--no-log",
     ]);
     assert!(!out.status.success());
     let e = text(&out);
     assert!(e.contains("reference GNC") && e.contains("both"), "{e}");
+}
+
+/// `--telemetry sensors` alone: the reference GNC flies the descent on its own filter,
+/// says so on the header line, and lands.
+#[test]
+fn sensor_telemetry_alone_flies_the_reference_gnc_on_its_filter() {
+    let dir = scratch("sensors-alone");
+    let rep = dir.join("r.json");
+    let out = run_oils(&[
+        "run",
+        "--telemetry",
+        "sensors",
+        "--link",
+        "inproc",
+        "--no-log",
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let head = stdout.lines().next().unwrap_or_default();
+    assert!(
+        head.contains("telemetry sensors")
+            && head.contains("fsw gnc (navigating on its own filter)"),
+        "{head}"
+    );
+    let r = report(&rep);
+    assert_eq!(r["config"]["gnc"]["navigation"], "sensors", "{r}");
+    assert_eq!(r["outcome"], "landed", "{}", text(&out));
 }
 
 #[test]

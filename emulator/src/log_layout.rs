@@ -307,6 +307,13 @@ pub fn layout(site: &Site) -> Result<Json, LayoutError> {
         "record_size": RECORD_SIZE,
         "crc": {"offset": 4, "covers": "bytes 0..4 and 8..record_size (CRC-32, IEEE)"},
         "trailer": {"magic": String::from_utf8_lossy(crate::recorder::TRAILER_MAGIC), "size": TRAILER_SIZE},
+        "frames": {
+            "header_size": crate::recorder::FRAME_HEADER_SIZE,
+            "header": "records u32, packed_len u32, CRC-32 of those 8 bytes",
+            "max_records": crate::recorder::FRAME_RECORDS,
+            "codec": "zstd",
+            "packing": "the records' bytes as little-endian u64 words, each word's second difference along the frame's records (wrapping; the first two against zeros), as byte planes: byte b of word j of record r at (8 j + b) * records + r",
+        },
         "end_of_run_flag": REC_END_OF_RUN,
         "flags_column": column_of(Topic::Command, "record_flags", 0),
         "columns": columns,

@@ -4,23 +4,38 @@
 //!
 //! File layout (little-endian):
 //! ```text
-//! magic      8 bytes  "OILSLOG6"
+//! magic      8 bytes  "OILSLOG7"
 //! header_len u32      length of the JSON header that follows
 //! header_crc u32      CRC-32 of the header bytes (an edited header is refused)
 //! header     JSON     the run's whole configuration (RunConfig), run id, protocol version
-//! records    RECORD_SIZE bytes each:
-//!            flags u32 | crc32 u32 | Telemetry (1176 bytes) | Command (192 bytes)
-//!            | applied command, true state, active faults and the step's timing:
-//!              TRUTH_VALUES f64s, the slots of `log_fields::FIELDS` (a timing figure
-//!              the step has not is NaN)
+//! frames     each:    records u32 | packed_len u32 | crc32 u32 (of the 8 bytes before it)
+//!                     | packed_len bytes: one zstd frame (with its content checksum) of
+//!                     `records` records, packed (see below)
 //! trailer    TRAILER_SIZE bytes, written when the log is closed:
-//!            "OILSEND6" | records u64 | crc32 u32 (of the 16 bytes before it)
+//!            "OILSEND7" | records u64 | crc32 u32 (of the 16 bytes before it)
 //! ```
-//! The CRC-32 covers the flags and everything after the CRC, so a damaged record is
-//! found and named by its position, never read as data. A log without its trailer (or
-//! whose trailer counts other records than it holds) is read, with a warning: the run
-//! was interrupted (kill -9, a full disk) or the file was cut. OILSLOG3 and OILSLOG4 logs
-//! hold protocol v1 packets and are refused with a message that says how to re-run them.
+//! A record is RECORD_SIZE bytes:
+//! flags u32 | crc32 u32 | Telemetry (1176 bytes) | Command (336 bytes) | applied
+//! command, true state, active faults and the step's timing: TRUTH_VALUES f64s, the slots
+//! of `log_fields::FIELDS` (a timing figure the step has not is NaN). Its CRC-32 covers
+//! the flags and everything after the CRC, so a damaged record is found and named by its
+//! position, never read as data.
+//!
+//! Packing ([`pack_frame`]): the records' bytes read as little-endian u64 words, each
+//! word replaced by its second difference along the frame (word minus twice the previous
+//! record's plus the one before, wrapping; the first records against zeros), then written
+//! as byte planes (byte b of word j of every record together). Smooth values (positions,
+//! masses, times) leave differences with few significant bytes, and the planes put equal
+//! bytes next to each other: zstd level 3 then makes the default descent's 198.9 MB of
+//! records 28 MB (docs/performance.md, "Log"). Frames hold up to [`FRAME_RECORDS`]
+//! records and are written when full, when no record came for `IDLE_FLUSH` (a stalled
+//! run) and when the log is closed; a crash loses at most the frame being filled.
+//!
+//! A log without its trailer (or whose trailer counts other records than it holds) is
+//! read, with a warning: the run was interrupted (kill -9, a full disk) or the file was
+//! cut; every whole frame before is read. OILSLOG6 logs (the same records, uncompressed,
+//! one after the other, "OILSEND6" trailer) are read too. The formats before, OILSLOG1
+//! to OILSLOG5, are refused with a message that says how to record them again.
 //!
 //! The file is created 0600 and locked (`flock`, exclusive) for the whole run: a second
 //! run given the same `--log` fails at once, before it touches the file.
@@ -33,7 +48,7 @@
 
 use crate::log_fields::{self, Access, Derived, Sample, Site, Value};
 use crate::plant::{ActuatorCommand, TruthState};
-use crossbeam::channel::{bounded, Receiver, Sender, TrySendError};
+use crossbeam::channel::{bounded, Receiver, RecvTimeoutError, Sender, TrySendError};
 use oils_shared::{AsBytes, Command, Telemetry};
 use serde::{Deserialize, Serialize};
 use std::fs::File;
@@ -43,7 +58,9 @@ use std::thread::JoinHandle;
 use thiserror::Error;
 
 /// File magic of this format.
-pub const MAGIC: &[u8; 8] = b"OILSLOG6";
+pub const MAGIC: &[u8; 8] = b"OILSLOG7";
+/// Magic of the format with the same records, uncompressed (still read).
+pub const MAGIC_V6: &[u8; 8] = b"OILSLOG6";
 /// Magic of the formats with protocol v1 packets (OILSLOG4; OILSLOG3 before the header
 /// CRC and the trailer): refused with a clear message.
 const MAGIC_V4: &[u8; 8] = b"OILSLOG4";
@@ -51,7 +68,21 @@ const MAGIC_V4: &[u8; 8] = b"OILSLOG4";
 const MAGIC_V5: &[u8; 8] = b"OILSLOG5";
 const MAGIC_V3: &[u8; 8] = b"OILSLOG3";
 /// Magic of the trailer that closes a log.
-pub const TRAILER_MAGIC: &[u8; 8] = b"OILSEND6";
+pub const TRAILER_MAGIC: &[u8; 8] = b"OILSEND7";
+/// Magic of an OILSLOG6 log's trailer.
+const TRAILER_MAGIC_V6: &[u8; 8] = b"OILSEND6";
+/// Bytes of a frame's header: records u32, packed length u32, their CRC-32.
+pub const FRAME_HEADER_SIZE: usize = 12;
+/// Records a frame holds when full: 2.1 MB of records, packed to about 0.3 MB for the
+/// default descent; 10 s of a 10 ms run is what a crash may lose.
+pub const FRAME_RECORDS: usize = 1024;
+/// zstd level: 3 (zstd's default) packs a frame in a few milliseconds on the writer
+/// thread; level 19 gains 3 % for twenty times the time (docs/performance.md, "Log").
+const ZSTD_LEVEL: i32 = 3;
+/// No record for this long: the writer writes the frame it is filling (the writer
+/// thread's own timer; nothing in the loop reads it). A run recording at 100 Hz or more
+/// never waits this long between records, so its frames stay full.
+const IDLE_FLUSH: std::time::Duration = std::time::Duration::from_millis(200);
 /// Bytes of the trailer.
 pub const TRAILER_SIZE: usize = 20;
 /// Magic of the format before per-step timing, refused with a clear message.
@@ -379,11 +410,18 @@ impl Recorder {
 
     /// A recorder writing OILSLOG6 to `out` (a file; in tests, a writer that fails);
     /// `path` names it in errors.
-    pub fn over(
+    pub fn over(path: &Path, out: Box<dyn Sink>, header_json: &str) -> Result<Self, RecorderError> {
+        Self::framed(path, out, header_json, FRAME_RECORDS)
+    }
+
+    /// [`Recorder::over`] with frames of `frame_records` records (tests use small ones).
+    pub fn framed(
         path: &Path,
         mut out: Box<dyn Sink>,
         header_json: &str,
+        frame_records: usize,
     ) -> Result<Self, RecorderError> {
+        let frame_records = frame_records.clamp(1, FRAME_RECORDS);
         let io = |source| RecorderError::Io {
             path: path.to_path_buf(),
             source,
@@ -398,7 +436,7 @@ impl Recorder {
         let thread_path = path.to_path_buf();
         let writer = std::thread::Builder::new()
             .name("oils-recorder".into())
-            .spawn(move || write_records(rx, out, thread_path))
+            .spawn(move || write_records(rx, out, thread_path, frame_records))
             .map_err(io)?;
         Ok(Self {
             tx: Some(tx),
@@ -503,30 +541,133 @@ impl Sink for File {
     }
 }
 
-/// Bytes handed to the OS at once (at most; less when the channel runs dry).
-const BATCH_BYTES: usize = 1 << 20;
+/// Packs `n` records (`raw`, `n * RECORD_SIZE` bytes) for compression: each u64 word's
+/// second difference along the records, as byte planes (the module's doc). `out` is
+/// cleared and filled with as many bytes.
+pub fn pack_frame(raw: &[u8], n: usize, out: &mut Vec<u8>) {
+    out.clear();
+    out.resize(n * RECORD_SIZE, 0);
+    let word_at = |r: usize, j: usize| {
+        let at = r * RECORD_SIZE + j * 8;
+        let mut word = [0u8; 8];
+        word.copy_from_slice(&raw[at..at + 8]);
+        u64::from_le_bytes(word)
+    };
+    for j in 0..RECORD_SIZE / 8 {
+        let (mut prev1, mut prev2) = (0u64, 0u64);
+        let mut r = 0;
+        // Eight records at a time: their eight differences, transposed as an 8x8 byte
+        // block, become eight bytes of each of the word's eight planes (one store each,
+        // not 64 byte stores).
+        while r < n {
+            let count = (n - r).min(8);
+            let mut d2 = [0u64; 8];
+            for (k, d) in d2.iter_mut().enumerate().take(count) {
+                let v = word_at(r + k, j);
+                *d = v.wrapping_sub(prev1.wrapping_mul(2)).wrapping_add(prev2);
+                (prev2, prev1) = (prev1, v);
+            }
+            for b in 0..8 {
+                let plane = (j * 8 + b) * n + r;
+                let mut bytes = [0u8; 8];
+                for (k, byte) in bytes.iter_mut().enumerate() {
+                    *byte = (d2[k] >> (8 * b)) as u8;
+                }
+                if count == 8 {
+                    // A fixed length: a store, not a call to memmove.
+                    out[plane..plane + 8].copy_from_slice(&bytes);
+                } else {
+                    out[plane..plane + count].copy_from_slice(&bytes[..count]);
+                }
+            }
+            r += count;
+        }
+    }
+}
 
+/// The inverse of [`pack_frame`]: `packed` (`n * RECORD_SIZE` bytes) back to the records.
+pub fn unpack_frame(packed: &[u8], n: usize, out: &mut Vec<u8>) {
+    out.clear();
+    out.resize(n * RECORD_SIZE, 0);
+    for j in 0..RECORD_SIZE / 8 {
+        let (mut prev1, mut prev2) = (0u64, 0u64);
+        for r in 0..n {
+            let mut word = [0u8; 8];
+            for (b, byte) in word.iter_mut().enumerate() {
+                *byte = packed[(j * 8 + b) * n + r];
+            }
+            let v = u64::from_le_bytes(word)
+                .wrapping_add(prev1.wrapping_mul(2))
+                .wrapping_sub(prev2);
+            (prev2, prev1) = (prev1, v);
+            let at = r * RECORD_SIZE + j * 8;
+            out[at..at + 8].copy_from_slice(&v.to_le_bytes());
+        }
+    }
+}
+
+/// A frame's 12-byte header.
+fn frame_header(records: u32, packed_len: u32) -> [u8; FRAME_HEADER_SIZE] {
+    let mut h = [0u8; FRAME_HEADER_SIZE];
+    h[0..4].copy_from_slice(&records.to_le_bytes());
+    h[4..8].copy_from_slice(&packed_len.to_le_bytes());
+    let crc = crc32fast::hash(&h[0..8]);
+    h[8..12].copy_from_slice(&crc.to_le_bytes());
+    h
+}
+
+/// The writer thread: records into frames, each packed, compressed and handed to the OS
+/// when full (and the last when the channel closes), then the trailer and an `fsync`.
+/// Its buffers are allocated once, here, off the stepping thread.
 fn write_records(
     rx: Receiver<Record>,
     mut out: Box<dyn Sink>,
     path: PathBuf,
+    frame_records: usize,
 ) -> Result<u64, RecorderError> {
+    let io_err = |source| RecorderError::Io {
+        path: path.clone(),
+        source,
+    };
+    let mut raw: Vec<u8> = Vec::with_capacity(frame_records * RECORD_SIZE);
+    let mut packed: Vec<u8> = Vec::with_capacity(frame_records * RECORD_SIZE);
+    let mut frame: Vec<u8> =
+        Vec::with_capacity(FRAME_HEADER_SIZE + zstd::zstd_safe::compress_bound(raw.capacity()));
+    let mut zstd = zstd::bulk::Compressor::new(ZSTD_LEVEL).map_err(io_err)?;
+    zstd.include_checksum(true).map_err(io_err)?;
     let mut buf = [0u8; RECORD_SIZE];
-    let mut batch: Vec<u8> = Vec::with_capacity(BATCH_BYTES + RECORD_SIZE);
-    // Steps of the records in `batch` (for the error of a failed write).
+    // Step of the frame's first record (for the error of a failed write).
     let mut first_step = 0u64;
     let mut written = 0u64;
-    // Hands `batch` to the OS; on failure, counts the whole records that got there.
-    fn put(
-        out: &mut dyn Sink,
-        path: &Path,
-        batch: &mut Vec<u8>,
-        first_step: u64,
-        written: &mut u64,
-    ) -> Result<(), RecorderError> {
+    // Packs, compresses and writes the records in `raw`; counts them once the OS has
+    // the whole frame.
+    let mut flush = |raw: &mut Vec<u8>,
+                     first_step: u64,
+                     written: &mut u64,
+                     out: &mut dyn Sink|
+     -> Result<(), RecorderError> {
+        let n = raw.len() / RECORD_SIZE;
+        if n == 0 {
+            return Ok(());
+        }
+        pack_frame(raw, n, &mut packed);
+        frame.clear();
+        frame.resize(
+            FRAME_HEADER_SIZE + zstd::zstd_safe::compress_bound(packed.len()),
+            0,
+        );
+        let len = zstd
+            .compress_to_buffer(&packed[..], &mut frame[FRAME_HEADER_SIZE..])
+            .map_err(|source| RecorderError::Io {
+                path: path.clone(),
+                source,
+            })?;
+        frame.truncate(FRAME_HEADER_SIZE + len);
+        frame[..FRAME_HEADER_SIZE].copy_from_slice(&frame_header(n as u32, len as u32));
+        raw.clear();
         let mut done = 0;
-        while done < batch.len() {
-            let e = match out.write(&batch[done..]) {
+        while done < frame.len() {
+            let e = match out.write(&frame[done..]) {
                 Ok(0) => std::io::Error::new(
                     std::io::ErrorKind::WriteZero,
                     "the file took no more bytes",
@@ -538,35 +679,38 @@ fn write_records(
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
                 Err(e) => e,
             };
-            let whole = (done / RECORD_SIZE) as u64;
-            *written += whole;
             return Err(RecorderError::Write {
-                path: path.to_path_buf(),
-                step: first_step + whole,
+                path: path.clone(),
+                step: first_step,
                 written: *written,
                 source: e,
             });
         }
-        *written += (batch.len() / RECORD_SIZE) as u64;
-        batch.clear();
+        *written += n as u64;
         Ok(())
-    }
-    // Block for the next record; then drain without blocking; write when dry or full.
-    while let Ok(rec) = rx.recv() {
-        let mut next = Some(rec);
-        while let Some(rec) = next {
-            if batch.is_empty() {
-                first_step = rec.telemetry.header.step;
+    };
+    loop {
+        let rec = match rx.recv_timeout(IDLE_FLUSH) {
+            Ok(rec) => rec,
+            // The run stalled (a flight software that never returns, a paused realtime
+            // run): what it recorded goes to the file now, as a short frame, so a run
+            // then killed keeps every step.
+            Err(RecvTimeoutError::Timeout) => {
+                flush(&mut raw, first_step, &mut written, out.as_mut())?;
+                continue;
             }
-            rec.encode(&mut buf);
-            batch.extend_from_slice(&buf);
-            if batch.len() >= BATCH_BYTES {
-                put(out.as_mut(), &path, &mut batch, first_step, &mut written)?;
-            }
-            next = rx.try_recv().ok();
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        if raw.is_empty() {
+            first_step = rec.telemetry.header.step;
         }
-        put(out.as_mut(), &path, &mut batch, first_step, &mut written)?;
+        rec.encode(&mut buf);
+        raw.extend_from_slice(&buf);
+        if raw.len() >= frame_records * RECORD_SIZE {
+            flush(&mut raw, first_step, &mut written, out.as_mut())?;
+        }
     }
+    flush(&mut raw, first_step, &mut written, out.as_mut())?;
     let io = |source| RecorderError::Io {
         path: path.clone(),
         source,
@@ -661,11 +805,11 @@ pub fn read_log(path: &Path) -> Result<Log, RecorderError> {
     parse_log(path, &bytes)
 }
 
-/// The record count of a valid trailer at the end of `body`, if there is one.
-fn trailer_count(body: &[u8]) -> Option<u64> {
+/// The record count of a valid trailer (`magic`) at the end of `body`, if there is one.
+fn trailer_count(body: &[u8], magic: &[u8; 8]) -> Option<u64> {
     let at = body.len().checked_sub(TRAILER_SIZE)?;
     let t = &body[at..];
-    if &t[..8] != TRAILER_MAGIC || at % RECORD_SIZE != 0 {
+    if &t[..8] != magic {
         return None;
     }
     let crc = u32::from_le_bytes(t[16..20].try_into().ok()?);
@@ -673,6 +817,45 @@ fn trailer_count(body: &[u8]) -> Option<u64> {
         return None;
     }
     Some(u64::from_le_bytes(t[8..16].try_into().ok()?))
+}
+
+/// One frame of an OILSLOG7 body, as its header describes it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameAt {
+    /// Offset of the frame's header in the body (after the file's JSON header).
+    pub offset: usize,
+    /// Records it holds.
+    pub records: u32,
+    /// Bytes of its zstd frame.
+    pub packed_len: u32,
+}
+
+/// The frames of an OILSLOG7 body, in order, found by their headers (each says how long
+/// its frame is: the index a reader seeks by), and the bytes after the last whole one
+/// (a frame cut short, or a damaged header, ends the list).
+pub fn frames(body: &[u8]) -> (Vec<FrameAt>, usize) {
+    let mut out = Vec::new();
+    let mut at = 0;
+    while body.len() - at >= FRAME_HEADER_SIZE {
+        let h = &body[at..at + FRAME_HEADER_SIZE];
+        let word = |i: usize| u32::from_le_bytes([h[i], h[i + 1], h[i + 2], h[i + 3]]);
+        let (records, packed_len) = (word(0), word(4));
+        let whole = at + FRAME_HEADER_SIZE + packed_len as usize <= body.len();
+        if word(8) != crc32fast::hash(&h[..8])
+            || records == 0
+            || records as usize > FRAME_RECORDS
+            || !whole
+        {
+            break;
+        }
+        out.push(FrameAt {
+            offset: at,
+            records,
+            packed_len,
+        });
+        at += FRAME_HEADER_SIZE + packed_len as usize;
+    }
+    (out, body.len() - at)
 }
 
 /// Parses a whole log file's bytes (`path` names it in errors). Never panics: any bytes
@@ -703,9 +886,10 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
         ));
     }
     let v3 = false;
-    if bytes.len() < 12 || &bytes[..8] != MAGIC {
+    let compressed = bytes.len() >= 8 && &bytes[..8] == MAGIC;
+    if bytes.len() < 12 || !(compressed || &bytes[..8] == MAGIC_V6) {
         return Err(not_log(
-            "missing OILSLOG6 magic (this program reads OILSLOG6)",
+            "missing OILSLOG7 magic (this program reads OILSLOG7 and OILSLOG6)",
         ));
     }
     let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
@@ -726,7 +910,15 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
     let header_json =
         String::from_utf8(header.to_vec()).map_err(|_| not_log("header is not UTF-8"))?;
     let mut body = &bytes[body_start..];
-    let trailer = if v3 { None } else { trailer_count(body) };
+    if compressed {
+        return parse_frames(path, header_json, body);
+    }
+    let trailer = if v3 {
+        None
+    } else {
+        trailer_count(body, TRAILER_MAGIC_V6)
+            .filter(|_| (body.len() - TRAILER_SIZE).is_multiple_of(RECORD_SIZE))
+    };
     if trailer.is_some() {
         body = &body[..body.len() - TRAILER_SIZE];
     }
@@ -751,6 +943,77 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
         ));
     }
     Ok(log)
+}
+
+/// The records of an OILSLOG7 body: every whole frame's, a frame that does not
+/// decompress counted damaged record by record.
+fn parse_frames(path: &Path, header_json: String, body: &[u8]) -> Result<Log, RecorderError> {
+    let (list, rest) = frames(body);
+    // The trailer is what follows the last whole frame, and all of it.
+    let trailer = if rest == TRAILER_SIZE {
+        trailer_count(body, TRAILER_MAGIC)
+    } else {
+        None
+    };
+    let mut log = Log {
+        header_json,
+        records: Vec::with_capacity(list.iter().map(|f| f.records as usize).sum()),
+        trailing_bytes: if trailer.is_some() { 0 } else { rest },
+        ..Log::default()
+    };
+    let mut decompress = zstd::bulk::Decompressor::new().map_err(|source| RecorderError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let (mut packed, mut raw) = (Vec::new(), Vec::new());
+    let mut position = 0u64;
+    for f in &list {
+        let n = f.records as usize;
+        let start = f.offset + FRAME_HEADER_SIZE;
+        let data = &body[start..start + f.packed_len as usize];
+        packed.clear();
+        let whole = decompress
+            .decompress_to_buffer(data, &mut packed_buffer(&mut packed, n))
+            .ok()
+            .filter(|len| *len == n * RECORD_SIZE);
+        match whole {
+            Some(len) => {
+                packed.truncate(len);
+                unpack_frame(&packed, n, &mut raw);
+                for chunk in raw.chunks_exact(RECORD_SIZE) {
+                    match Record::decode(chunk) {
+                        Some(r) => log.records.push(r),
+                        None => log.damaged_records.push(position),
+                    }
+                    position += 1;
+                }
+            }
+            None => {
+                log.damaged_records.extend(position..position + n as u64);
+                position += n as u64;
+            }
+        }
+    }
+    log.check_one_run(path)?;
+    log.check_end(trailer == Some(position));
+    if rest > 0 && trailer.is_none() {
+        log.warnings.push(format!(
+            "{rest} bytes after the last whole frame (a frame cut short, or a damaged frame header) ignored"
+        ));
+    }
+    if let Some(n) = trailer.filter(|n| *n != position) {
+        log.warnings.push(format!(
+            "its trailer counts {n} records, the file holds {position}"
+        ));
+    }
+    Ok(log)
+}
+
+/// `buf` sized for `records` records, to decompress into (a frame says more: an error).
+fn packed_buffer(buf: &mut Vec<u8>, records: usize) -> &mut Vec<u8> {
+    buf.clear();
+    buf.resize(records * RECORD_SIZE, 0);
+    buf
 }
 
 /// Writes a log's records as CSV: one row per record, one column per value of every
@@ -1012,10 +1275,13 @@ pub(crate) mod tests {
         std::fs::remove_file(&path).ok();
     }
 
-    /// A log of `n` records of run `run_id`, closed (end record, trailer), as bytes.
+    /// A log of `n` records of run `run_id`, closed (end record, trailer), one record a
+    /// frame, as bytes.
     fn closed_log(name: &str, n: u64, run_id: u64) -> Vec<u8> {
         let path = temp(name);
-        let rec = Recorder::create(&path, &format!(r#"{{"run_id":"{run_id:016x}"}}"#)).unwrap();
+        let file = create_locked(&path).unwrap();
+        let header = format!(r#"{{"run_id":"{run_id:016x}"}}"#);
+        let rec = Recorder::framed(&path, Box::new(file), &header, 1).unwrap();
         for k in 0..n {
             let mut r = Record::default();
             r.telemetry.header = oils_shared::PacketHeader::new(run_id, k, k as i64 * 10);
@@ -1038,8 +1304,11 @@ pub(crate) mod tests {
         let whole = parse_log(Path::new("x"), &bytes).unwrap();
         assert!(whole.complete, "{:?}", whole.warnings);
         assert!(whole.warnings.is_empty());
-        // Cut after 6 records: no end record, no trailer.
-        let cut = bytes.len() - TRAILER_SIZE - 4 * RECORD_SIZE;
+        // Cut after 6 frames of one record: no end record, no trailer.
+        let body = body_start(&bytes);
+        let (list, _) = frames(&bytes[body..]);
+        assert_eq!(list.len(), 10);
+        let cut = body + list[6].offset;
         let log = parse_log(Path::new("x"), &bytes[..cut]).unwrap();
         assert_eq!(log.records.len(), 6);
         assert!(!log.complete);
@@ -1068,9 +1337,12 @@ pub(crate) mod tests {
     fn a_log_mixing_runs_is_refused() {
         let a = closed_log("mix-a.oilslog", 4, 0xaaaa);
         let b = closed_log("mix-b.oilslog", 4, 0xbbbb);
-        let head = a.len() - TRAILER_SIZE - 4 * RECORD_SIZE;
-        let mut mixed = a[..head + 2 * RECORD_SIZE].to_vec();
-        mixed.extend_from_slice(&b[head + 2 * RECORD_SIZE..]);
+        // a's first two frames, then b's last two (the headers are the same length).
+        let (fa, fb) = (body_start(&a), body_start(&b));
+        let at_a = fa + frames(&a[fa..]).0[2].offset;
+        let at_b = fb + frames(&b[fb..]).0[2].offset;
+        let mut mixed = a[..at_a].to_vec();
+        mixed.extend_from_slice(&b[at_b..]);
         let e = parse_log(Path::new("x"), &mixed).unwrap_err().to_string();
         assert!(e.contains("mixes runs") && e.contains("record 2"), "{e}");
     }
@@ -1089,6 +1361,63 @@ pub(crate) mod tests {
         let mode = std::fs::metadata(&path).unwrap().permissions().mode();
         assert_eq!(mode & 0o777, 0o600, "{mode:o}");
         std::fs::remove_file(&path).ok();
+    }
+
+    /// Where a log's frames start: after the magic, the header's length and CRC, and
+    /// the header.
+    fn body_start(bytes: &[u8]) -> usize {
+        16 + u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize
+    }
+
+    /// Every record back as written, through frames of every size up to a full one and
+    /// a last one partly filled; the packing is its own inverse on any bytes.
+    #[test]
+    fn frames_round_trip_records_and_packing_inverts() {
+        let mut records = Vec::new();
+        for k in 0..(2 * FRAME_RECORDS as u64 + 37) {
+            let mut r = distinct_record();
+            r.telemetry.header.step = k;
+            r.telemetry.altitude_m = 1000.0 - k as f64 * 0.37;
+            r.truth.pos_mci_m[0] = 1.7e6 + (k as f64).sin();
+            records.push(r);
+        }
+        let path = temp("frames.oilslog");
+        let rec = Recorder::create(&path, "{}").unwrap();
+        for r in &records {
+            rec.record(r).unwrap();
+        }
+        assert_eq!(rec.finish().unwrap(), records.len() as u64);
+        let bytes = std::fs::read(&path).unwrap();
+        let (list, rest) = frames(&bytes[body_start(&bytes)..]);
+        let sizes: Vec<u32> = list.iter().map(|f| f.records).collect();
+        assert_eq!(sizes, [FRAME_RECORDS as u32, FRAME_RECORDS as u32, 37]);
+        assert_eq!(rest, TRAILER_SIZE);
+        let log = read_log(&path).unwrap();
+        assert_eq!(log.records, records);
+        std::fs::remove_file(&path).ok();
+
+        let raw: Vec<u8> = (0..5 * RECORD_SIZE)
+            .map(|i| (i * 7919 % 251) as u8)
+            .collect();
+        let (mut packed, mut back) = (Vec::new(), Vec::new());
+        pack_frame(&raw, 5, &mut packed);
+        assert_ne!(packed, raw);
+        unpack_frame(&packed, 5, &mut back);
+        assert_eq!(back, raw);
+    }
+
+    /// A damaged byte inside a frame's compressed records: the frame's records are
+    /// counted damaged by position, the other frames read.
+    #[test]
+    fn a_damaged_frame_names_its_records() {
+        let mut bytes = closed_log("damaged.oilslog", 6, 7);
+        let body = body_start(&bytes);
+        let f = frames(&bytes[body..]).0[3];
+        bytes[body + f.offset + FRAME_HEADER_SIZE + f.packed_len as usize / 2] ^= 0x10;
+        let log = parse_log(Path::new("x"), &bytes).unwrap();
+        assert_eq!(log.damaged_records, [3]);
+        assert_eq!(log.records.len(), 5);
+        assert!(!log.complete);
     }
 
     /// A disk that fills after `room` bytes.
@@ -1123,29 +1452,40 @@ pub(crate) mod tests {
     /// the whole records the file holds, which read back.
     #[test]
     fn a_full_disk_names_the_failing_record_and_counts_the_written_ones() {
-        let bytes = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let header = "{}";
-        let room = 16 + header.len() + 37 * RECORD_SIZE + 100;
-        let sink = FillsUp {
-            room,
-            bytes: bytes.clone(),
-        };
-        let rec = Recorder::over(Path::new("full.oilslog"), Box::new(sink), header).unwrap();
-        for k in 0..100u64 {
-            let mut r = Record::default();
-            r.telemetry.header.step = k;
-            if rec.record(&r).is_err() {
-                break;
+        // Frames of 10 records; the disk fills 100 bytes into the fifth frame.
+        let write = |room: usize| {
+            let bytes = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+            let sink = FillsUp {
+                room,
+                bytes: bytes.clone(),
+            };
+            let rec =
+                Recorder::framed(Path::new("full.oilslog"), Box::new(sink), header, 10).unwrap();
+            for k in 0..100u64 {
+                let mut r = Record::default();
+                r.telemetry.header.step = k;
+                if rec.record(&r).is_err() {
+                    break;
+                }
             }
-        }
-        match rec.finish() {
+            let end = rec.finish();
+            let bytes = bytes.lock().unwrap().clone();
+            (end, bytes)
+        };
+        let (whole, all) = write(usize::MAX / 2);
+        assert_eq!(whole.unwrap(), 100);
+        let body = body_start(&all);
+        let room = body + frames(&all[body..]).0[4].offset + 100;
+        let (end, bytes) = write(room);
+        match end {
             Err(RecorderError::Write { step, written, .. }) => {
-                assert_eq!((step, written), (37, 37));
+                assert_eq!((step, written), (40, 40));
             }
             other => panic!("{other:?}"),
         }
-        let log = parse_log(Path::new("full.oilslog"), &bytes.lock().unwrap()).unwrap();
-        assert_eq!(log.records.len(), 37);
+        let log = parse_log(Path::new("full.oilslog"), &bytes).unwrap();
+        assert_eq!(log.records.len(), 40);
         assert_eq!(log.trailing_bytes, 100);
         assert!(!log.complete);
     }
@@ -1159,6 +1499,11 @@ pub(crate) mod tests {
             Err(RecorderError::NotALog { .. })
         ));
         std::fs::write(&path, b"OILSLOG3\xff\xff\xff\x00").unwrap();
+        assert!(matches!(
+            read_log(&path),
+            Err(RecorderError::NotALog { .. })
+        ));
+        std::fs::write(&path, b"OILSLOG5\xff\xff\xff\x00").unwrap();
         assert!(matches!(
             read_log(&path),
             Err(RecorderError::NotALog { .. })

@@ -138,15 +138,26 @@ impl RunReport {
     pub fn table(&self) -> String {
         let s = &self.summary;
         let mut out = String::new();
+        // What the telemetry carries and what the reference GNC navigates from, when
+        // they are not the defaults (nav; the ideal navigation source).
+        let mut fsw = self.fsw.clone();
+        if self.config.fsw == oils_shared::fsw::FswSpec::Gnc
+            && self.config.gnc.navigation == oils_shared::fsw::GncNavigation::Sensors
+        {
+            fsw.push_str(" (navigating on its own filter)");
+        }
+        let telemetry = match self.config.telemetry {
+            crate::run_config::TelemetrySource::Nav => String::new(),
+            t => format!("  telemetry {}", t.as_str()),
+        };
         let _ = writeln!(
             out,
-            "oils run {}  link {}  mode {:?}  dt {} ms  propulsion {}  fsw {}  wait {}  seed {}",
+            "oils run {}  link {}  mode {:?}  dt {} ms  propulsion {}{telemetry}  fsw {fsw}  wait {}  seed {}",
             self.run_id,
             self.link,
             self.mode,
             self.dt_ms,
             self.propulsion,
-            self.fsw,
             self.wait,
             self.seed
         );
@@ -271,10 +282,30 @@ impl RunReport {
         }
         let _ = writeln!(out, "digest      {}", s.digest);
         if let Some(log) = &self.log {
-            let _ = writeln!(out, "log         {log} ({} records)", s.log_records);
+            // The size the file has on disk now (the table is printed once the log is
+            // closed); a file that cannot be read back shows no size.
+            let size = std::fs::metadata(log)
+                .map(|m| format!(", {}", human_bytes(m.len())))
+                .unwrap_or_default();
+            let _ = writeln!(out, "log         {log} ({} records{size})", s.log_records);
         }
         out
     }
+}
+
+/// Bytes in decimal units (`198.9 MB`), as `ls -lh --si` and file managers show them.
+pub fn human_bytes(n: u64) -> String {
+    const UNITS: [&str; 4] = ["kB", "MB", "GB", "TB"];
+    if n < 1000 {
+        return format!("{n} B");
+    }
+    let mut v = n as f64 / 1000.0;
+    let mut unit = 0;
+    while v >= 999.95 && unit + 1 < UNITS.len() {
+        v /= 1000.0;
+        unit += 1;
+    }
+    format!("{v:.1} {}", UNITS[unit])
 }
 
 /// A C flight-software library as flown.
@@ -524,5 +555,18 @@ fn fsw_report_lines(out: &mut String, f: &crate::fsw_monitor::FswSelfReport) {
             "CYCLE SLIPS {} (a rate group overran its period)",
             f.cycle_slips
         );
+    }
+}
+
+#[cfg(test)]
+mod size_tests {
+    #[test]
+    fn sizes_read_in_decimal_units() {
+        use super::human_bytes;
+        assert_eq!(human_bytes(999), "999 B");
+        assert_eq!(human_bytes(198_945_972), "198.9 MB");
+        assert_eq!(human_bytes(19_999_999), "20.0 MB");
+        assert_eq!(human_bytes(999_960), "1.0 MB");
+        assert_eq!(human_bytes(2_500_000_000), "2.5 GB");
     }
 }

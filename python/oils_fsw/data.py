@@ -3,11 +3,11 @@
 Needs the ``data`` extra (``pip install './python[data]'``: numpy, pandas, and mcap for
 MCAP logs); the flight-software client (``oils_fsw`` itself) does not.
 
-* :func:`read_log` -- a log (OILSLOG6 binary records, or MCAP) as a DataFrame whose
+* :func:`read_log` -- a log (OILSLOG7 or OILSLOG6 binary records, or MCAP) as a DataFrame whose
   columns are those of ``oils export LOG --csv``, in the same order, with the same values.
 * :func:`read_log_arrays` -- the same columns as a dict of numpy arrays.
 * :func:`read_records` -- the binary log's records as one numpy structured array (the
-  stored columns), a read-only view of the file: no parser loop, no copy.
+  stored columns), unpacked from the log's zstd frames by numpy (no parser loop in Python).
 * :func:`read_layout` -- the record layout a log describes itself with.
 * :func:`read_campaign` -- ``cases.csv`` of an ``oils mc run`` directory as a DataFrame,
   ``summary.json`` in its ``attrs``.
@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import json
 import os
+import struct
 import warnings
 import zlib
 from pathlib import Path
@@ -41,7 +42,9 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 LAYOUT_FORMAT = "oils-log-layout-1"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-OILSLOG_MAGIC = b"OILSLOG6"
+OILSLOG_MAGIC = b"OILSLOG7"
+# The same records uncompressed, one after the other (still read).
+OILSLOG6_MAGIC = b"OILSLOG6"
 
 __all__ = [
     "LogError",
@@ -81,9 +84,9 @@ def _load_layout(layout: Union[PathLike, Dict[str, Any], None], header: Dict[str
 
 
 def _read_header(path: Path, data) -> Dict[str, Any]:
-    """The JSON header of an OILSLOG6 file (its CRC checked), and where the records start."""
-    if len(data) < 16 or bytes(data[:8]) != OILSLOG_MAGIC:
-        raise LogError(f"{path}: not an OILSLOG6 log (magic {bytes(data[:8])!r})")
+    """The JSON header of an OILSLOG7 or OILSLOG6 file (its CRC checked)."""
+    if len(data) < 16 or bytes(data[:8]) not in (OILSLOG_MAGIC, OILSLOG6_MAGIC):
+        raise LogError(f"{path}: not an OILSLOG7 or OILSLOG6 log (magic {bytes(data[:8])!r})")
     n = int.from_bytes(bytes(data[8:12]), "little")
     crc = int.from_bytes(bytes(data[12:16]), "little")
     if 16 + n > len(data):
@@ -98,7 +101,7 @@ def _read_header(path: Path, data) -> Dict[str, Any]:
 
 
 def read_layout(path: PathLike) -> Dict[str, Any]:
-    """The record layout an OILSLOG6 or MCAP log carries in its header."""
+    """The record layout an OILSLOG7, OILSLOG6 or MCAP log carries in its header."""
     path = Path(path)
     header = _mcap_header(path) if _is_mcap(path) else _read_header(path, _map(path))
     return _load_layout(None, header, path)
@@ -138,13 +141,15 @@ def _binary_records(path: Path, layout, verify: bool):
     trailer = layout["trailer"]
     tsize, tmagic = int(trailer["size"]), trailer["magic"].encode()
     count = None
-    if len(body) >= tsize and (len(body) - tsize) % size == 0:
+    problems = []
+    if bytes(data[:8]) == OILSLOG_MAGIC:
+        body, count, problems = _unframe(path, body, layout)
+    elif len(body) >= tsize and (len(body) - tsize) % size == 0:
         t = bytes(body[len(body) - tsize:])
         if t[:8] == tmagic and zlib.crc32(t[:16]) == int.from_bytes(t[16:20], "little"):
             count = int.from_bytes(t[8:16], "little")
             body = body[:len(body) - tsize]
     held = len(body) // size
-    problems = []
     if len(body) % size:
         problems.append(f"{len(body) % size} trailing bytes of a torn record ignored")
     if count is None:
@@ -176,14 +181,58 @@ def _binary_records(path: Path, layout, verify: bool):
     return records, layout, header
 
 
+def _unframe(path: Path, body, layout: Dict[str, Any]):
+    """An OILSLOG7 body's records, unpacked from their zstd frames, as one uint8 array;
+    the trailer's record count (None without a trailer) and what to warn about. The
+    frames and their packing are as the layout's ``frames`` describes them."""
+    import zstandard  # the `data` extra installs it
+
+    frames = layout["frames"]
+    if frames.get("codec") != "zstd":
+        raise LogError(f"{path}: frames of codec {frames.get('codec')!r}, this reader reads zstd")
+    hsize, most = int(frames["header_size"]), int(frames["max_records"])
+    size = int(layout["record_size"])
+    trailer = layout["trailer"]
+    tsize, tmagic = int(trailer["size"]), trailer["magic"].encode()
+    body = bytes(body)
+    unzip = zstandard.ZstdDecompressor()
+    parts, at, position = [], 0, 0
+    while len(body) - at >= hsize:
+        n, packed_len, crc = struct.unpack_from("<III", body, at)
+        if crc != zlib.crc32(body[at:at + 8]) or not 0 < n <= most or at + hsize + packed_len > len(body):
+            break
+        try:
+            packed = unzip.decompress(body[at + hsize:at + hsize + packed_len], max_output_size=n * size)
+        except zstandard.ZstdError:
+            packed = b""
+        if len(packed) != n * size:
+            raise LogError(f"{path}: {n} damaged records (a frame that does not decompress), at positions {position} to {position + n - 1}")
+        # Byte planes back to words, then the second differences summed twice (uint64
+        # sums wrap, as the writer's differences did).
+        d2 = np.ascontiguousarray(np.frombuffer(packed, np.uint8).reshape(size, n).T).view("<u8")
+        words = np.cumsum(np.cumsum(d2, axis=0, dtype=np.uint64), axis=0, dtype=np.uint64)
+        parts.append(words.astype("<u8", copy=False).tobytes())
+        at += hsize + packed_len
+        position += n
+    rest = body[at:]
+    count = None
+    if len(rest) == tsize and rest[:8] == tmagic and zlib.crc32(rest[:16]) == int.from_bytes(rest[16:20], "little"):
+        count = int.from_bytes(rest[8:16], "little")
+    problems = []
+    if rest and count is None:
+        problems.append(f"{len(rest)} bytes after the last whole frame ignored")
+    return np.frombuffer(b"".join(parts), np.uint8), count, problems
+
+
 def read_records(path: PathLike, layout=None, verify: bool = True) -> np.ndarray:
     """The binary log's records as a numpy structured array: one field per stored CSV
     column (named as the CSV names it), at the offset and with the dtype the layout
-    gives; a read-only view of the memory-mapped file. Derived columns are not in it
+    gives (read-only; over the memory-mapped file for an OILSLOG6 log). Derived columns are not in it
     (:func:`read_log_arrays` has them).
 
-    A log without its trailer (an interrupted run) or with a torn last record is read
-    with a warning, every whole record kept, as ``oils export`` does; damaged records
+    An OILSLOG7 log's records are unpacked from its zstd frames into memory (an OILSLOG6
+    log's are mapped from the file). A log without its trailer (an interrupted run) or
+    with a torn last frame or record is read with a warning, every whole record kept, as ``oils export`` does; damaged records
     (CRC mismatch) raise :class:`LogError` unless ``verify=False``.
     """
     path = Path(path)
@@ -403,7 +452,7 @@ def read_log_arrays(path: PathLike, layout=None, verify: bool = True) -> Dict[st
 
 
 def read_log(path: PathLike, layout=None, verify: bool = True) -> pd.DataFrame:
-    """A log (OILSLOG6 or MCAP) as a DataFrame with the CSV export's columns, in order.
+    """A log (OILSLOG7, OILSLOG6 or MCAP) as a DataFrame with the CSV export's columns, in order.
 
     Integers are integers (ids ``uint64``), flags ``bool``, floats ``float64``; optional
     figures (timing) are ``float64`` with NaN where a step has none, as in the CSV.

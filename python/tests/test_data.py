@@ -11,6 +11,7 @@ differ at all.
 """
 
 import json
+import struct
 import os
 import shutil
 import subprocess
@@ -143,23 +144,31 @@ class LogsEqualTheCsvExport(unittest.TestCase):
         cut = self.tmp / "cut.oilslog"
         raw = self.bin.read_bytes()
         layout = data.read_layout(self.bin)
-        size = layout["record_size"]
-        # Drop the trailer, the end record and half a record: as kill -9 mid-write leaves it.
-        cut.write_bytes(raw[: len(raw) - layout["trailer"]["size"] - size - size // 2])
+        # The frames, by their headers (records u32, packed length u32, CRC).
+        at, frames = 16 + int.from_bytes(raw[8:12], "little"), []
+        hsize = layout["frames"]["header_size"]
+        while at < len(raw) and raw[at:at + 8] != layout["trailer"]["magic"].encode():
+            records, packed = struct.unpack_from("<II", raw, at)
+            frames.append((at, records, hsize + packed))
+            at += hsize + packed
+        self.assertGreaterEqual(len(frames), 2)
+        # Drop the trailer and half the last frame: as kill -9 mid-write leaves it.
+        last_at, last_records, last_size = frames[-1]
+        cut.write_bytes(raw[: last_at + last_size // 2])
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             df = oils_fsw.read_log(cut)
         said = " / ".join(str(w.message) for w in caught)
         full = oils_fsw.read_log(self.bin)
-        self.assertEqual(len(df), len(full) - 2)
+        self.assertEqual(len(df), len(full) - last_records)
         self.assertIn("without its trailer", said)
-        self.assertIn("trailing bytes of a torn record", said)
+        self.assertIn(f"{last_size // 2} bytes after the last whole frame ignored", said)
         pd.testing.assert_frame_equal(df, full.iloc[: len(df)].reset_index(drop=True), check_exact=True)
 
     def test_damaged_record_is_refused(self):
         bad = self.tmp / "bad.oilslog"
         raw = bytearray(self.bin.read_bytes())
-        raw[-200] ^= 0xFF  # inside the last record, not the trailer
+        raw[-200] ^= 0xFF  # inside the last frame's compressed records, not the trailer
         bad.write_bytes(bytes(raw))
         with self.assertRaisesRegex(data.LogError, "damaged records"):
             oils_fsw.read_log(bad)
@@ -167,7 +176,7 @@ class LogsEqualTheCsvExport(unittest.TestCase):
     def test_not_a_log_is_refused(self):
         junk = self.tmp / "junk.oilslog"
         junk.write_bytes(b"OILSLOG1" + bytes(64))
-        with self.assertRaisesRegex(data.LogError, "not an OILSLOG6 log"):
+        with self.assertRaisesRegex(data.LogError, "not an OILSLOG7 or OILSLOG6 log"):
             oils_fsw.read_log(junk)
 
 

@@ -66,10 +66,11 @@ impl RunServices {
             "never notified (busy): poll the telemetry subscriber"
         };
         let id = self.run_id;
+        let (telemetry, command) = payload_types();
         format!(
             "oils: run {id:016x} waits for flight software on its iceoryx2 {} services (ipc, in your oils domain: docs/protocol.md \"Domain\"):\n\
-             \x20   {:<38} publish-subscribe oils.v1.Telemetry, 304 bytes: subscribe\n\
-             \x20   {:<38} publish-subscribe oils.v1.Command, 120 bytes: publish\n\
+             \x20   {:<38} publish-subscribe {telemetry}: subscribe\n\
+             \x20   {:<38} publish-subscribe {command}: publish\n\
              \x20   {:<38} event: {woken}\n\
              \x20   {:<38} event: {notify}\n\
              \x20 protocol v{}, schema hash {:#018x}, wait {} (docs/protocol.md). For example:\n\
@@ -92,6 +93,25 @@ impl RunServices {
         let _ = write!(s, "{SERVICE_PREFIX}/{:016x}/{what}", self.run_id);
         s
     }
+}
+
+/// The two services' payload types as a client must declare them: the iceoryx2 type
+/// name each packet carries and its size (`oils.v3.Telemetry, 1176 bytes`), taken from
+/// the types themselves.
+pub fn payload_types() -> (String, String) {
+    use iceoryx2::prelude::ZeroCopySend;
+    // SAFETY: `type_name` is unsafe because iceoryx2 trusts it to tell payload types
+    // apart; here it is only read, to be printed.
+    let (tlm, cmd) = unsafe {
+        (
+            <crate::Telemetry as ZeroCopySend>::type_name(),
+            <crate::Command as ZeroCopySend>::type_name(),
+        )
+    };
+    (
+        format!("{tlm}, {} bytes", core::mem::size_of::<crate::Telemetry>()),
+        format!("{cmd}, {} bytes", core::mem::size_of::<crate::Command>()),
+    )
 }
 
 /// A tiny fixed-capacity string, so naming services needs no allocator (and no extra
@@ -183,6 +203,15 @@ mod tests {
             assert!(busy.contains(part), "`{part}` missing from:\n{busy}");
         }
         assert!(busy.contains(&format!("{:#018x}", crate::SCHEMA_HASH)));
+        // The payload types from the types: this protocol version's names and sizes.
+        let v = format!("oils.v{}.", crate::PROTOCOL_VERSION);
+        for (name, size) in [
+            ("Telemetry", core::mem::size_of::<crate::Telemetry>()),
+            ("Command", core::mem::size_of::<crate::Command>()),
+        ] {
+            let shown = format!("publish-subscribe {v}{name}, {size} bytes");
+            assert!(busy.contains(&shown), "`{shown}` missing from:\n{busy}");
+        }
         let event = s.client_guide(WaitStrategy::Event);
         assert!(event.contains("notify after each command") && event.contains("wait event"));
         assert!(!event.contains("do not notify"));

@@ -7,7 +7,7 @@ use anyhow::{bail, Context, Result};
 use oils_emulator::propulsion::hifi::HifiParams;
 use oils_emulator::propulsion::PropulsionKind;
 use oils_emulator::report::{FswLibrary, RunReport};
-use oils_emulator::run_config::{load_scenario, LinkKind, RunConfig, WaitKind};
+use oils_emulator::run_config::{load_scenario, LinkKind, RunConfig, TelemetrySource, WaitKind};
 use oils_emulator::scheduler::{MissPolicy, Mode, Outcome};
 use oils_emulator::session::{self, Extras, Onboard, SessionError, StubLaunch};
 use oils_lab::mcap_log::McapOpener;
@@ -93,7 +93,8 @@ pub struct RunArgs {
     pub telemetry: Option<oils_emulator::run_config::TelemetrySource>,
     /// What the reference GNC navigates from: bench (the ideal navigation source) or
     /// sensors (its error-state Kalman filter on the device samples, started from the
-    /// ground's state vector; needs --telemetry sensors or both). [default: bench]
+    /// ground's state vector; needs --telemetry sensors or both). [default: sensors with
+    /// --telemetry sensors (the telemetry has no ideal navigation source), else bench]
     #[arg(long, value_name = "bench|sensors")]
     pub gnc_nav: Option<oils_shared::fsw::GncNavigation>,
     /// What the reference GNC turns the vehicle with: torque (the ideal torque actuator)
@@ -330,6 +331,15 @@ impl RunArgs {
             cfg.allow_reattach = true;
         }
         cfg.faults.extend(self.faults.iter().cloned());
+        if self.telemetry == Some(TelemetrySource::Sensors)
+            && self.gnc_nav.is_none()
+            && cfg.fsw == FswSpec::Gnc
+        {
+            // Sensors only, no ideal navigation source: the reference GNC flies on its own
+            // filter (an explicit --gnc-nav bench still asks for the refusal). Decided
+            // last, once --fsw and --no-stub have said who flies.
+            cfg.gnc.navigation = oils_shared::fsw::GncNavigation::Sensors;
+        }
         cfg.validate()?;
         Ok(cfg)
     }
