@@ -43,8 +43,16 @@ fn export_refuses_an_output_that_is_its_log() {
     ] {
         let out = oils().args(&args).current_dir(&dir).output().unwrap();
         assert!(!out.status.success(), "{args:?} should fail");
-        assert!(stderr(&out).contains("name the same file"), "{}", stderr(&out));
-        assert_eq!(std::fs::read(&log).unwrap(), before, "{args:?} touched the log");
+        assert!(
+            stderr(&out).contains("name the same file"),
+            "{}",
+            stderr(&out)
+        );
+        assert_eq!(
+            std::fs::read(&log).unwrap(),
+            before,
+            "{args:?} touched the log"
+        );
     }
 }
 
@@ -67,7 +75,11 @@ fn run_refuses_a_report_that_is_its_log() {
         x.to_str().unwrap(),
     ]);
     assert!(!out.status.success(), "{}", text(&out));
-    assert!(stderr(&out).contains("name the same file"), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("name the same file"),
+        "{}",
+        stderr(&out)
+    );
 }
 
 /// `--every 0` silently meant 1.
@@ -88,4 +100,67 @@ fn export_refuses_every_zero() {
     assert!(!out.status.success(), "{}", text(&out));
     assert!(stderr(&out).contains("--every"), "{}", stderr(&out));
     assert!(!prof.exists());
+}
+
+/// A campaign whose base flies an FMU exited 0 with every case `error` ("propulsion"):
+/// now the spec is refused before a case runs, naming the reason.
+#[test]
+fn a_campaign_on_an_fmu_is_refused_with_the_reason() {
+    let dir = scratch("sweep-mc-fmu");
+    let spec = dir.join("fmu.toml");
+    std::fs::write(
+        &spec,
+        "cases = 2\nseed = 1\n[base]\npropulsion = \"fmu\"\npropulsion_fmu = \"hifi.fmu\"\n",
+    )
+    .unwrap();
+    let out = run_oils(&[
+        "mc",
+        "run",
+        "--no-plots",
+        "--spec",
+        spec.to_str().unwrap(),
+        "--out",
+        dir.join("c").to_str().unwrap(),
+    ]);
+    assert!(!out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("base.propulsion = \"fmu\""),
+        "{}",
+        text(&out)
+    );
+}
+
+/// `sensor-bias:laser-altimeter,value=1e300` drove the reference GNC's filter to NaN
+/// and a 79 m/s crash; two `value=1.7e308` biases summed to inf in telemetry. A fault
+/// value beyond any quantity the bench measures is refused, naming it.
+#[test]
+fn unphysical_fault_values_are_refused() {
+    for faults in [
+        vec!["sensor-bias:laser-altimeter,value=1e300@t=0.5"],
+        vec![
+            "sensor-bias:altitude_m,value=1.7e308@t=0.5",
+            "sensor-bias:altitude_m,value=1.7e308@t=0.6",
+        ],
+    ] {
+        let mut args = vec![
+            "run",
+            "--link",
+            "inproc",
+            "--no-log",
+            "--duration",
+            "1",
+            "--scenario",
+            "terminal-descent",
+        ];
+        for f in &faults {
+            args.extend(["--fault", f]);
+        }
+        let out = run_oils(&args);
+        assert!(!out.status.success(), "{faults:?}: {}", text(&out));
+        assert!(
+            stderr(&out).contains("out of its range"),
+            "{}",
+            stderr(&out)
+        );
+    }
 }
