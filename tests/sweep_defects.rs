@@ -151,6 +151,8 @@ fn unphysical_fault_values_are_refused() {
             "1",
             "--scenario",
             "terminal-descent",
+            "--telemetry",
+            "sensors",
         ];
         for f in &faults {
             args.extend(["--fault", f]);
