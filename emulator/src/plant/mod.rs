@@ -1082,7 +1082,8 @@ impl Plant {
             rate_body_rad_s: s.rate_body_rad_s.into(),
             mass_kg: s.mass_kg,
             altitude_m: self.altitude_m(),
-            contact: self.touchdown.is_some(),
+            // From the first footpad contact on, not only once the landing is judged.
+            contact: self.contact.is_some() || self.touchdown.is_some(),
             propulsion: self.prop_out,
             internals: self.propulsion.internals(),
         }
