@@ -394,7 +394,14 @@ impl CampaignSpec {
 }
 
 /// Names a dispersion may not take (they are streams or columns of their own).
-pub const RESERVED: &[&str] = &["seed", "index", "outcome", "digest", "nominal"];
+pub const RESERVED: &[&str] = &[
+    "seed",
+    "index",
+    "outcome",
+    "outcome_reason",
+    "digest",
+    "nominal",
+];
 
 #[cfg(test)]
 mod tests {
