@@ -227,3 +227,24 @@ fn truth_contact_is_set_from_the_first_footpad_contact() {
         "judged at {judged_s} s, first contact {first} s, td {td:?}"
     );
 }
+
+/// The ideal navigation's specific force feels the legs: at rest on the ground it reads
+/// the ground's push, `g` up the body Z axis (1.62 m/s^2), as the IMU does, not 0.
+#[test]
+fn ideal_navigation_feels_the_legs_at_rest() {
+    let cfg = drop(0.05, -0.5);
+    let mut p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap();
+    loop {
+        let status = p.step(&ActuatorCommand::default(), 10_000_000);
+        if let PlantStatus::Touchdown(td) = status {
+            assert!(td.landed, "{td:?}");
+            break;
+        }
+        assert!(p.time_ns() < 100_000_000_000, "the landing never ended");
+    }
+    let tlm = p.telemetry(Default::default());
+    let g = cfg.moon.mu_m3_s2 / p.state().pos_mci_m.norm_squared();
+    let a = tlm.accel_body_m_s2;
+    assert!((a[2] - g).abs() < 0.02 * g, "at rest: {a:?}, g = {g}");
+    assert!(a[0].abs() < 0.02 * g && a[1].abs() < 0.02 * g, "{a:?}");
+}
