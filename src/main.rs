@@ -137,6 +137,21 @@ fn real_main() -> anyhow::Result<()> {
 }
 
 fn export(a: &ExportArgs) -> anyhow::Result<()> {
+    if a.every == 0 {
+        bail!("--every 0: keep one step in N needs N >= 1");
+    }
+    let mut paths: Vec<(&str, &std::path::Path)> = vec![("the log", a.log.as_path())];
+    for (name, p) in [
+        ("--csv", &a.csv),
+        ("--mcap", &a.mcap),
+        ("--profile", &a.profile),
+        ("--layout", &a.layout),
+    ] {
+        if let Some(p) = p {
+            paths.push((name, p.as_path()));
+        }
+    }
+    cmd::refuse_aliases(&paths)?;
     let log = oils_lab::mcap_log::read_any(&a.log)?;
     for w in &log.warnings {
         eprintln!("oils export: {}: {w}", a.log.display());

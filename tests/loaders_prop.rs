@@ -328,6 +328,7 @@ proptest! {
                 index,
                 seed: 1,
                 outcome: "landed".into(),
+                outcome_reason: None,
                 error: None,
                 digest: "ab".into(),
                 steps: 2,

@@ -434,3 +434,31 @@ fn a_campaign_on_sensor_navigation_reports_the_navigation_error() {
     assert!(spec.contains("telemetry = \"sensors\""), "{spec}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A campaign says why each case crashed: `outcome_reason` in `cases.csv`, the per-case
+/// JSON and the failures of `summary.json`, and the crashed cases counted by reason.
+/// (A vertical-speed limit of 0.1 m/s makes every touchdown a `vertical-speed` crash.)
+#[test]
+fn a_campaign_says_why_each_case_crashed() {
+    let dir = scratch("mc-reasons");
+    let spec = dir.join("strict.toml");
+    std::fs::write(
+        &spec,
+        "cases = 3\nseed = 1\n[base]\npropulsion = \"ideal\"\n[base.scenario.touchdown]\nvertical_speed_mps = 0.1\n",
+    )
+    .unwrap();
+    let out = dir.join("c");
+    mc_run(&out, &["--spec", spec.to_str().unwrap()]);
+    let rows = rows(&out);
+    assert_eq!(column(&rows, "outcome"), ["crashed"; 3]);
+    assert_eq!(column(&rows, "outcome_reason"), ["vertical-speed"; 3]);
+    let summary: serde_json::Value =
+        serde_json::from_str(&read(&out.join("summary.json"))).unwrap();
+    assert_eq!(summary["crash_reasons"]["vertical-speed"], 3, "{summary}");
+    assert_eq!(summary["failures"][0]["outcome_reason"], "vertical-speed");
+    // A case file: a line of provenance, then the result.
+    let text = read(&out.join("cases").join("0000000.json"));
+    let case: serde_json::Value = serde_json::from_str(text.lines().nth(1).unwrap()).unwrap();
+    assert_eq!(case["outcome_reason"], "vertical-speed", "{case}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -358,3 +358,20 @@ fn a_fault_that_can_never_fire_is_refused_before_the_run() {
         );
     }
 }
+
+/// The default descent on hifi with a 10 % thrust loss on one engine lands whenever it
+/// strikes, as on the surrogate. (At t = 400 s the old clog, scaling the injector's
+/// output while its dome filled, dumped 4 808 N at shutdown and tipped the lander over.)
+#[test]
+fn a_ten_percent_thrust_loss_on_hifi_lands_whenever_it_strikes() {
+    for t in [0, 400, 940] {
+        let fault = format!("thrust-degraded:1,factor=0.9@t={t}");
+        let r = fly(&config(PropulsionKind::Hifi, &[fault.as_str()], 2000.0));
+        assert_eq!(
+            r.summary.outcome,
+            Outcome::Landed,
+            "{fault}: {:?}",
+            r.summary.touchdown
+        );
+    }
+}

@@ -370,3 +370,58 @@ fn bad_inputs_are_errors_not_panics() {
     let e = HifiPropulsion::new(&p, &PropulsionConfig::default()).unwrap_err();
     assert!(e.to_string().contains("calibration"), "{e}");
 }
+
+/// A clogged injector (`thrust-degraded` in hifi) passes less at the same pressures: the
+/// dome upstream of it does not fill beyond full, so at shutdown it holds no more than a
+/// healthy dome and its tail-off never rises above the thrust before the cut. (The
+/// clog used to scale only the injector's output while the branch kept its healthy
+/// flow: the dome filled without bound and dumped at shutdown, 4 808 N from an 800 N
+/// engine.)
+#[test]
+fn a_clogged_injector_gives_less_thrust_and_no_spike_at_shutdown() {
+    use oils_emulator::propulsion::PropulsionFault;
+    let mut m = model(&HifiParams::default());
+    hold(&mut m, &all(480.0), 2.0, STEP_NS);
+    m.inject(
+        &PropulsionFault::ThrustDegraded {
+            engine: 1,
+            factor: 0.7,
+        },
+        true,
+    );
+    let burning = hold(&mut m, &all(480.0), 20.0, STEP_NS);
+    let last = burning.last().unwrap().thrust_n;
+    assert!(
+        last[1] < 0.95 * last[0] && last[1] > 0.5 * last[0],
+        "clogged engine 1 against healthy engine 0: {last:?}"
+    );
+    for o in &burning {
+        assert!(o.thrust_n[1] <= o.thrust_n[0] + 1e-9, "{:?}", o.thrust_n);
+    }
+    let mut off = all(480.0);
+    off.on = [false; 4];
+    // The narrower orifice drains the dome more slowly: a longer, lower dribble.
+    let open = m.clog_open_frac(0.7);
+    eprintln!("open fractions {open:?}");
+    let tail = hold(&mut m, &off, 3.0, 1_000_000);
+    let mut prev = last[1];
+    for (k, o) in tail.iter().enumerate() {
+        // 1 N: the engine still burns through the solenoid's close delay, where its
+        // thrust is the steady one still settling (0.3 % of it).
+        assert!(o.thrust_n[1] <= last[1] + 1.0, "step {k}: {:?}", o.thrust_n);
+        // Once the solenoids are shut (40 ms), the tail only falls.
+        if k > 40 {
+            assert!(
+                o.thrust_n[1] <= prev + 1e-9,
+                "step {k}: tail rises {prev} -> {:?}",
+                o.thrust_n
+            );
+        }
+        prev = o.thrust_n[1];
+    }
+    assert!(prev < 1e-3, "tail-off not over: {prev} N");
+    for b in m.propellant_balance() {
+        let rel = b.imbalance_kg().abs() / b.ejected_kg;
+        assert!(rel < 1e-6, "propellant imbalance {rel:e} ({b:?})");
+    }
+}

@@ -195,3 +195,56 @@ fn a_drop_on_a_slope_steeper_than_the_friction_angle_slides() {
     let v = rot.surface_relative_mci(&p.state().pos_mci_m, &p.state().vel_mci_m_s);
     assert!(v.norm() > 1.0, "{v}");
 }
+
+/// `truth.contact` says the footpads have touched: it is set at the first contact (the
+/// touchdown's `t_s`), not when the landing is judged a second or more later.
+#[test]
+fn truth_contact_is_set_from_the_first_footpad_contact() {
+    let cfg = drop(0.05, -0.5);
+    let mut p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap();
+    let mut first_contact_s = None;
+    let td = loop {
+        let status = p.step(&ActuatorCommand::default(), 10_000_000);
+        let t_s = p.time_ns() as f64 * 1e-9;
+        if p.truth().contact && first_contact_s.is_none() {
+            first_contact_s = Some(t_s);
+        }
+        if let PlantStatus::Touchdown(td) = status {
+            break td;
+        }
+        assert!(t_s < 100.0, "the landing never ended");
+    };
+    let first = first_contact_s.expect("truth.contact never set");
+    // Set on the step that holds the contact instant, well before the judgement.
+    assert!(
+        first >= td.t_s && first < td.t_s + 0.0100001,
+        "{first} vs contact at {}",
+        td.t_s
+    );
+    let judged_s = p.time_ns() as f64 * 1e-9;
+    assert!(
+        judged_s > first + 0.1,
+        "judged at {judged_s} s, first contact {first} s, td {td:?}"
+    );
+}
+
+/// The ideal navigation's specific force feels the legs: at rest on the ground it reads
+/// the ground's push, `g` up the body Z axis (1.62 m/s^2), as the IMU does, not 0.
+#[test]
+fn ideal_navigation_feels_the_legs_at_rest() {
+    let cfg = drop(0.05, -0.5);
+    let mut p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap();
+    loop {
+        let status = p.step(&ActuatorCommand::default(), 10_000_000);
+        if let PlantStatus::Touchdown(td) = status {
+            assert!(td.landed, "{td:?}");
+            break;
+        }
+        assert!(p.time_ns() < 100_000_000_000, "the landing never ended");
+    }
+    let tlm = p.telemetry(Default::default());
+    let g = cfg.moon.mu_m3_s2 / p.state().pos_mci_m.norm_squared();
+    let a = tlm.accel_body_m_s2;
+    assert!((a[2] - g).abs() < 0.02 * g, "at rest: {a:?}, g = {g}");
+    assert!(a[0].abs() < 0.02 * g && a[1].abs() < 0.02 * g, "{a:?}");
+}

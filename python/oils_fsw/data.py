@@ -479,7 +479,13 @@ def read_campaign(directory: PathLike) -> pd.DataFrame:
     # Floats as written (pandas >= 3 parses them exactly by default; older ones need
     # round_trip); a digest of only decimal digits stays a string.
     exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
-    text = {"outcome": str, "faults": str, "digest": str, "error": str}
+    text = {
+        "outcome": str,
+        "outcome_reason": str,
+        "faults": str,
+        "digest": str,
+        "error": str,
+    }
     df = pd.read_csv(cases, dtype=text, **exact)
     for c in text:
         if c in df:

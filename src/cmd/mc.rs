@@ -377,13 +377,18 @@ fn mc_run(a: &McRunArgs, stop: &AtomicBool) -> Result<()> {
     none_all_invalid(&merged)
 }
 
-/// A campaign whose every case is `invalid` flew nothing: an error, not a result.
+/// A campaign whose every case is `invalid` or `error` flew nothing: an error, not a
+/// result.
 fn none_all_invalid(merged: &Merged) -> Result<()> {
     let r = &merged.results;
-    if !r.is_empty() && r.iter().all(|c| c.outcome == "invalid") {
+    if !r.is_empty()
+        && r.iter()
+            .all(|c| c.outcome == "invalid" || c.outcome == "error")
+    {
         bail!(
-            "every one of the {} cases is invalid: nothing flew (first: {}); check the spec's dispersions",
+            "every one of the {} cases is invalid or an error: nothing flew (first: {} {}); check the spec's base and dispersions",
             r.len(),
+            r[0].outcome,
             r[0].error.as_deref().unwrap_or("no reason recorded")
         );
     }

@@ -421,6 +421,11 @@ pub fn run(args: &RunArgs) -> Result<()> {
     if args.plots.is_some() && !cfg.log.enabled {
         bail!("--plots draws from the run's log: the configuration disables it (log.enabled)");
     }
+    // Before tick 0: outputs that would overwrite one another (the log replaced by the
+    // report: the log's lock covers other runs, not this run's own outputs).
+    if let (true, Some(log), Some(report)) = (cfg.log.enabled, &cfg.log.path, &args.report) {
+        super::refuse_aliases(&[("--log", log.as_path()), ("--report", report.as_path())])?;
+    }
     // Before tick 0: a report or figures that cannot be written fail the run now.
     if let Some(path) = &args.report {
         let dir = path.parent().unwrap_or(std::path::Path::new("."));

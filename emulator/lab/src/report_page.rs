@@ -278,6 +278,14 @@ pub fn write_campaign(
         );
     }
     out.push_str("</table>\n");
+    if !s.crash_reasons.is_empty() {
+        let reasons: Vec<String> = s
+            .crash_reasons
+            .iter()
+            .map(|(why, n)| format!("{} {n}", escape(why)))
+            .collect();
+        let _ = writeln!(out, "<p>Crashed, by reason: {}.</p>", reasons.join(", "));
+    }
     if !s.missing.is_empty() {
         let _ = writeln!(
             out,
@@ -382,7 +390,11 @@ pub fn write_campaign(
                 f.index,
                 escape(&f.outcome),
                 escape(&faults),
-                escape(f.error.as_deref().unwrap_or("")),
+                escape(match (&f.outcome_reason, &f.error) {
+                    (Some(why), _) => why.as_str(),
+                    (None, Some(e)) => e.as_str(),
+                    (None, None) => "",
+                }),
                 escape(&case_command(dir, f.index))
             );
         }

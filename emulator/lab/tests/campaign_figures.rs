@@ -23,6 +23,7 @@ fn case(index: Option<u64>, landed: bool, at_m: (f64, f64), applied: &[(&str, f6
         index,
         seed: 0,
         outcome: if landed { "landed" } else { "crashed" }.into(),
+        outcome_reason: None,
         error: None,
         digest: "0123".into(),
         steps: 100,

@@ -252,6 +252,10 @@ impl FromStr for FaultKind {
     }
 }
 
+/// Largest magnitude of a sensor fault's `value` or `sigma`: ten times the largest
+/// quantity in the telemetry (the helium bottle's 3.1e7 Pa).
+pub const MAX_SENSOR_FAULT_VALUE: f64 = 3.1e8;
+
 /// Telemetry fields a sensor fault can act on.
 pub const SENSOR_FIELDS: &[&str] = &[
     "altitude_m",
@@ -501,7 +505,12 @@ impl FaultSpec {
                     "area_mm2" => v > 0.0 && v <= 100.0,
                     "kg_s" => v > 0.0 && v <= 10.0,
                     "rate_pa_s" => v.abs() <= 1e6,
-                    "sigma" => v >= 0.0,
+                    // A bias, spike or noise beyond any quantity the bench measures
+                    // (the bottle's 3.1e7 Pa, positions 1.7e6 m from the Moon's
+                    // centre) is no sensor's failure; the bound also keeps sums of
+                    // several faults finite.
+                    "value" => v.abs() <= MAX_SENSOR_FAULT_VALUE,
+                    "sigma" => (0.0..=MAX_SENSOR_FAULT_VALUE).contains(&v),
                     "steps" => (1.0..=1000.0).contains(&v) && v.fract() == 0.0,
                     "bits" => (1.0..=64.0).contains(&v) && v.fract() == 0.0,
                     _ => true,

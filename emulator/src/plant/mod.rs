@@ -623,6 +623,7 @@ impl Plant {
             // 5b. On the legs: the whole step with the contact loads.
             let x1 = self.integrate_on_legs(&loads, &x0, 0.0, dt_s, step_start_s, dt_ns);
             self.state = RigidBodyState::from_vector(&x1, mass_end_kg);
+            self.add_leg_force(&x1, end_s, mass_end_kg);
             return self.settle(&x1, end_s, dt_s);
         }
 
@@ -649,7 +650,17 @@ impl Plant {
         self.contact = Some(Contact { td, rest_s: 0.0 });
         let x1 = self.integrate_on_legs(&loads, &x_c, frac * dt_s, dt_s, step_start_s, dt_ns);
         self.state = RigidBodyState::from_vector(&x1, mass_end_kg);
+        self.add_leg_force(&x1, end_s, mass_end_kg);
         self.settle(&x1, end_s, dt_s)
+    }
+
+    /// Adds the legs' force at the step's end to the specific force the ideal
+    /// navigation reports, as the engines' above: an accelerometer feels the ground's
+    /// push (1.62 m/s^2 up at rest), the same force the IMU model senses.
+    fn add_leg_force(&mut self, x: &StateVector, t_s: f64, mass_kg: f64) {
+        let c = self.legs.loads(x, t_s, &self.setup.rotation, &self.ground);
+        self.specific_force_body_m_s2 +=
+            self.state.q_mci_from_body.inverse() * (c.force_mci_n / mass_kg);
     }
 
     /// Integrates from `t_from_s` to `t_to_s` (seconds into the step that started at
@@ -1082,7 +1093,8 @@ impl Plant {
             rate_body_rad_s: s.rate_body_rad_s.into(),
             mass_kg: s.mass_kg,
             altitude_m: self.altitude_m(),
-            contact: self.touchdown.is_some(),
+            // From the first footpad contact on, not only once the landing is judged.
+            contact: self.contact.is_some() || self.touchdown.is_some(),
             propulsion: self.prop_out,
             internals: self.propulsion.internals(),
         }

@@ -377,6 +377,10 @@ pub struct CaseResult {
     pub seed: u64,
     /// `landed`, `crashed`, `aborted`, `completed`, `timeout`, `invalid` or `error`.
     pub outcome: String,
+    /// Why a case crashed, as the report names it (`tip-over`, `slope`,
+    /// `vertical-speed`...); absent for a landing and a case that did not touch down.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outcome_reason: Option<String>,
     /// Why a case aborted, timed out or failed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -458,6 +462,7 @@ pub fn run_case(
         index: Some(setup.index),
         seed: setup.config.seed,
         outcome: String::new(),
+        outcome_reason: None,
         error: None,
         digest: String::new(),
         steps: 0,
@@ -544,6 +549,10 @@ pub fn run_case(
                 tilt_deg: t.tilt_deg,
             });
             result.outcome = format!("{:?}", s.outcome).to_lowercase();
+            result.outcome_reason = s
+                .touchdown
+                .and_then(|t| t.reason)
+                .map(|r| r.as_str().to_string());
             result.error = s.error.clone();
             if s.outcome == oils_emulator::scheduler::Outcome::Aborted && timed_out() {
                 result.outcome = "timeout".into();

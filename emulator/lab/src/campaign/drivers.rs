@@ -253,6 +253,7 @@ mod tests {
             index: Some(index),
             seed: index,
             outcome: if landed { "landed" } else { "crashed" }.into(),
+            outcome_reason: None,
             error: None,
             digest: "d".into(),
             steps: 1,

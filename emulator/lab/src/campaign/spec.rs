@@ -306,6 +306,11 @@ impl CampaignSpec {
         let mut base = self.base.clone();
         base.link = oils_emulator::run_config::LinkKind::Inproc;
         base.validate().map_err(|e| bad(format!("base: {e}")))?;
+        if base.propulsion == PropulsionKind::Fmu {
+            return Err(bad(
+                "base.propulsion = \"fmu\": a campaign builds each case's model in its worker, which has no FMU loader; fly the FMU with `oils run --propulsion fmu:PATH`, or campaign on hifi, surrogate or ideal",
+            ));
+        }
         if matches!(base.fsw, oils_onboard_stub::fsw::FswSpec::External) {
             return Err(bad(
                 "base.fsw = \"external\": a campaign runs its flight software in process (gnc, playback or c:PATH)",
@@ -389,7 +394,14 @@ impl CampaignSpec {
 }
 
 /// Names a dispersion may not take (they are streams or columns of their own).
-pub const RESERVED: &[&str] = &["seed", "index", "outcome", "digest", "nominal"];
+pub const RESERVED: &[&str] = &[
+    "seed",
+    "index",
+    "outcome",
+    "outcome_reason",
+    "digest",
+    "nominal",
+];
 
 #[cfg(test)]
 mod tests {

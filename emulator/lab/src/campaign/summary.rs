@@ -134,6 +134,9 @@ pub struct Failure {
     pub index: u64,
     /// Its outcome.
     pub outcome: String,
+    /// Why it crashed (`tip-over`, `slope`...), when it touched down.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub outcome_reason: Option<String>,
     /// Why, if known.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
@@ -158,6 +161,8 @@ pub struct Summary {
     pub landed_fraction: f64,
     /// Cases by outcome.
     pub outcomes: BTreeMap<String, u64>,
+    /// Crashed cases by the reason (`tip-over`, `slope`, `vertical-speed`...).
+    pub crash_reasons: BTreeMap<String, u64>,
     /// Cases and landed cases by the faults they were given: `none` (fault-free), or
     /// the fault kinds joined with `+` (`thrust-degraded`, `engine-off+telemetry-drop`).
     pub landed_by_faults: BTreeMap<String, LandedCount>,
@@ -258,10 +263,11 @@ fn text(s: &str) -> String {
 }
 
 /// The fixed columns of `cases.csv`, before the applied dispersion values.
-pub const CSV_COLUMNS: [&str; 19] = [
+pub const CSV_COLUMNS: [&str; 20] = [
     "index",
     "seed",
     "outcome",
+    "outcome_reason",
     "touchdown_t_s",
     "vertical_speed_mps",
     "horizontal_speed_mps",
@@ -297,10 +303,11 @@ pub fn cases_csv(results: &[CaseResult], nominal: &CaseResult) -> String {
         let td = r.touchdown;
         let _ = write!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.index.map_or(String::new(), |i| i.to_string()),
             r.seed,
             r.outcome,
+            text(r.outcome_reason.as_deref().unwrap_or("")),
             opt(td.map(|t| t.t_s)),
             opt(td.map(|t| t.vertical_speed_mps)),
             opt(td.map(|t| t.horizontal_speed_mps)),
@@ -344,6 +351,12 @@ pub fn summarise(
         *outcomes.entry(r.outcome.clone()).or_insert(0) += 1;
     }
     let landed = outcomes.get("landed").copied().unwrap_or(0);
+    let mut crash_reasons = BTreeMap::new();
+    for r in results {
+        if let Some(why) = &r.outcome_reason {
+            *crash_reasons.entry(why.clone()).or_insert(0) += 1;
+        }
+    }
     let mut landed_by_faults: BTreeMap<String, LandedCount> = BTreeMap::new();
     for r in results {
         let c = landed_by_faults.entry(fault_kinds(&r.faults)).or_default();
@@ -438,6 +451,7 @@ pub fn summarise(
             r.index.map(|index| Failure {
                 index,
                 outcome: r.outcome.clone(),
+                outcome_reason: r.outcome_reason.clone(),
                 error: r.error.clone(),
             })
         })
@@ -455,6 +469,7 @@ pub fn summarise(
             landed as f64 / results.len() as f64
         },
         outcomes,
+        crash_reasons,
         landed_by_faults,
         nominal: NominalSummary {
             outcome: nominal.outcome.clone(),

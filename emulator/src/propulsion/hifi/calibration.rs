@@ -77,6 +77,61 @@ impl CalibrationPoint<'_> {
     }
 }
 
+impl CalibrationPoint<'_> {
+    /// The fraction of the injector area `Cd A` `[fuel, ox]` that leaves an engine at
+    /// `thrust_fraction` of `thrust_n` in steady state, its valves where the table puts
+    /// them for `thrust_n` and the other engines healthy: how a thrust loss stated as a
+    /// fraction (`thrust-degraded`, the surrogate's and ideal model's output factor) is
+    /// made a clog in hifi. Both injectors shrink so that each side passes the same
+    /// fraction of its flow, which keeps the mixture ratio.
+    ///
+    /// With the chamber at `k Pc` (thrust `Cf Pc At`, `k` the fraction), the degraded
+    /// flow `m' = k Pc At / c*(k Pc)` must cross `p_manifold - k Pc` through the healthy
+    /// series resistances plus the injector's `R_inj / a^2`: solving for `a` gives
+    /// `a = sqrt(R_inj / ((p_manifold - k Pc) / phi(m') - R_series))`.
+    pub fn injector_open_frac(
+        &self,
+        thrust_n: f64,
+        thrust_fraction: f64,
+    ) -> Result<[f64; 2], HifiError> {
+        if thrust_fraction >= 1.0 {
+            return Ok([1.0; 2]);
+        }
+        if thrust_fraction <= 0.0 {
+            return Ok([0.0; 2]);
+        }
+        let positions = self.positions(thrust_n)?;
+        let ch = self.chamber;
+        let mr = self.mixture_ratio;
+        let flows_at = |pc: f64| {
+            let total = pc * ch.throat_area_m2 / (ch.efficiency(pc) * ch.cstar_ideal(mr, 1.0));
+            [total / (1.0 + mr), total * mr / (1.0 + mr)]
+        };
+        let pc = thrust_n / (ch.thrust_coefficient * ch.throat_area_m2);
+        let pc_degraded = thrust_fraction * pc;
+        let healthy = flows_at(pc);
+        let degraded = flows_at(pc_degraded);
+        let mut out = [1.0; 2];
+        for p in 0..2 {
+            let (feed, side) = (self.feeds[p], self.sides[p]);
+            let main = (self.engines as f64 - 1.0) * healthy[p] + degraded[p];
+            let p_manifold = self.tank_pressure_pa
+                - feed.main_resistance * friction_phi(main, feed.main_laminar_kg_s);
+            let series = side
+                .series_resistance(1.0, positions[p])
+                .unwrap_or(f64::INFINITY);
+            let r_injector =
+                (p_manifold - pc_degraded) / friction_phi(degraded[p], side.laminar_kg_s) - series;
+            out[p] = if r_injector > side.injector_resistance {
+                (side.injector_resistance / r_injector).sqrt()
+            } else {
+                1.0
+            };
+        }
+        Ok(out)
+    }
+}
+
 impl ThrottleTable {
     /// Solves the calibration over `[min_thrust_n, max_thrust_n]`.
     pub fn build(

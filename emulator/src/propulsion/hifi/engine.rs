@@ -264,6 +264,12 @@ impl EngineSide {
     /// `series_jac` is the resistance used for the slope (the integrator's implicit
     /// diagonal): the larger of the sub-step's start and end values, so that a valve
     /// closing within the sub-step is treated as stiff as it is about to become.
+    ///
+    /// `injector_open_frac` is the fraction of the injector's effective area `Cd A`
+    /// left open (1 healthy; less when clogged). A clog acts on the area, so the
+    /// injector's resistance `1 / (2 rho (Cd A)^2)` grows as `1 / frac^2` and the flow
+    /// in the branch falls with it, the manifold upstream seeing the smaller draw; the
+    /// dribble through the narrower orifice falls in proportion to the area.
     #[inline]
     #[allow(clippy::too_many_arguments)]
     pub fn rates(
@@ -275,6 +281,7 @@ impl EngineSide {
         series_jac: f64,
         p_manifold: f64,
         p_chamber: f64,
+        injector_open_frac: f64,
     ) -> BranchRates {
         let fill = dome_kg * self.inv_dome_full_kg;
         let reach = if fill >= 1.0 {
@@ -284,7 +291,7 @@ impl EngineSide {
         };
         let fed = reach * m.max(0.0);
         let drain = if dribble_gate > 0.0 {
-            dribble_gate * self.drain_k * dome_kg.max(0.0).sqrt()
+            dribble_gate * injector_open_frac * self.drain_k * dome_kg.max(0.0).sqrt()
         } else {
             0.0
         };
@@ -297,9 +304,14 @@ impl EngineSide {
                 let mut drop = r * m * s_m;
                 let mut slope = series_jac.max(r) * (2.0 * m * m + ml2) / s_m;
                 if fed > 0.0 {
+                    let injector = if injector_open_frac == 1.0 {
+                        self.injector_resistance
+                    } else {
+                        self.injector_resistance / (injector_open_frac * injector_open_frac)
+                    };
                     let s_f = (fed * fed + ml2).sqrt();
-                    drop += self.injector_resistance * fed * s_f;
-                    slope += self.injector_resistance * reach * (2.0 * fed * fed + ml2) / s_f;
+                    drop += injector * fed * s_f;
+                    slope += injector * reach * (2.0 * fed * fed + ml2) / s_f;
                 }
                 (
                     (p_manifold - p_chamber - drop) * self.inv_inertance,

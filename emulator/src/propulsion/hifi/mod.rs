@@ -190,6 +190,9 @@ pub struct HifiPropulsion {
     valve_speed: [f64; ENGINE_COUNT],
     /// Injected regulator set-point drift, Pa/s (0: none).
     regulator_drift_pa_s: f64,
+    /// Calibration conditions kept to size a clog: mixture ratio and rated thrust, N.
+    mixture_ratio: f64,
+    rated_thrust_n: f64,
 }
 
 impl HifiPropulsion {
@@ -370,6 +373,8 @@ impl HifiPropulsion {
             valve_stuck: [false; ENGINE_COUNT],
             valve_speed: [1.0; ENGINE_COUNT],
             regulator_drift_pa_s: 0.0,
+            mixture_ratio: mr,
+            rated_thrust_n: cfg.max_thrust_n,
         };
         let act = model.actuation();
         model.plant.set_actuation(0, &act);
@@ -383,6 +388,27 @@ impl HifiPropulsion {
     /// valve filter takes its stroke map from it, `emulator/config/train.toml`).
     pub fn throttle_table(&self) -> &ThrottleTable {
         &self.table
+    }
+
+    /// The injector area fractions `[fuel, ox]` of a clog that leaves an engine
+    /// `thrust_fraction` of its rated thrust at nominal conditions (see
+    /// [`CalibrationPoint::injector_open_frac`]): `thrust-degraded` means the same
+    /// fraction here as at the surrogate's and ideal model's outputs.
+    pub fn clog_open_frac(&self, thrust_fraction: f64) -> [f64; 2] {
+        let pl = &self.plant;
+        CalibrationPoint {
+            chamber: &pl.chamber,
+            feeds: [&pl.feeds[FUEL], &pl.feeds[OX]],
+            sides: [&pl.sides[FUEL], &pl.sides[OX]],
+            // The manifolds start at the nominal tank pressure the table was made at.
+            tank_pressure_pa: self.manifold_ref_pa[FUEL],
+            mixture_ratio: self.mixture_ratio,
+            engines: ENGINE_COUNT,
+        }
+        .injector_open_frac(self.rated_thrust_n, thrust_fraction)
+        // The table was solved at this point when the model was built, so this cannot
+        // fail; a healthy injector if it ever did.
+        .unwrap_or([1.0; 2])
     }
 
     fn actuation(&self) -> Actuation {
@@ -592,11 +618,18 @@ impl Propulsion for HifiPropulsion {
 
     fn inject(&mut self, fault: &super::PropulsionFault, active: bool) {
         use super::PropulsionFault as F;
+        if let F::ThrustDegraded { engine, factor } = *fault {
+            let open = if active {
+                self.clog_open_frac(factor)
+            } else {
+                [1.0; 2]
+            };
+            self.plant.faults.injector_open_frac[engine] = open;
+            return;
+        }
         let f = &mut self.plant.faults;
         match *fault {
-            F::ThrustDegraded { engine, factor } => {
-                f.injector_factor[engine] = if active { factor } else { 1.0 }
-            }
+            F::ThrustDegraded { .. } => {}
             F::ValveStuck { engine } => self.valve_stuck[engine] = active,
             F::ValveSlow { engine, factor } => {
                 self.valve_speed[engine] = if active { factor } else { 1.0 }

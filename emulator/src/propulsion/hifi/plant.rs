@@ -147,7 +147,7 @@ pub struct Plant {
 
 /// Failures of the pressure-fed system, acting through the physics: a leak is a mass
 /// flow out of a volume, a failed regulator a poppet held at a stop, a clogged injector
-/// a smaller flow. Everything downstream (pressures, flows, thrust) follows.
+/// a smaller orifice (higher resistance: less flow at the same pressures). Everything downstream (pressures, flows, thrust) follows.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlantFaults {
     /// Poppet held at its stop: `Some(true)` wide open, `Some(false)` shut.
@@ -156,8 +156,9 @@ pub struct PlantFaults {
     pub pressurant_leak_m2: f64,
     /// Propellant leak from each tank `[fuel, ox]`, kg/s (0: none).
     pub propellant_leak_kg_s: [f64; 2],
-    /// Injector flow factor per engine (1: healthy).
-    pub injector_factor: [f64; ENGINE_COUNT],
+    /// Fraction of each injector's area `Cd A` left open `[engine][propellant]`
+    /// (1: healthy, 0: blocked, the branch then passes nothing).
+    pub injector_open_frac: [[f64; 2]; ENGINE_COUNT],
 }
 
 impl Default for PlantFaults {
@@ -166,7 +167,7 @@ impl Default for PlantFaults {
             regulator_held_open: None,
             pressurant_leak_m2: 0.0,
             propellant_leak_kg_s: [0.0; 2],
-            injector_factor: [1.0; ENGINE_COUNT],
+            injector_open_frac: [[1.0; 2]; ENGINE_COUNT],
         }
     }
 }
@@ -249,19 +250,20 @@ impl Rhs<N_STATES> for Plant {
             for p in 0..2 {
                 let flow = y[ix::branch_flow(e, p)];
                 let dome = y[ix::dome_mass(e, p)];
+                let open_frac = self.faults.injector_open_frac[e][p];
                 let r = self.sides[p].rates(
                     flow,
                     dome,
                     drive.act.dribble[e][p],
-                    drive.series[e][p],
+                    drive.series[e][p].filter(|_| open_frac > 0.0),
                     other.series[e][p].unwrap_or(0.0),
                     y[ix::manifold_pressure(p)],
                     pc,
+                    open_frac,
                 );
                 d[ix::branch_flow(e, p)] = r.dflow;
                 j[ix::branch_flow(e, p)] = r.dflow_slope;
-                // A clogged injector passes less at the same pressures.
-                let injected_kg_s = r.injected_kg_s * self.faults.injector_factor[e];
+                let injected_kg_s = r.injected_kg_s;
                 d[ix::dome_mass(e, p)] = flow - injected_kg_s;
                 branch_sum[p] += flow;
                 injected[p] = injected_kg_s;
@@ -338,7 +340,7 @@ impl Plant {
     }
 
     /// Constraints applied after each sub-step: the poppet's hard stops, and no flow
-    /// through a branch whose valve is shut.
+    /// through a branch whose valve is shut or whose injector is blocked.
     #[inline]
     pub fn project(&self, y: &mut [f64; N_STATES]) {
         let (mut lift, mut vel) = (y[ix::POPPET_LIFT], y[ix::POPPET_VEL]);
@@ -351,7 +353,9 @@ impl Plant {
         y[ix::POPPET_VEL] = vel;
         for e in 0..ENGINE_COUNT {
             for p in 0..2 {
-                if self.drive[1].series[e][p].is_none() {
+                if self.drive[1].series[e][p].is_none()
+                    || self.faults.injector_open_frac[e][p] <= 0.0
+                {
                     y[ix::branch_flow(e, p)] = 0.0;
                 }
             }
