@@ -225,7 +225,9 @@ fn good_log() -> Vec<u8> {
     static LOG: OnceLock<Vec<u8>> = OnceLock::new();
     LOG.get_or_init(|| {
         let path = std::env::temp_dir().join(format!("oils-prop-{}.oilslog", std::process::id()));
-        let rec = Recorder::create(&path, r#"{"config":{}}"#).unwrap();
+        let header =
+            oils_emulator::session::log_header(&oils_emulator::run_config::RunConfig::default(), 0);
+        let rec = Recorder::create(&path, &header).unwrap();
         for k in 0..5u64 {
             let mut r = Record::default();
             r.telemetry.header.step = k;

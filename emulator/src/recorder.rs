@@ -1064,7 +1064,8 @@ pub(crate) mod tests {
     #[test]
     fn records_round_trip_and_export() {
         let path = temp("rt.oilslog");
-        let rec = Recorder::create(&path, r#"{"seed":1}"#).unwrap();
+        let header = crate::session::log_header(&crate::run_config::RunConfig::default(), 0);
+        let rec = Recorder::create(&path, &header).unwrap();
         for k in 0..1000u64 {
             let mut r = Record {
                 flags: REC_COMMAND_RECEIVED,
@@ -1077,7 +1078,7 @@ pub(crate) mod tests {
         }
         assert_eq!(rec.finish().unwrap(), 1000);
         let log = read_log(&path).unwrap();
-        assert_eq!(log.header_json, r#"{"seed":1}"#);
+        assert_eq!(log.header_json, header);
         assert_eq!(log.records.len(), 1000);
         assert_eq!(log.trailing_bytes, 0);
         assert_eq!(log.records[999].telemetry.altitude_m, 499.5);

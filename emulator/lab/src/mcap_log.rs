@@ -1205,7 +1205,10 @@ mod tests {
         records[10].flags |= REC_REJECTED_VALUES;
         records[499].flags = REC_END_OF_RUN;
         let log = Log {
-            header_json: r#"{"run_id":"deadbeef01234567"}"#.into(),
+            header_json: oils_emulator::session::log_header(
+                &oils_emulator::run_config::RunConfig::default(),
+                0xdeadbeef01234567,
+            ),
             records,
             ..Log::default()
         };
@@ -1337,7 +1340,10 @@ mod tests {
         let mut records: Vec<Record> = (0..6000).map(record).collect();
         records[5999].flags = REC_END_OF_RUN;
         let log = Log {
-            header_json: r#"{"run_id":"deadbeef01234567"}"#.into(),
+            header_json: oils_emulator::session::log_header(
+                &oils_emulator::run_config::RunConfig::default(),
+                0xdeadbeef01234567,
+            ),
             records,
             ..Log::default()
         };
@@ -1381,7 +1387,10 @@ mod tests {
     fn a_short_attachment_record_is_skipped() {
         let path = temp("attachment.mcap");
         let log = Log {
-            header_json: r#"{"run_id":"deadbeef01234567"}"#.into(),
+            header_json: oils_emulator::session::log_header(
+                &oils_emulator::run_config::RunConfig::default(),
+                0xdeadbeef01234567,
+            ),
             records: (0..3).map(record).collect(),
             ..Log::default()
         };

@@ -264,13 +264,14 @@ mod tests {
 
     /// A clean command of the thrusters' mode, mid-throttle, thrusters firing briefly.
     fn clean() -> Command {
-        let mut c = Command::default();
-        c.thrust_cmd_n = [400.0; ENGINE_COUNT];
-        c.engine_on = [1; ENGINE_COUNT];
-        c.torque_cmd_body_nm = [1.0, -2.0, 0.5];
-        c.thruster_on_time_ns = [1_000_000; THRUSTER_COUNT];
-        c.attitude_mode = ATTITUDE_MODE_THRUSTERS;
-        c
+        Command {
+            thrust_cmd_n: [400.0; ENGINE_COUNT],
+            engine_on: [1; ENGINE_COUNT],
+            torque_cmd_body_nm: [1.0, -2.0, 0.5],
+            thruster_on_time_ns: [1_000_000; THRUSTER_COUNT],
+            attitude_mode: ATTITUDE_MODE_THRUSTERS,
+            ..Command::default()
+        }
     }
 
     /// Flips the bit 0x80 of one byte of a clean command; returns the sanitiser's count of

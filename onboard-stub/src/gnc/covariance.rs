@@ -159,6 +159,8 @@ fn transposed(z: &Columns) -> Columns {
 
 /// Makes a nearly symmetric matrix symmetric: each pair of mirrored entries becomes
 /// their mean.
+// Each step reads and writes both `z[j][i]` and `z[i][j]`: indices say it plainly.
+#[allow(clippy::needless_range_loop)]
 fn mirror_upper(z: &mut Columns) {
     for j in 0..N {
         for i in 0..j {
