@@ -1,8 +1,9 @@
 //! Cost of the terrain queries per call (elevation, normal, height above ground, ray
 //! casts) on the default synthetic surface about the Chandrayaan-3 site, the cost of
 //! building that surface once, and ray-cast throughput (rays per second) on the default
-//! surface and on a 8192 x 8192-node DEM (67 million nodes at 1 m, 0.5 GB of heights:
-//! the largest that leaves this 24 GB machine room for the rest of its work).
+//! surface and on a 8192 x 8192-node DEM (67 million nodes at 1 m: 0.5 GB of heights and
+//! 0.7 GB of pyramid; a gigapixel DEM would take 20 GB of this 24 GB machine, which its
+//! other work shares).
 //!
 //! `cargo bench --bench terrain -- --warm-up-time 1 --measurement-time 3`
 

@@ -7,9 +7,10 @@
 //! Level 0 holds each grid cell's largest node (the bilinear patch never rises above its
 //! corners); level `l + 1` the largest of its four children. Values are `f32` rounded up,
 //! so a bound never falls below the `f64` surface; each level also keeps the bound over
-//! every tile's 3 x 3 neighbourhood, which is what a query reads. The pyramid costs a
-//! third of the grid's memory. Hand-written: the heightfield crates on crates.io build meshes for
-//! rendering engines, not conservative bounds over a geodetic DEM.
+//! every tile's 3 x 3 neighbourhood, which is what a query reads. Two `f32` a tile over
+//! every level: 4/3 of the grid's own memory. Hand-written: the heightfield crates on
+//! crates.io build meshes for rendering engines, not conservative bounds over a geodetic
+//! DEM.
 
 use super::grid::Grid;
 
