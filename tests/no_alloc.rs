@@ -93,9 +93,9 @@ fn allocations_over<L: Link + ?Sized>(
             &scenario.propulsion,
         ))
         .unwrap(),
-        1,
     )
     .unwrap();
+    let mut devices = oils_emulator::devices::Devices::new(&scenario, 1);
     let stop = AtomicBool::new(false);
     let log = std::env::temp_dir().join(format!("oils-noalloc-{run_id:x}.oilslog"));
     let recorder = Recorder::create(&log, "{}").unwrap();
@@ -122,6 +122,7 @@ fn allocations_over<L: Link + ?Sized>(
     let summary = run_observed(
         &cfg,
         &mut plant,
+        &mut devices,
         link,
         &mut LockstepClock::new(10_000),
         faults,

@@ -12,6 +12,7 @@
 //! compared bit for bit.
 
 use oils_emulator::config::ScenarioConfig;
+use oils_emulator::devices::Devices;
 use oils_emulator::plant::{Plant, PlantStatus};
 use oils_emulator::propulsion::{
     build_surrogate, EngineCommand, Propulsion, PropulsionDiagnostics, PropulsionKind,
@@ -100,11 +101,12 @@ fn main() {
             hash: blake3::Hasher::new(),
             report: report.clone(),
         };
-        let mut plant = Plant::new(&cfg, Box::new(timed), 2024).expect("plant");
+        let mut plant = Plant::new(&cfg, Box::new(timed)).expect("plant");
+        let mut devices = Devices::new(&cfg, 2024);
         let mut gnc = ReferenceGnc::new(GncConfig::default()).expect("gnc");
         let mut landed = None;
         for k in 0..200_000u64 {
-            let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
+            let tlm = devices.telemetry(&plant, PacketHeader::new(1, k, plant.time_ns()));
             let cmd = gnc.step(&tlm);
             if let PlantStatus::Touchdown(td) = plant.step(
                 &sanitize(&cmd, cfg.propulsion.max_thrust_n, tlm.header.t_ns, DT_NS).0,

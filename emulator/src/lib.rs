@@ -21,6 +21,7 @@
 
 pub mod clock;
 pub mod config;
+pub mod devices;
 pub mod digest;
 pub mod exact_json;
 pub mod failure_scenarios;

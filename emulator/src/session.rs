@@ -9,6 +9,7 @@
 //! the core does not write itself.
 
 use crate::clock::{LockstepClock, RealtimeClock, ReplayClock, StepClock};
+use crate::devices::Devices;
 use crate::faults::{FaultPlan, PlantFault};
 use crate::link::{BoundLink, InProcLink, Link, ReplayLink};
 use crate::plant::Plant;
@@ -147,15 +148,21 @@ pub fn fresh_run_id() -> u64 {
 /// The plant a configuration describes, with its propulsion model (built before tick 0).
 pub fn build_plant(cfg: &RunConfig) -> Result<Plant, SessionError> {
     let propulsion = propulsion::build(&cfg.propulsion_spec())?;
-    let mut plant = Plant::new(&cfg.scenario, propulsion, cfg.seed)?;
-    plant.set_ideal_nav(cfg.telemetry.ideal_nav());
+    Ok(Plant::new(&cfg.scenario, propulsion)?)
+}
+
+/// The devices a configuration puts on board: the ideal navigation source if its
+/// telemetry carries it, the sensors if it carries them, seeded from the run's seed.
+pub fn build_devices(cfg: &RunConfig) -> Result<Devices, SessionError> {
+    let mut devices = Devices::new(&cfg.scenario, cfg.seed);
+    devices.set_ideal_nav(cfg.telemetry.ideal_nav());
     if cfg.telemetry.sensors() {
-        plant.attach_sensors(crate::sensors::SensorSuite::new(
+        devices.attach_sensors(crate::sensors::SensorSuite::new(
             &cfg.scenario.sensors,
             cfg.seed,
         )?);
     }
-    Ok(plant)
+    Ok(devices)
 }
 
 /// The run's faults, armed, after checking that the plant's propulsion model can
@@ -303,11 +310,10 @@ pub fn run(
         )));
     }
     let mut plant = match (cfg.propulsion, extras.propulsion) {
-        (propulsion::PropulsionKind::Fmu, Some(build)) => {
-            Plant::new(&cfg.scenario, build(cfg)?, cfg.seed)?
-        }
+        (propulsion::PropulsionKind::Fmu, Some(build)) => Plant::new(&cfg.scenario, build(cfg)?)?,
         _ => build_plant(cfg)?,
     };
+    let mut devices = build_devices(cfg)?;
     let mut faults = fault_plan(cfg, &plant)?;
     let mut sched = scheduler_config(cfg, run_id);
     if extras.untimed {
@@ -355,6 +361,7 @@ pub fn run(
             let summary = run_and_close(
                 &sched,
                 &mut plant,
+                &mut devices,
                 &mut link,
                 clock.as_mut(),
                 &mut faults,
@@ -394,6 +401,7 @@ pub fn run(
             let summary = run_and_close(
                 &sched,
                 &mut plant,
+                &mut devices,
                 &mut link,
                 clock.as_mut(),
                 &mut faults,
@@ -443,6 +451,7 @@ pub fn run(
 fn run_and_close<L: Link + ?Sized>(
     sched: &SchedulerConfig,
     plant: &mut Plant,
+    devices: &mut Devices,
     link: &mut L,
     clock: &mut dyn StepClock,
     faults: &mut FaultPlan,
@@ -453,6 +462,7 @@ fn run_and_close<L: Link + ?Sized>(
     let mut summary = scheduler::run_observed(
         sched,
         plant,
+        devices,
         link,
         clock,
         faults,
@@ -544,6 +554,7 @@ pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, Se
         return Err(bad("the log holds no records".into()));
     };
     let mut plant = build_plant(&config)?;
+    let mut devices = build_devices(&config)?;
     let mut faults = fault_plan(&config, &plant)?;
     let mut sched = scheduler_config(&config, run_id);
     let recorded = log.records.len();
@@ -570,6 +581,7 @@ pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, Se
     let mut summary = scheduler::run(
         &sched,
         &mut plant,
+        &mut devices,
         &mut link,
         &mut clock,
         &mut faults,

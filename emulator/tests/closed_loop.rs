@@ -4,6 +4,7 @@
 //! +-5 % thrust error; runs are bit-reproducible; profile playback drives the plant.
 
 use oils_emulator::config::ScenarioConfig;
+use oils_emulator::devices::Devices;
 use oils_emulator::plant::{Plant, PlantStatus, RigidBodyState, TouchdownState};
 use oils_emulator::propulsion::{
     ideal::IdealPropulsion, EngineCommand, Propulsion, PropulsionOutput,
@@ -36,13 +37,14 @@ fn fly<F: FlightSoftware>(
     phase_of: impl Fn(&F) -> Option<(Phase, bool)>,
     max_s: f64,
 ) -> Outcome {
-    let mut plant = Plant::new(cfg, propulsion, seed).unwrap();
+    let mut plant = Plant::new(cfg, propulsion).unwrap();
+    let mut devices = Devices::new(cfg, seed);
     let mut phases: Vec<(f64, Phase)> = Vec::new();
     let mut used_pair = false;
     let steps = (max_s * 1e9 / DT_NS as f64) as u64;
     let mut touchdown = None;
     for k in 0..steps {
-        let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
+        let tlm = devices.telemetry(&plant, PacketHeader::new(1, k, plant.time_ns()));
         let cmd = fsw.step(&tlm);
         if let Some((p, pair)) = phase_of(fsw) {
             used_pair |= pair;
@@ -226,11 +228,12 @@ fn profile_playback_drives_the_plant() {
                 1,800,800,800,800,1,1,1,1\n\
                 5,320,0,320,0,1,0,1,0\n";
     let mut fsw = ProfilePlayback::new(ThrustProfile::parse(text).unwrap());
-    let mut plant = Plant::new(&cfg, ideal(&cfg), 1).unwrap();
+    let mut plant = Plant::new(&cfg, ideal(&cfg)).unwrap();
+    let mut devices = Devices::new(&cfg, 1);
     let mut up_speed_at_5s = f64::NAN;
     let mut touchdown = None;
     for k in 0..10_000u64 {
-        let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
+        let tlm = devices.telemetry(&plant, PacketHeader::new(1, k, plant.time_ns()));
         let cmd = fsw.step(&tlm);
         if k < 100 {
             assert_eq!(cmd.engine_on, [0; 4], "off before the first row");

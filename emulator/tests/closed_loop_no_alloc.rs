@@ -3,6 +3,7 @@
 //! `Plant::telemetry` and `ReferenceGnc::step` (and `ProfilePlayback::step`).
 
 use oils_emulator::config::ScenarioConfig;
+use oils_emulator::devices::Devices;
 use oils_emulator::plant::{ActuatorCommand, Plant, PlantStatus};
 use oils_emulator::propulsion::{ideal::IdealPropulsion, EngineCommand};
 use oils_onboard_stub::fsw::FlightSoftware;
@@ -34,12 +35,13 @@ fn actuator(cmd: &Command, cycle_start_ns: i64) -> ActuatorCommand {
 /// Steps `fsw` against a fresh plant to touchdown; returns the allocations counted in
 /// the loop.
 fn allocations_in_loop(fsw: &mut dyn FlightSoftware, cfg: &ScenarioConfig) -> usize {
-    let mut plant = Plant::new(cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 3).unwrap();
+    let mut plant = Plant::new(cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
+    let mut devices = Devices::new(cfg, 3);
     let before = common::allocations();
     let mut landed = false;
     for k in 0..200_000u64 {
         let t_ns = plant.time_ns();
-        let tlm = plant.telemetry(PacketHeader::new(1, k, t_ns));
+        let tlm = devices.telemetry(&plant, PacketHeader::new(1, k, t_ns));
         let cmd = fsw.step(&tlm);
         if let PlantStatus::Touchdown(td) = plant.step(&actuator(&cmd, t_ns), 10_000_000) {
             std::hint::black_box(td);

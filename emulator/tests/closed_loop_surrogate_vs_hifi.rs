@@ -21,6 +21,7 @@
 //!   m g_moon / (Isp g0) ~ 0.46 kg/s for ~860 kg.
 
 use oils_emulator::config::ScenarioConfig;
+use oils_emulator::devices::Devices;
 use oils_emulator::plant::{Plant, PlantStatus, TouchdownState};
 use oils_emulator::propulsion::shadow::ShadowPropulsion;
 use oils_emulator::propulsion::{
@@ -38,10 +39,11 @@ fn land(
     cfg: &ScenarioConfig,
     propulsion: Box<dyn Propulsion>,
 ) -> (TouchdownState, Option<PropulsionDiagnostics>) {
-    let mut plant = Plant::new(cfg, propulsion, 2024).unwrap();
+    let mut plant = Plant::new(cfg, propulsion).unwrap();
+    let mut devices = Devices::new(cfg, 2024);
     let mut gnc = ReferenceGnc::new(GncConfig::default()).unwrap();
     for k in 0..200_000u64 {
-        let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
+        let tlm = devices.telemetry(&plant, PacketHeader::new(1, k, plant.time_ns()));
         let cmd = gnc.step(&tlm);
         if let PlantStatus::Touchdown(td) = plant.step(
             &sanitize(&cmd, cfg.propulsion.max_thrust_n, tlm.header.t_ns, DT_NS).0,

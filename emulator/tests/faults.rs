@@ -153,7 +153,6 @@ fn a_stuck_valve_holds_its_engine_while_the_others_follow_the_command() {
             &scenario.propulsion,
         ))
         .unwrap(),
-        0,
     )
     .unwrap();
     let cmd = |n: f64| ActuatorCommand {
@@ -314,6 +313,7 @@ fn the_reference_gnc_detects_the_failed_engine_from_telemetry() {
     use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
     let cfg = config(PropulsionKind::Ideal, &["engine-off:1@t=300"], 320.0);
     let mut plant = session::build_plant(&cfg).unwrap();
+    let mut devices = session::build_devices(&cfg).unwrap();
     let mut faults = session::fault_plan(&cfg, &plant).unwrap();
     let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()));
     let sched = SchedulerConfig {
@@ -330,6 +330,7 @@ fn the_reference_gnc_detects_the_failed_engine_from_telemetry() {
     run(
         &sched,
         &mut plant,
+        &mut devices,
         &mut link,
         &mut LockstepClock::new(1000),
         &mut faults,

@@ -2,6 +2,7 @@
 //! A counting global allocator in its own test binary proves it.
 
 use oils_emulator::config::ScenarioConfig;
+use oils_emulator::devices::Devices;
 use oils_emulator::plant::{ActuatorCommand, Plant, PlantStatus};
 use oils_emulator::propulsion::{ideal::IdealPropulsion, EngineCommand};
 use oils_shared::PacketHeader;
@@ -18,7 +19,8 @@ fn step_and_telemetry_do_not_allocate_through_flight_and_touchdown() {
     cfg.initial.horizontal_speed_m_s = 0.5;
     cfg.initial.thrust_pitch_deg = 90.0;
     cfg.nav_noise.enabled = true;
-    let mut plant = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 7).unwrap();
+    let mut plant = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
+    let mut devices = Devices::new(&cfg, 7);
     let cmd = ActuatorCommand {
         engines: EngineCommand {
             thrust_cmd_n: [400.0; 4],
@@ -31,14 +33,14 @@ fn step_and_telemetry_do_not_allocate_through_flight_and_touchdown() {
     let before = common::allocations();
     let mut touched = false;
     for k in 0..100_000u64 {
-        let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
+        let tlm = devices.telemetry(&plant, PacketHeader::new(1, k, plant.time_ns()));
         std::hint::black_box(&tlm);
         if let PlantStatus::Touchdown(td) = plant.step(&cmd, 10_000_000) {
             std::hint::black_box(td);
             touched = true;
             // One more call each after touchdown (frozen path).
             std::hint::black_box(plant.step(&cmd, 10_000_000));
-            std::hint::black_box(plant.telemetry(PacketHeader::new(1, k + 1, 0)));
+            std::hint::black_box(devices.telemetry(&plant, PacketHeader::new(1, k + 1, 0)));
             break;
         }
     }
@@ -58,7 +60,8 @@ fn thruster_path_does_not_allocate_through_flight_and_touchdown() {
     cfg.initial.altitude_m = 20.0;
     cfg.initial.horizontal_speed_m_s = 0.5;
     cfg.initial.thrust_pitch_deg = 90.0;
-    let mut plant = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 7).unwrap();
+    let mut plant = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
+    let mut devices = Devices::new(&cfg, 7);
     let cycle_ns = 20_000_000u64;
     let mut cmd = ActuatorCommand {
         engines: EngineCommand {
@@ -81,7 +84,7 @@ fn thruster_path_does_not_allocate_through_flight_and_touchdown() {
             }
         }
         for _ in 0..2 {
-            let tlm = plant.telemetry(PacketHeader::new(1, k, plant.time_ns()));
+            let tlm = devices.telemetry(&plant, PacketHeader::new(1, k, plant.time_ns()));
             std::hint::black_box(&tlm);
             std::hint::black_box(plant.thrusters().thrust_now_n());
             if let PlantStatus::Touchdown(td) = plant.step(&cmd, 10_000_000) {

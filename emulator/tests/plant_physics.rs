@@ -3,6 +3,7 @@
 
 use nalgebra::{UnitQuaternion, Vector3};
 use oils_emulator::config::ScenarioConfig;
+use oils_emulator::devices::Devices;
 use oils_emulator::plant::{ActuatorCommand, Plant, PlantStatus, TouchdownState};
 use oils_emulator::propulsion::{ideal::IdealPropulsion, EngineCommand};
 use oils_shared::{PacketHeader, TLM_FLAG_NAV_NOISE};
@@ -12,7 +13,7 @@ use rand_chacha::ChaCha8Rng;
 const G0_M_S2: f64 = 9.80665;
 
 fn plant(cfg: &ScenarioConfig) -> Plant {
-    Plant::new(cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap()
+    Plant::new(cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap()
 }
 
 fn coast() -> ActuatorCommand {
@@ -364,7 +365,7 @@ fn telemetry_reports_specific_force_altitude_and_valves() {
     for _ in 0..500 {
         p.step(&cmd, 10_000_000);
     }
-    let tlm = p.telemetry(PacketHeader::new(9, 500, p.time_ns()));
+    let tlm = Devices::new(&cfg, 1).telemetry(&p, PacketHeader::new(9, 500, p.time_ns()));
     assert_eq!(tlm.header.step, 500);
     assert_eq!(tlm.header.flags & TLM_FLAG_NAV_NOISE, 0);
     let thrust: f64 = p.propulsion_output().thrust_n.iter().sum();
@@ -389,10 +390,9 @@ fn nav_noise_is_flagged_seeded_and_reproducible() {
     let mut cfg = vertical_drop(1_000.0, 90.0);
     cfg.nav_noise.enabled = true;
     let run = |seed: u64| {
-        let mut p =
-            Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), seed).unwrap();
+        let mut p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
         p.step(&full_thrust(), 10_000_000);
-        p.telemetry(PacketHeader::new(1, 1, p.time_ns()))
+        Devices::new(&cfg, seed).telemetry(&p, PacketHeader::new(1, 1, p.time_ns()))
     };
     let (a, b, c) = (run(3), run(3), run(4));
     assert_eq!(a, b);
@@ -407,7 +407,7 @@ fn nav_noise_is_flagged_seeded_and_reproducible() {
 fn bad_configuration_is_refused() {
     let mut cfg = ScenarioConfig::default();
     cfg.moon.radius_m = -1.0;
-    let r = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 0);
+    let r = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)));
     assert_eq!(r.err().map(|e| e.field), Some("moon.radius_m"));
 }
 
@@ -415,7 +415,11 @@ fn bad_configuration_is_refused() {
 fn specific_force_after_one_step(cfg: &ScenarioConfig) -> Vector3<f64> {
     let mut p = plant(cfg);
     assert_eq!(p.step(&full_thrust(), 10_000_000), PlantStatus::Flying);
-    Vector3::from(p.telemetry(PacketHeader::default()).accel_body_m_s2)
+    Vector3::from(
+        Devices::new(cfg, 1)
+            .telemetry(&p, PacketHeader::default())
+            .accel_body_m_s2,
+    )
 }
 
 #[test]
@@ -487,7 +491,7 @@ fn a_failed_propulsion_model_is_named_by_the_plant() {
     }
     let cfg = ScenarioConfig::default();
     let prop = FailsAfter(3, IdealPropulsion::new(&cfg.propulsion));
-    let mut plant = Plant::new(&cfg, Box::new(prop), 1).unwrap();
+    let mut plant = Plant::new(&cfg, Box::new(prop)).unwrap();
     let cmd = ActuatorCommand::default();
     for _ in 0..2 {
         plant.step(&cmd, 10_000_000);

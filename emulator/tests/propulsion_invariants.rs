@@ -47,7 +47,7 @@ struct Trace {
 fn fly(kind: PropulsionKind, fault: Option<&PlantFault>, case: &Case) -> Trace {
     let scenario = ScenarioConfig::default();
     let model = build(&PropulsionSpec::new(kind, &scenario.propulsion)).unwrap();
-    let mut plant = Plant::new(&scenario, model, 0).unwrap();
+    let mut plant = Plant::new(&scenario, model).unwrap();
     let n = ((case.close_s + case.tail_s) / DT_S).round() as usize;
     let (fault_k, close_k) = (
         (case.fault_s / DT_S).round() as usize,

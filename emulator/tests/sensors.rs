@@ -1041,7 +1041,6 @@ fn the_plants_truth_senses_free_fall_as_zero_and_thrust_as_thrust_over_mass() {
     let mut plant = Plant::new(
         &scenario,
         Box::new(IdealPropulsion::new(&scenario.propulsion)),
-        1,
     )
     .unwrap();
     let mut cfg = only(true, false, true, true, true);

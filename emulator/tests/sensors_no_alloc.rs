@@ -33,7 +33,7 @@ fn after_plant_step_and_fill_frame_do_not_allocate() {
     cfg.initial.range_to_site_m = 0.0;
     cfg.sensors.star_tracker.outage_start_s = vec![1.0];
     cfg.sensors.star_tracker.outage_duration_s = vec![1.0];
-    let mut plant = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 7).unwrap();
+    let mut plant = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
     let mut suite = SensorSuite::new(&cfg.sensors, 7).unwrap();
     let mut frame = SensorFrame::default();
     let cmd = ActuatorCommand {

@@ -7,6 +7,7 @@
 
 use nalgebra::Vector3;
 use oils_emulator::config::ScenarioConfig;
+use oils_emulator::devices::Devices;
 use oils_emulator::plant::thrusters::ThrusterBank;
 use oils_emulator::plant::{ActuatorCommand, Plant, PlantStatus};
 use oils_emulator::propulsion::ideal::IdealPropulsion;
@@ -38,7 +39,7 @@ fn config() -> ScenarioConfig {
 }
 
 fn plant(cfg: &ScenarioConfig) -> Plant {
-    Plant::new(cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap()
+    Plant::new(cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap()
 }
 
 /// Thruster mode, `on` on-times (thruster, ns), for the cycle starting at `cycle_start_ns`.
@@ -241,8 +242,10 @@ fn thruster_mode_with_zero_on_times_coasts_bit_for_bit() {
     assert_eq!(thrusters.rcs_propellant_used_kg(), 0.0);
     let h = PacketHeader::new(1, 0, 0);
     assert_eq!(
-        ideal.telemetry(h).accel_body_m_s2,
-        thrusters.telemetry(h).accel_body_m_s2
+        Devices::new(&cfg, 1).telemetry(&ideal, h).accel_body_m_s2,
+        Devices::new(&cfg, 1)
+            .telemetry(&thrusters, h)
+            .accel_body_m_s2
     );
 }
 
@@ -273,7 +276,11 @@ fn one_thruster_through_the_centre_of_mass_pushes_by_its_impulse_over_mass() {
     }
     let x = 1.0 - (-(0.012 - OPEN_S) / TAU_S).exp();
     let want_accel = d_body * (F_N * x / q.state().mass_kg);
-    let accel = Vector3::from(q.telemetry(PacketHeader::new(1, 0, 0)).accel_body_m_s2);
+    let accel = Vector3::from(
+        Devices::new(&cfg, 1)
+            .telemetry(&q, PacketHeader::new(1, 0, 0))
+            .accel_body_m_s2,
+    );
     assert!((accel - want_accel).norm() < 1e-12 * want_accel.norm());
 }
 

@@ -2,6 +2,7 @@
 //! against closed forms and the configured limits.
 
 use oils_emulator::config::ScenarioConfig;
+use oils_emulator::devices::Devices;
 use oils_emulator::plant::frames::MoonRotation;
 use oils_emulator::plant::{ActuatorCommand, CrashReason, Plant, PlantStatus, TouchdownState};
 use oils_emulator::propulsion::ideal::IdealPropulsion;
@@ -19,7 +20,7 @@ fn drop(altitude_m: f64, vertical_speed_m_s: f64) -> ScenarioConfig {
 }
 
 fn fly_to_the_end(cfg: &ScenarioConfig) -> (Plant, TouchdownState, u64) {
-    let mut p = Plant::new(cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap();
+    let mut p = Plant::new(cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
     for step in 1..200_000 {
         if let PlantStatus::Touchdown(td) = p.step(&ActuatorCommand::default(), 10_000_000) {
             return (p, td, step);
@@ -40,14 +41,14 @@ fn mcmf_position(p: &Plant, cfg: &ScenarioConfig) -> nalgebra::Vector3<f64> {
 fn a_lander_at_rest_on_the_surface_stays_at_rest_in_the_moon_fixed_frame() {
     let cfg = drop(0.001, 0.0);
     let start = {
-        let p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap();
+        let p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
         mcmf_position(&p, &cfg)
     };
     // Inertially it moves at omega R cos(lat) = 1.63 m/s with the ground.
     let rot = MoonRotation {
         rate_rad_s: cfg.moon.rotation_rate_rad_s,
     };
-    let p0 = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap();
+    let p0 = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
     let inertial_speed = p0.state().vel_mci_m_s.norm();
     let expect = cfg.moon.rotation_rate_rad_s
         * p0.state().pos_mci_m.norm()
@@ -201,7 +202,7 @@ fn a_drop_on_a_slope_steeper_than_the_friction_angle_slides() {
 #[test]
 fn truth_contact_is_set_from_the_first_footpad_contact() {
     let cfg = drop(0.05, -0.5);
-    let mut p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap();
+    let mut p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
     let mut first_contact_s = None;
     let td = loop {
         let status = p.step(&ActuatorCommand::default(), 10_000_000);
@@ -233,7 +234,7 @@ fn truth_contact_is_set_from_the_first_footpad_contact() {
 #[test]
 fn ideal_navigation_feels_the_legs_at_rest() {
     let cfg = drop(0.05, -0.5);
-    let mut p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion)), 1).unwrap();
+    let mut p = Plant::new(&cfg, Box::new(IdealPropulsion::new(&cfg.propulsion))).unwrap();
     loop {
         let status = p.step(&ActuatorCommand::default(), 10_000_000);
         if let PlantStatus::Touchdown(td) = status {
@@ -242,7 +243,7 @@ fn ideal_navigation_feels_the_legs_at_rest() {
         }
         assert!(p.time_ns() < 100_000_000_000, "the landing never ended");
     }
-    let tlm = p.telemetry(Default::default());
+    let tlm = Devices::new(&cfg, 1).telemetry(&p, Default::default());
     let g = cfg.moon.mu_m3_s2 / p.state().pos_mci_m.norm_squared();
     let a = tlm.accel_body_m_s2;
     assert!((a[2] - g).abs() < 0.02 * g, "at rest: {a:?}, g = {g}");

@@ -21,7 +21,6 @@ pub mod initial;
 pub mod integrator;
 pub mod legs;
 pub mod model_error;
-pub mod nav_noise;
 pub mod rigid_body;
 pub mod thrusters;
 
@@ -33,11 +32,9 @@ use ground::Ground;
 use integrator::RK4;
 use legs::{Legs, CONTACT_SUBSTEP_NS};
 use nalgebra::Vector3;
-use nav_noise::{NavNoise, StateVectorUplink};
 use oils_shared::{
     EngineReading, NavState, PacketHeader, PropulsionReadings, Telemetry, ENGINE_COUNT,
-    TLM_FLAG_COMPUTER_RESET, TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_IDEAL_NAV, TLM_FLAG_NAV_NOISE,
-    TLM_FLAG_SENSORS, TLM_FLAG_STATE_VECTOR,
+    TLM_FLAG_FOOTPAD_CONTACT,
 };
 use rigid_body::{Dynamics, HeldLoads, MassModel, StateVector};
 use thrusters::ThrusterBank;
@@ -213,14 +210,6 @@ pub struct Plant {
     pads_in_contact: u8,
     /// The landing's end, once it is over.
     touchdown: Option<TouchdownState>,
-    noise: Option<NavNoise>,
-    /// Whether the telemetry carries the ideal navigation source.
-    ideal_nav: bool,
-    /// The ground's state vector, sent on the first telemetry with the devices on and
-    /// after each computer reset.
-    state_vector: StateVectorUplink,
-    /// A state vector is due on the next telemetry (with the devices on).
-    state_vector_due: bool,
     /// Engine faults acting on the command.
     engine_faults: [EngineFault; ENGINE_COUNT],
     /// Output scale of each engine (the configured thrust scale times a degradation
@@ -234,9 +223,6 @@ pub struct Plant {
     thrusters: ThrusterBank,
     /// State and time at the start of the last step, for [`Plant::sensor_truth`].
     step_start: (RigidBodyState, i64),
-    /// The sensors on board, when the telemetry carries them: fed the truth after every
-    /// step, drained into each telemetry's sensor frame.
-    sensors: Option<Box<crate::sensors::SensorSuite>>,
     /// The last [`Plant::altitude_m`]: its position, time and value. The scheduler and
     /// the telemetry both ask for it after a step, and the terrain lookup is worth one.
     altitude_memo: std::cell::Cell<Option<(Vector3<f64>, i64, f64)>>,
@@ -251,12 +237,11 @@ enum EngineFault {
 }
 
 impl Plant {
-    /// A plant at the configured initial state. Validates `cfg`; `seed` seeds the
-    /// navigation noise stream.
+    /// A plant at the configured initial state. Validates `cfg`. Nothing in it is
+    /// random: the seeded streams are the devices' ([`crate::devices::Devices`]).
     pub fn new(
         cfg: &ScenarioConfig,
         propulsion: Box<dyn Propulsion>,
-        seed: u64,
     ) -> Result<Plant, ConfigError> {
         cfg.validate()?;
         let lander = &cfg.lander;
@@ -307,10 +292,6 @@ impl Plant {
         let prop_out = propulsion.output();
         let mut state = initial::initial_state(cfg);
         state.mass_kg = (setup.wet_mass_kg - prop_out.ejected_kg()).max(lander.dry_mass_kg);
-        let noise = cfg
-            .nav_noise
-            .enabled
-            .then(|| NavNoise::new(&cfg.nav_noise, seed));
         Ok(Plant {
             setup,
             propulsion,
@@ -325,10 +306,6 @@ impl Plant {
             contact: None,
             pads_in_contact: 0,
             touchdown: None,
-            noise,
-            ideal_nav: true,
-            state_vector: StateVectorUplink::new(&cfg.state_vector, seed),
-            state_vector_due: true,
             engine_faults: [EngineFault::None; ENGINE_COUNT],
             output_factor: lander.engine_thrust_scale,
             thrust_scale: lander.engine_thrust_scale,
@@ -338,31 +315,16 @@ impl Plant {
                 .then(|| model_error::ModelError::new(&cfg.model_error)),
             thrusters: ThrusterBank::from_config(lander),
             step_start: (state, 0),
-            sensors: None,
             altitude_memo: std::cell::Cell::new(None),
         })
     }
 
-    /// Whether [`Plant::telemetry`] fills the ideal navigation source (`nav`,
-    /// `accel_body_m_s2`, `altitude_m`, [`TLM_FLAG_IDEAL_NAV`]); on unless told. Off, the
-    /// fields are zero and the navigation noise stream is not drawn.
-    pub fn set_ideal_nav(&mut self, on: bool) {
-        self.ideal_nav = on;
-    }
-
-    /// Telemetry of the current state. Fills everything but `header` and `sensors`;
-    /// the header is kept as given apart from OR-ing in [`TLM_FLAG_IDEAL_NAV`],
-    /// [`TLM_FLAG_NAV_NOISE`] and [`TLM_FLAG_FOOTPAD_CONTACT`].
-    pub fn telemetry(&mut self, header: PacketHeader) -> Telemetry {
-        let mut tlm = Telemetry::default();
-        self.telemetry_into(header, &mut tlm);
-        tlm
-    }
-
-    /// [`Plant::telemetry`] written over `tlm`, every field of it: the run's loop keeps
-    /// one packet and fills it each step, where a packet returned by value was copied
-    /// (a kilobyte, twice a step).
-    pub fn telemetry_into(&mut self, header: PacketHeader, tlm: &mut Telemetry) {
+    /// The plant's own readings into `tlm`, every field of it: `header`, the exact
+    /// navigation state (position, velocity, attitude, rate), the specific force, the
+    /// footpads' height, the mass, the propulsion readings and the footpad-contact flag;
+    /// the sensor frame zero. What the flight software is told of them is the devices'
+    /// business ([`crate::devices::Devices::telemetry_into`]).
+    pub fn readings_into(&self, header: PacketHeader, tlm: &mut Telemetry) {
         let s = &self.state;
         let q = s.q_mci_from_body.quaternion();
         let mut engines = [EngineReading::default(); ENGINE_COUNT];
@@ -393,75 +355,16 @@ impl Plant {
         if self.pads_in_contact > 0 {
             tlm.header.flags |= TLM_FLAG_FOOTPAD_CONTACT;
         }
-        if let Some(sensors) = self.sensors.as_mut() {
-            sensors.fill_frame(header.t_ns, &mut tlm.sensors);
-            tlm.header.flags |= TLM_FLAG_SENSORS;
-            // Only when the ideal navigation is off: with it on (`both`), it is what a
-            // flight software starts from.
-            if !self.ideal_nav
-                && self.state_vector_due
-                && header.flags & TLM_FLAG_COMPUTER_RESET == 0
-            {
-                // The ground's state vector in place of the ideal navigation: the truth
-                // plus the orbit determination's error (docs/sensors.md).
-                self.state_vector_due = false;
-                tlm.accel_body_m_s2 = [0.0; 3];
-                tlm.altitude_m = 0.0;
-                self.state_vector.apply(&mut tlm.nav);
-                tlm.header.flags |= TLM_FLAG_STATE_VECTOR;
-                return;
-            }
-        }
-        if !self.ideal_nav {
-            tlm.nav = NavState::default();
-            tlm.accel_body_m_s2 = [0.0; 3];
-            tlm.altitude_m = 0.0;
-            return;
-        }
-        tlm.header.flags |= TLM_FLAG_IDEAL_NAV;
-        if let Some(noise) = self.noise.as_mut() {
-            noise.apply(tlm);
-            tlm.header.flags |= TLM_FLAG_NAV_NOISE;
-        }
     }
 
-    /// A computer reset ended: the ground uplinks a fresh state vector on the next
-    /// telemetry (with the devices on).
-    pub fn uplink_state_vector(&mut self) {
-        self.state_vector_due = true;
-    }
-
-    /// Puts the sensors on board: from now on every step feeds them the truth and every
-    /// telemetry carries their samples (`TLM_FLAG_SENSORS`).
-    pub fn attach_sensors(&mut self, suite: crate::sensors::SensorSuite) {
-        self.sensors = Some(Box::new(suite));
-    }
-
-    /// The sensors on board, if attached (for their faults and their report).
-    pub fn sensors_mut(&mut self) -> Option<&mut crate::sensors::SensorSuite> {
-        self.sensors.as_deref_mut()
-    }
-
-    /// The sensors on board, if attached.
-    pub fn sensors(&self) -> Option<&crate::sensors::SensorSuite> {
-        self.sensors.as_deref()
-    }
-
-    /// Advances one bench step of `dt_ns` with `cmd` held, then feeds the sensors (if
-    /// on board) the step's truth. Once the landing is over the state is frozen and every
+    /// Advances one bench step of `dt_ns` with `cmd` held (the devices then take the
+    /// step's truth: [`crate::devices::Devices::after_plant_step`]). Once the landing is over the state is frozen and every
     /// further call returns the same touchdown. No allocation, I/O or clock.
     pub fn step(&mut self, cmd: &ActuatorCommand, dt_ns: u64) -> PlantStatus {
         if let Some(td) = self.touchdown {
             return PlantStatus::Touchdown(td);
         }
-        let status = self.integrate_step(cmd, dt_ns);
-        // Taken out for the call: the truth borrows the plant (a pointer move, no copy
-        // of the suite, no allocation).
-        if let Some(mut sensors) = self.sensors.take() {
-            sensors.after_plant_step(&self.sensor_truth());
-            self.sensors = Some(sensors);
-        }
-        status
+        self.integrate_step(cmd, dt_ns)
     }
 
     /// One step of the physics (see [`Plant::step`]).

@@ -561,7 +561,7 @@ mod tests {
             for b in &ids[i + 1..] {
                 assert_ne!(a, b);
             }
-            assert_ne!(*a, crate::plant::nav_noise::NAV_NOISE_STREAM);
+            assert_ne!(*a, crate::devices::nav_noise::NAV_NOISE_STREAM);
         }
     }
 

@@ -9,27 +9,41 @@
 //! * realtime paces step starts against absolute monotonic deadlines; a command not in
 //!   by its deadline is a deadline miss, handled by the [`MissPolicy`].
 //!
+//! A cycle is a pipeline of owned stages, each in its own module with one job:
+//! * faults fire at the cycle's start and act through each stage's hook;
+//! * [`devices`]: the devices turn the truth into Telemetry(k)
+//!   ([`crate::devices::Devices`]: sensors, ideal navigation, state-vector uplink), the
+//!   telemetry faults on top;
+//! * [`exchange`]: the link carries it out and Command(k) back, checked, timed,
+//!   digested, through the link faults and the sanitiser;
+//! * [`recording`]: the cycle's log record;
+//! * [`truth`]: the plant integrates the held command up to the next cycle, the devices
+//!   sampling each step.
+//!
 //! The step path (everything inside the loop) does no heap allocation, locking or
 //! logging: the plant and propulsion are built before tick 0, the link's ports exist,
 //! the recorder takes a copy through a bounded channel, the histograms are preallocated.
 
+mod devices;
+mod exchange;
+mod recording;
+mod truth;
+
 use crate::clock::StepClock;
-use crate::digest::RunDigest;
+use crate::devices::Devices;
 use crate::faults::{FaultPlan, FaultReport, FaultyLink};
-use crate::fsw_monitor::FswMonitor;
 use crate::link::{ExchangeError, Link};
-use crate::plant::{ActuatorCommand, Plant, PlantStatus, TouchdownState};
-use crate::recorder::{
-    Record, Recorder, StepTimes, REC_COMMAND_RECEIVED, REC_DEADLINE_MISS, REC_ENDED_AFTER_PUBLISH,
-    REC_END_OF_RUN, REC_FAULT_CLEARED, REC_FAULT_FIRED, REC_REJECTED_VALUES,
-};
-use crate::sanitize::sanitize;
-use crate::timing::{TimingMonitor, TimingThresholds};
+use crate::plant::{Plant, PlantStatus, TouchdownState};
+use crate::recorder::{Recorder, StepTimes, REC_FAULT_CLEARED, REC_FAULT_FIRED};
+use crate::timing::TimingThresholds;
+use devices::DeviceStage;
+use exchange::{ExchangeStage, Stop};
 use oils_shared::clock::{monotonic_ns, monotonic_ns_if};
-use oils_shared::link::LinkError;
-use oils_shared::{Command, PacketHeader, Telemetry, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_END_OF_RUN};
+use oils_shared::TLM_FLAG_END_OF_RUN;
+use recording::Recording;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
+use truth::TruthStage;
 
 /// How steps are paced.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -262,24 +276,35 @@ impl Abort {
 pub type StepObserver<'a> = &'a mut dyn FnMut(u64, &Plant);
 
 /// Runs one bench run over an established link with the flight software connected,
-/// the plant built.
+/// the plant and its devices built.
+#[allow(clippy::too_many_arguments)]
 pub fn run<L: Link + ?Sized, C: StepClock + ?Sized>(
     cfg: &SchedulerConfig,
     plant: &mut Plant,
+    devices: &mut Devices,
     link: &mut L,
     clock: &mut C,
     faults: &mut FaultPlan,
     recorder: Option<&Recorder>,
     stop: &AtomicBool,
 ) -> Result<RunSummary, SchedulerError> {
-    run_observed(cfg, plant, link, clock, faults, recorder, stop, None)
+    run_observed(
+        cfg, plant, devices, link, clock, faults, recorder, stop, None,
+    )
 }
 
 /// [`run`], calling `observer` after every integrated step.
+///
+/// A cycle is the stages in turn: the faults due fire (each acting through its stage's
+/// hook), the devices compose Telemetry(k) from the truth, the exchange sends it and
+/// turns what comes back into the command the plant holds, the recording logs the
+/// cycle, and the truth integrates the held command up to the next cycle. A stage that
+/// ends the run says why ([`Abort`]); the next cycle then sends the end of the run.
 #[allow(clippy::too_many_arguments)]
 pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     cfg: &SchedulerConfig,
     plant: &mut Plant,
+    devices: &mut Devices,
     link: &mut L,
     clock: &mut C,
     faults: &mut FaultPlan,
@@ -287,61 +312,34 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     stop: &AtomicBool,
     mut observer: Option<StepObserver<'_>>,
 ) -> Result<RunSummary, SchedulerError> {
-    let mut timing = TimingMonitor::new();
-    let mut digest = RunDigest::new();
-    let with_transport = link.has_transport();
-    let mut plant_faults = [None; crate::faults::MAX_FAULTS];
-    for (i, slot) in plant_faults.iter_mut().enumerate().take(faults.len()) {
-        *slot = faults.plant_fault(i);
-    }
-    let mut applied = ActuatorCommand::default();
-    let mut status = PlantStatus::Flying;
-    let mut rejected_commands = 0u64;
-    let mut rejected_values = 0u64;
+    let mut truth = TruthStage::new(cfg.dt_ns, cfg.fsw_period_ns, faults);
+    let mut onboard = DeviceStage::new();
+    let mut recording = Recording::new(recorder);
     let mut abort: Option<Abort> = None;
     let mut steps = 0u64;
-    let mut plant_steps = 0u64;
     let mut plant_overruns = 0u64;
-    let plant_steps_per_cycle = (cfg.fsw_period_ns / cfg.dt_ns.max(1)).max(1);
-    // A failed log (a full disk, ...) ends the run like any abort: the flight software
-    // is told, the summary is made, and the session names the writer's error.
-    let mut recorder = recorder;
     clock.start();
-    // Untimed (`time_exchanges` off), every exchange's clock reading is 0, this too.
-    let now_ns = || monotonic_ns_if(cfg.time_exchanges);
-    let mut last_command_ns = now_ns();
+    let mut exchange =
+        ExchangeStage::new(link.has_transport(), monotonic_ns_if(cfg.time_exchanges));
     let mut k: u64 = 0;
-    // The last step whose telemetry went out mid-step (a replay must know whether the
-    // end came before or after it: the end record says).
-    let mut published: Option<u64> = None;
-    // A computer reset was under way at the last step.
-    let mut was_resetting = false;
-    let mut fsw_monitor = FswMonitor::new();
-    // Telemetry(k), filled in place each step (`Plant::telemetry_into`).
-    let mut tlm = Telemetry::default();
 
     loop {
         let mut step_times = StepTimes::default();
         if let Some(late_ns) = clock.wait_for_step(k, stop) {
-            timing.record_wake_error(late_ns);
+            exchange.timing.record_wake_error(late_ns);
             step_times.wake_error_ns = Some(late_ns.min(i64::MAX as u64) as i64);
         }
         let t_ns = plant.time_ns();
         if abort.is_none() && stop.load(Ordering::Relaxed) {
             abort = Some(Abort::Interrupted);
         }
+
+        // Faults: those due fire, each through its stage's hook.
         let (fired, cleared) = faults.advance(k, t_ns, plant.altitude_m());
         let mut fault_flags = 0u32;
         if fired | cleared != 0 {
-            if let Some(sensors) = plant.sensors_mut() {
-                faults.apply_device_faults(fired, cleared, sensors);
-            }
-            for (i, f) in plant_faults.iter().enumerate().take(faults.len()) {
-                let bit = 1u64 << i;
-                if let (true, Some(f)) = ((fired | cleared) & bit != 0, f) {
-                    plant.set_fault(f, fired & bit != 0);
-                }
-            }
+            DeviceStage::apply_faults(faults, devices, fired, cleared);
+            truth.apply_faults(plant, fired, cleared);
             if fired != 0 {
                 fault_flags |= REC_FAULT_FIRED;
             }
@@ -350,215 +348,76 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             }
         }
         let faults_active = faults.active_mask();
-        let (sensor_faults, link_faults) = faults.stages();
+        let (telemetry_faults, link_faults) = faults.stages();
         let mut link = FaultyLink::new(&mut *link, link_faults);
+
+        // Devices: Telemetry(k) from the truth.
         let resetting = link.resetting();
-        let mut header = PacketHeader::new(cfg.run_id, k, t_ns);
-        if resetting {
-            header.flags |= TLM_FLAG_COMPUTER_RESET;
-        } else if was_resetting {
-            // The computer is back: the ground uplinks a fresh state vector.
-            plant.uplink_state_vector();
-        }
-        was_resetting = resetting;
-        plant.telemetry_into(header, &mut tlm);
-        sensor_faults.apply(&mut tlm, fired);
-        let finished = abort.is_some()
-            || matches!(status, PlantStatus::Touchdown(_))
-            || t_ns >= cfg.max_duration_ns;
+        let tlm = onboard.compose(
+            cfg.run_id,
+            k,
+            resetting,
+            plant,
+            devices,
+            telemetry_faults,
+            fired,
+        );
+
+        let finished = abort.is_some() || truth.touched_down() || t_ns >= cfg.max_duration_ns;
         if finished {
+            let mut tlm = *tlm;
             tlm.header.flags |= TLM_FLAG_END_OF_RUN;
-            // Best effort: the flight software may be gone already.
-            let _ = link.publish_end_of_run(&tlm);
-            digest.add_telemetry(&tlm);
-            if let Some(r) = recorder {
-                // Best effort too: a failed writer already ended the run.
-                let after_publish = if published == Some(k) {
-                    REC_ENDED_AFTER_PUBLISH
-                } else {
-                    0
-                };
-                let _ = r.record(&Record {
-                    flags: REC_END_OF_RUN | after_publish | fault_flags,
-                    telemetry: tlm,
-                    command: Command::default(),
-                    applied: ActuatorCommand::default(),
-                    truth: plant.truth(),
-                    faults_active,
-                    timing: step_times,
-                });
-            }
+            exchange.end_of_run(&mut link, &tlm);
+            let after_publish = exchange.published == Some(k);
+            recording.record_end(
+                fault_flags,
+                after_publish,
+                &tlm,
+                plant,
+                faults_active,
+                step_times,
+            );
             break;
         }
 
-        // A link fault may keep Telemetry(k) from the flight software: then nothing is
-        // published, nothing can answer, and the step is a miss.
-        let withheld = link.withheld();
-        let published_ns = now_ns();
-        if link.publish(&tlm)? {
-            digest.add_telemetry(&tlm);
-            published = Some(k);
-        } else {
-            // The flight software is excused while it sees nothing: its silence is
-            // counted from the first telemetry it could have answered again.
-            last_command_ns = published_ns;
-        }
-
-        let deadline_ns = clock.command_deadline_ns(k, published_ns);
-        let received = loop {
-            if withheld {
-                break None;
+        // Exchange: out, back, checked, faulted, sanitised.
+        let exchanged = match exchange.exchange(
+            cfg,
+            k,
+            t_ns,
+            tlm,
+            plant,
+            &mut link,
+            clock,
+            stop,
+            &mut step_times,
+        ) {
+            Ok(x) => x,
+            Err(Stop::Abort(a)) => {
+                abort = Some(a);
+                continue;
             }
-            match link.receive_until(deadline_ns, stop) {
-                Ok(Some(c)) if c.header.step < k => timing.record_late_command(),
-                Ok(other) => break other,
-                Err(ExchangeError::Link(LinkError::Interrupted)) => {
-                    abort = Some(Abort::Interrupted);
-                    break None;
-                }
-                // Once, at the end of the run: the message may allocate. The flight
-                // software failed, died or changed: the run ends, and is reported.
-                Err(
-                    e @ (ExchangeError::ForeignFlightSoftware { .. }
-                    | ExchangeError::FlightSoftware(_)
-                    | ExchangeError::FlightSoftwareGone { .. }),
-                ) => {
-                    abort = Some(Abort::Protocol(e.to_string()));
-                    break None;
-                }
-                Err(e) => return Err(e.into()),
-            }
+            Err(Stop::Failed(e)) => return Err(e),
         };
-        let received_ns = now_ns();
-        if abort.is_some() {
+
+        // Recording: the cycle's record.
+        if let Err(a) = recording.record(
+            k,
+            fault_flags | exchanged.flags,
+            tlm,
+            exchanged.received,
+            &exchange.applied,
+            plant,
+            faults_active,
+            step_times,
+        ) {
+            abort = Some(a);
             continue;
         }
-        // A duplicated command from the previous step arrives stale, and is discarded.
-        if link.take_stale_duplicate() {
-            timing.record_late_command();
-        }
 
-        let mut flags = fault_flags;
-        // What came off the wire; the link faults then make it what is delivered.
-        let mut wire_cmd = received;
-        match &wire_cmd {
-            Some(cmd) => {
-                if let Err(m) = cmd.header.check_peer() {
-                    abort = Some(Abort::Protocol(m.to_string()));
-                    continue;
-                }
-                if cmd.header.step != k || cmd.header.run_id != cfg.run_id {
-                    abort = Some(Abort::Protocol(format!(
-                        "command for run {:016x} step {} arrived while run {:016x} was at step {k}",
-                        cmd.header.run_id, cmd.header.step, cfg.run_id
-                    )));
-                    continue;
-                }
-                last_command_ns = received_ns;
-                // Untimed (`time_exchanges` off), nothing was measured: nothing recorded.
-                if cfg.time_exchanges {
-                    let round_trip_ns = received_ns - published_ns;
-                    step_times.round_trip_ns = Some(round_trip_ns);
-                    if with_transport {
-                        timing.record_exchange(round_trip_ns, cmd.stub_compute_ns);
-                        step_times.transport_ns =
-                            Some(round_trip_ns.saturating_sub(cmd.stub_compute_ns));
-                    } else {
-                        timing.record_in_process(round_trip_ns, cmd.stub_compute_ns);
-                    }
-                }
-                digest.add_command(cmd);
-                fsw_monitor.record(cmd, &plant.truth(), t_ns);
-                flags |= REC_COMMAND_RECEIVED;
-            }
-            None if !withheld && !clock.misses_allowed() => {
-                abort = Some(Abort::StubSilent {
-                    step: k,
-                    waited_ms: (received_ns - published_ns) / 1_000_000,
-                });
-                continue;
-            }
-            None => {}
-        }
-        // The command as received, for the log (copied only when there is one).
-        let logged_cmd = recorder.map(|_| wire_cmd.unwrap_or_default());
-        // Link faults act between the wire and the sanitiser. While the computer
-        // resets, what comes back is ignored: the main engines hold their command, the
-        // attitude torque stops (held thruster pulses never fire twice).
-        if resetting {
-            link.deliver(&mut None);
-            applied.torque_cmd_body_nm = [0.0; 3];
-        } else {
-            link.deliver(&mut wire_cmd);
-            match &wire_cmd {
-                Some(cmd) => {
-                    let (safe, rejected) = sanitize(cmd, cfg.max_thrust_n, t_ns, cfg.fsw_period_ns);
-                    if rejected > 0 {
-                        rejected_commands += 1;
-                        rejected_values += rejected as u64;
-                        flags |= REC_REJECTED_VALUES;
-                    }
-                    applied = safe;
-                }
-                None => {
-                    timing.record_deadline_miss();
-                    flags |= REC_DEADLINE_MISS;
-                    // Only a realtime run can miss a deadline on a live link: in lockstep
-                    // a miss comes from a fault alone (simulated), and a dead peer is
-                    // what `receive_until` waiting out the link timeout finds.
-                    let silent_ms = received_ns.saturating_sub(last_command_ns) / 1_000_000;
-                    if clock.misses_allowed() && silent_ms >= cfg.link_timeout_ms {
-                        abort = Some(Abort::StubSilent {
-                            step: k,
-                            waited_ms: silent_ms,
-                        });
-                        continue;
-                    }
-                    match cfg.miss_policy {
-                        MissPolicy::Hold => {}
-                        MissPolicy::Zero => applied = ActuatorCommand::default(),
-                        MissPolicy::Abort { after } => {
-                            if timing.deadline_misses() >= after {
-                                abort = Some(Abort::TooManyMisses(timing.deadline_misses()));
-                                continue;
-                            }
-                        }
-                    }
-                }
-            }
-        }
-        if let Some(r) = recorder {
-            let logged = r.record(&Record {
-                flags,
-                telemetry: tlm,
-                command: logged_cmd.unwrap_or_default(),
-                applied,
-                truth: plant.truth(),
-                faults_active,
-                timing: step_times,
-            });
-            if logged.is_err() {
-                recorder = None;
-                abort = Some(Abort::LogFailed { step: k });
-                continue;
-            }
-        }
-        // Command(k) is held over the flight-software cycle: the plant steps on the
-        // base tick until the next exchange (once, with the default periods).
-        for _ in 0..plant_steps_per_cycle {
-            status = plant.step(&applied, cfg.dt_ns);
-            if let Some(what) = plant.first_non_finite() {
-                abort = Some(Abort::NotFinite { step: k, what });
-            } else if let Some(why) = plant.propulsion_failure() {
-                abort = Some(Abort::PropulsionFailed { step: k, why });
-            }
-            if let Some(observe) = observer.as_mut() {
-                observe(plant_steps, plant);
-            }
-            plant_steps += 1;
-            if abort.is_some() || matches!(status, PlantStatus::Touchdown(_)) {
-                break;
-            }
+        // Truth: Command(k) held over the cycle.
+        if let Some(a) = truth.advance(k, plant, devices, &exchange.applied, &mut observer) {
+            abort = Some(a);
         }
         if clock.cycle_overran(k) {
             plant_overruns += 1;
@@ -569,8 +428,8 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
 
     let wall_s = monotonic_ns().saturating_sub(clock.started_ns()) as f64 * 1e-9;
     let sim_time_s = plant.time_ns() as f64 * 1e-9;
-    let timing = timing.summary(wall_s, sim_time_s);
-    let (outcome, touchdown) = match (&abort, status) {
+    let timing = exchange.timing.summary(wall_s, sim_time_s);
+    let (outcome, touchdown) = match (&abort, truth.status) {
         (Some(_), _) => (Outcome::Aborted, None),
         (None, PlantStatus::Touchdown(td)) => (
             if td.landed {
@@ -583,9 +442,9 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         (None, PlantStatus::Flying) => (Outcome::Completed, None),
     };
     Ok(RunSummary {
-        digest: digest.hex(),
+        digest: exchange.digest.hex(),
         steps,
-        plant_steps,
+        plant_steps: truth.plant_steps,
         overruns: vec![
             RateGroupOverruns {
                 group: "plant",
@@ -607,15 +466,15 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         touchdown,
         sim_time_s,
         propellant_used_kg: plant.propellant_used_kg(),
-        rejected_commands,
-        rejected_values,
+        rejected_commands: exchange.rejected_commands,
+        rejected_values: exchange.rejected_values,
         threshold_violations: cfg.thresholds.violations(&timing),
         timing,
         log_records: 0,
         faults: faults.report(),
         propulsion_diagnostics: plant.propulsion_diagnostics(),
-        sensors_dropped: plant.sensors().map(|s| s.dropped()),
-        fsw_report: Some(fsw_monitor.finish())
+        sensors_dropped: devices.sensors().map(|s| s.dropped()),
+        fsw_report: Some(exchange.fsw_monitor.finish())
             .filter(|r| r.boot_count > 0 || r.navigation_reported),
     })
 }

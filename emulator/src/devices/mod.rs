@@ -1,0 +1,136 @@
+//! The devices stage of a cycle: what turns the plant's truth into the telemetry the
+//! flight software reads. The plant integrates physics and knows nothing of packets;
+//! here live the device models on board ([`SensorSuite`]), the ideal navigation source
+//! and its noise, and the ground's state-vector uplink.
+//!
+//! Two calls drive it, both allocation-free once built:
+//! * [`Devices::after_plant_step`] after every plant step that integrated: the sensors
+//!   take the step's truth;
+//! * [`Devices::telemetry_into`] at each flight-software cycle: the plant's readings
+//!   (propulsion, footpad contact), then the device samples, the state vector or the
+//!   ideal navigation, as the run's telemetry kind asks.
+
+pub mod nav_noise;
+
+use crate::config::ScenarioConfig;
+use crate::plant::Plant;
+use crate::sensors::SensorSuite;
+use nav_noise::{NavNoise, StateVectorUplink};
+use oils_shared::{
+    NavState, PacketHeader, Telemetry, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_IDEAL_NAV,
+    TLM_FLAG_NAV_NOISE, TLM_FLAG_SENSORS, TLM_FLAG_STATE_VECTOR,
+};
+
+/// Everything on board between the truth and the telemetry.
+#[derive(Debug)]
+pub struct Devices {
+    /// The navigation noise on the ideal source, when configured.
+    noise: Option<NavNoise>,
+    /// Whether the telemetry carries the ideal navigation source.
+    ideal_nav: bool,
+    /// The ground's state vector, sent on the first telemetry with the devices on and
+    /// after each computer reset.
+    state_vector: StateVectorUplink,
+    /// A state vector is due on the next telemetry (with the devices on).
+    state_vector_due: bool,
+    /// The sensors on board, when the telemetry carries them.
+    sensors: Option<Box<SensorSuite>>,
+}
+
+impl Devices {
+    /// The devices of a scenario for run `seed`: the ideal navigation on (with its noise
+    /// if configured), no sensors until [`Devices::attach_sensors`].
+    pub fn new(cfg: &ScenarioConfig, seed: u64) -> Self {
+        Self {
+            noise: cfg
+                .nav_noise
+                .enabled
+                .then(|| NavNoise::new(&cfg.nav_noise, seed)),
+            ideal_nav: true,
+            state_vector: StateVectorUplink::new(&cfg.state_vector, seed),
+            state_vector_due: true,
+            sensors: None,
+        }
+    }
+
+    /// Whether the telemetry fills the ideal navigation source (`nav`,
+    /// `accel_body_m_s2`, `altitude_m`, [`TLM_FLAG_IDEAL_NAV`]); on unless told. Off, the
+    /// fields are zero and the navigation noise stream is not drawn.
+    pub fn set_ideal_nav(&mut self, on: bool) {
+        self.ideal_nav = on;
+    }
+
+    /// Puts the sensors on board: from now on every step feeds them the truth and every
+    /// telemetry carries their samples (`TLM_FLAG_SENSORS`).
+    pub fn attach_sensors(&mut self, suite: SensorSuite) {
+        self.sensors = Some(Box::new(suite));
+    }
+
+    /// The sensors on board, if attached (for their faults and their report).
+    pub fn sensors_mut(&mut self) -> Option<&mut SensorSuite> {
+        self.sensors.as_deref_mut()
+    }
+
+    /// The sensors on board, if attached.
+    pub fn sensors(&self) -> Option<&SensorSuite> {
+        self.sensors.as_deref()
+    }
+
+    /// A computer reset ended: the ground uplinks a fresh state vector on the next
+    /// telemetry (with the devices on).
+    pub fn uplink_state_vector(&mut self) {
+        self.state_vector_due = true;
+    }
+
+    /// Feeds the sensors the truth of the plant step just integrated. Call after each
+    /// [`Plant::step`] that moved time (not once the landing is over).
+    pub fn after_plant_step(&mut self, plant: &Plant) {
+        if let Some(sensors) = self.sensors.as_mut() {
+            sensors.after_plant_step(&plant.sensor_truth());
+        }
+    }
+
+    /// The telemetry at the plant's present state (a fresh packet; see
+    /// [`Devices::telemetry_into`]).
+    pub fn telemetry(&mut self, plant: &Plant, header: PacketHeader) -> Telemetry {
+        let mut tlm = Telemetry::default();
+        self.telemetry_into(plant, header, &mut tlm);
+        tlm
+    }
+
+    /// Writes every field of `tlm`: the plant's readings, then what the devices give.
+    /// The run's loop keeps one packet and fills it each step.
+    pub fn telemetry_into(&mut self, plant: &Plant, header: PacketHeader, tlm: &mut Telemetry) {
+        plant.readings_into(header, tlm);
+        if let Some(sensors) = self.sensors.as_mut() {
+            sensors.fill_frame(header.t_ns, &mut tlm.sensors);
+            tlm.header.flags |= TLM_FLAG_SENSORS;
+            // Only when the ideal navigation is off: with it on (`both`), it is what a
+            // flight software starts from.
+            if !self.ideal_nav
+                && self.state_vector_due
+                && header.flags & TLM_FLAG_COMPUTER_RESET == 0
+            {
+                // The ground's state vector in place of the ideal navigation: the truth
+                // plus the orbit determination's error (docs/sensors.md).
+                self.state_vector_due = false;
+                tlm.accel_body_m_s2 = [0.0; 3];
+                tlm.altitude_m = 0.0;
+                self.state_vector.apply(&mut tlm.nav);
+                tlm.header.flags |= TLM_FLAG_STATE_VECTOR;
+                return;
+            }
+        }
+        if !self.ideal_nav {
+            tlm.nav = NavState::default();
+            tlm.accel_body_m_s2 = [0.0; 3];
+            tlm.altitude_m = 0.0;
+            return;
+        }
+        tlm.header.flags |= TLM_FLAG_IDEAL_NAV;
+        if let Some(noise) = self.noise.as_mut() {
+            noise.apply(tlm);
+            tlm.header.flags |= TLM_FLAG_NAV_NOISE;
+        }
+    }
+}
