@@ -203,6 +203,12 @@ impl Default for LogConfig {
     }
 }
 
+/// The default plant step (the base tick), ms.
+pub const DEFAULT_DT_MS: u64 = 10;
+/// The plant step a run with the devices on takes when none was chosen: the IMU's
+/// 5 ms period needs a base tick that divides it.
+pub const DEVICES_DT_MS: u64 = 5;
+
 /// Everything one bench run needs, as plain data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -298,7 +304,7 @@ impl Default for RunConfig {
             link: LinkKind::Iceoryx2,
             mode: Mode::Lockstep,
             speed: 1.0,
-            dt_ms: 10,
+            dt_ms: DEFAULT_DT_MS,
             fsw_period_ms: None,
             duration_s: 2000.0,
             telemetry: TelemetrySource::Nav,
@@ -579,6 +585,17 @@ impl RunConfig {
         match self.fsw_period_ms {
             Some(ms) => ms * 1_000_000,
             None => self.dt_ns() * 10_000_000u64.div_ceil(self.dt_ns().max(1)),
+        }
+    }
+
+    /// Sets what the telemetry carries, and the base tick the devices need: their
+    /// periods (the IMU's 5 ms) need a plant step that divides them, so a plant step
+    /// left at the default 10 ms (`dt_ms_chosen` false) becomes 5 ms with the devices
+    /// on. The one place this rule lives (`oils run`, `oils mc`).
+    pub fn set_telemetry(&mut self, telemetry: TelemetrySource, dt_ms_chosen: bool) {
+        self.telemetry = telemetry;
+        if telemetry.sensors() && !dt_ms_chosen && self.dt_ms == DEFAULT_DT_MS {
+            self.dt_ms = DEVICES_DT_MS;
         }
     }
 

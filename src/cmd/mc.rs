@@ -216,11 +216,8 @@ fn resolve(args: &SpecArgs, store: &Store) -> Result<CampaignSpec> {
     if let Some(n) = args.gnc_nav {
         spec.base.gnc.navigation = n;
         if n == oils_shared::fsw::GncNavigation::Sensors && !spec.base.telemetry.sensors() {
-            spec.base.telemetry = oils_emulator::run_config::TelemetrySource::Sensors;
-            // The devices' periods (the IMU's 5 ms) need a base tick that divides them.
-            if spec.base.dt_ms == 10 {
-                spec.base.dt_ms = 5;
-            }
+            spec.base
+                .set_telemetry(oils_emulator::run_config::TelemetrySource::Sensors, false);
         }
     }
     if let Some(a) = args.gnc_attitude {

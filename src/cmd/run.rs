@@ -239,11 +239,7 @@ impl RunArgs {
              wake_spin_us => wake_spin_us, link_timeout_ms => link_timeout_ms,
              startup_timeout_ms => startup_timeout_ms);
         if let Some(t) = self.telemetry {
-            cfg.telemetry = t;
-            // The devices' periods (the IMU's 5 ms) need a base tick that divides them.
-            if t.sensors() && self.dt_ms.is_none() && cfg.dt_ms == 10 {
-                cfg.dt_ms = 5;
-            }
+            cfg.set_telemetry(t, self.dt_ms.is_some());
         }
         if let Some(n) = self.gnc_nav {
             cfg.gnc.navigation = n;

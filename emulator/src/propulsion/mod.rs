@@ -296,7 +296,7 @@ fn build_surrogate_held(spec: &PropulsionSpec) -> Result<Box<dyn Propulsion>, Bu
     use surrogate::model_file::ModelFile;
     let sample_ns = match &spec.surrogate_model {
         Some(path) => ModelFile::load(path)?.model.sample_time_ns,
-        None => surrogate::SurrogatePropulsion::default_sample_time_ns(),
+        None => surrogate::SurrogatePropulsion::default_sample_time_ns()?,
     };
     match spec.step_ns {
         Some(step) if step > 0 && step < sample_ns && sample_ns.is_multiple_of(step) => {
@@ -323,7 +323,7 @@ pub fn model_period_ns(spec: &PropulsionSpec) -> Result<u64, BuildError> {
                     .model
                     .sample_time_ns
             }
-            None => surrogate::SurrogatePropulsion::default_sample_time_ns(),
+            None => surrogate::SurrogatePropulsion::default_sample_time_ns()?,
         },
         PropulsionKind::Ideal | PropulsionKind::Hifi | PropulsionKind::Fmu => step,
     })

@@ -105,12 +105,14 @@ impl SurrogatePropulsion {
     }
 
     /// The committed default model's sample time, nanoseconds.
-    pub fn default_sample_time_ns() -> u64 {
+    pub fn default_sample_time_ns() -> Result<u64, ModelFileError> {
         // Parsed once per process: a campaign asks once per case.
         static SAMPLE_NS: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
-        *SAMPLE_NS.get_or_init(|| {
-            ModelFile::parse(DEFAULT_MODEL_JSON).map_or(10_000_000, |f| f.model.sample_time_ns)
-        })
+        if let Some(ns) = SAMPLE_NS.get() {
+            return Ok(*ns);
+        }
+        let ns = ModelFile::parse(DEFAULT_MODEL_JSON)?.model.sample_time_ns;
+        Ok(*SAMPLE_NS.get_or_init(|| ns))
     }
 
     /// Steps on which some feature left the training envelope (and was clamped).
