@@ -54,6 +54,17 @@ pub struct FrameMeta {
     pub empty_pixels: u32,
 }
 
+/// What the renderer did for the last frame ([`Camera::last_stats`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RenderStats {
+    /// Lattice nodes shaded (fast renderer).
+    pub nodes: usize,
+    /// Pixels no triangle covered, cast exactly (fast renderer).
+    pub fallback_pixels: u32,
+    /// Pixels that saw the sky.
+    pub sky_pixels: u32,
+}
+
 /// Why a frame was not rendered.
 #[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
 pub enum FrameError {
@@ -195,6 +206,16 @@ impl Camera {
         let pose = mounted_pose(truth, &self.lever_body, &self.body_from_cam, 0.0);
         let p_cam = pose.mcmf_from_sensor.transpose() * (p_mcmf - pose.origin_mcmf);
         self.pinhole.project(&p_cam)
+    }
+
+    /// What the last frame's renderer did: lattice nodes shaded and pixels that fell
+    /// back to an exact ray (the fast renderer), sky pixels.
+    pub fn last_stats(&self) -> RenderStats {
+        RenderStats {
+            nodes: self.scratch.nodes,
+            fallback_pixels: self.scratch.fallback_pixels,
+            sky_pixels: self.scratch.sky_pixels,
+        }
     }
 
     /// The frame's I/F image from the last [`Self::render`] (the sun's pixels
