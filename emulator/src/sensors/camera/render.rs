@@ -33,6 +33,10 @@ const MAX_SHADOW_RANGE_M: f64 = 50_000.0;
 const SHADOW_RAY_LIFT_M: f64 = 1e-3;
 /// Probe rays per side of the image (the fast renderer's footprint).
 const PROBES: u32 = 9;
+/// Lattice spacing in pixel footprints at the nearest visible point.
+const NODE_SPACING_PX: f64 = 1.0;
+/// Nodes projecting further than this outside the image are not shaded, pixels.
+const OFF_IMAGE_PX: f64 = 4.0;
 /// Most lattice nodes a frame samples (beyond: the spacing grows).
 const MAX_NODES: f64 = 4.0e6;
 
@@ -218,6 +222,32 @@ fn shade_site(
     }
 }
 
+/// [`crate::world::terrain::MapProjection::site_of_map`] without its `hypot` and `cos`:
+/// within 0.01 rad of the site (17 km) the series of `sin(theta)/s` and `cos(theta)` in
+/// `theta^2` (to `theta^6`, below 1e-16 relative); beyond, the projection itself.
+#[inline]
+pub(crate) fn site_point(
+    map: &crate::world::terrain::MapProjection,
+    e: f64,
+    n: f64,
+    h: f64,
+) -> Vector3<f64> {
+    if map.is_flat() {
+        return Vector3::new(e, n, h);
+    }
+    let r0 = map.radius_m;
+    let t2 = (e * e + n * n) / (r0 * r0);
+    if t2 >= 1e-4 {
+        return map.site_of_map(e, n, h);
+    }
+    let f = (1.0 - t2 / 6.0 * (1.0 - t2 / 20.0 * (1.0 - t2 / 42.0))) / r0;
+    let c = 1.0 - t2 / 2.0 * (1.0 - t2 / 12.0 * (1.0 - t2 / 30.0));
+    let rho = r0 + h;
+    // rho c - R = h c - R (1 - c), the latter small: no cancellation.
+    let one_minus_c = t2 / 2.0 * (1.0 - t2 / 12.0 * (1.0 - t2 / 30.0));
+    Vector3::new(rho * f * e, rho * f * n, h * c - r0 * one_minus_c)
+}
+
 /// The fast renderer over a terrain (module documentation).
 #[allow(clippy::too_many_arguments)]
 fn render_fast(
@@ -262,7 +292,7 @@ fn render_fast(
         let pad = 0.05 * (e_hi - e_lo).max(n_hi - n_lo) + 1.0;
         let (e_lo, e_hi, n_lo, n_hi) = (e_lo - pad, e_hi + pad, n_lo - pad, n_hi + pad);
         let row_cap = scratch.rows[0].len();
-        let mut spacing = (t_min * cam.pixel_angle_rad()).max(1e-4);
+        let mut spacing = (NODE_SPACING_PX * t_min * cam.pixel_angle_rad()).max(1e-4);
         let count = |s: f64| (((e_hi - e_lo) / s).ceil() + 1.0, ((n_hi - n_lo) / s).ceil() + 1.0);
         let (nx, ny) = count(spacing);
         if nx * ny > MAX_NODES {
@@ -276,17 +306,30 @@ fn render_fast(
         let (nx, ny) = (nx as usize, ny as usize);
         nodes = nx * ny;
         let map = terrain.map();
+        let w_px = cam.width as f64 + OFF_IMAGE_PX;
+        let h_px = cam.height as f64 + OFF_IMAGE_PX;
         let [mut prev, mut cur] = std::mem::take(&mut scratch.rows);
         for j in 0..ny {
             let n = n_lo + spacing * j as f64;
             for (i, vert) in cur.iter_mut().take(nx).enumerate() {
                 let e = e_lo + spacing * i as f64;
-                let h = terrain.elevation_m(e, n);
-                let p = map.site_of_map(e, n, h);
+                let p = site_point(map, e, n, terrain.elevation_m(e, n));
                 let rel = p - o;
                 let pc = cam_from_site * rel;
                 *vert = match cam.project(&pc) {
+                    // Off the image by more than a triangle's size (at most about a
+                    // pixel): no pixel centre of its triangles is in the frame.
+                    Some((u, v)) if u < -OFF_IMAGE_PX || v < -OFF_IMAGE_PX || u > w_px || v > h_px => {
+                        Vertex {
+                            u: u as f32,
+                            v: v as f32,
+                            z: pc.z as f32,
+                            iof: 0.0,
+                            ok: true,
+                        }
+                    }
                     Some((u, v)) => {
+                        // The terrain's own normal, as the oracle's hit has it.
                         let nrm = terrain.normal_site(e, n);
                         let view = rel / rel.norm();
                         let iof = shade_site(terrain, shading, &sun_site, e, n, &p, &nrm, &view);
@@ -337,6 +380,13 @@ fn render_fast(
     scratch.fallback_pixels = fallback;
 }
 
+/// `ceil(x)` for a finite `x >= 0`.
+#[inline]
+fn ceil_nonneg(x: f32) -> u32 {
+    let t = x as u32;
+    t + ((t as f32) < x) as u32
+}
+
 /// Fills the pixel centres inside triangle `abc` that are nearer than the depth buffer,
 /// with the I/F interpolated linearly on the image.
 #[inline]
@@ -358,18 +408,22 @@ fn raster_triangle(
     let u_hi = a.u.max(b.u).max(c.u);
     let v_lo = a.v.min(b.v).min(c.v);
     let v_hi = a.v.max(b.v).max(c.v);
-    // Pixel centres i + 0.5 within [u_lo, u_hi].
-    let i0 = (u_lo - 0.5).ceil().max(0.0);
-    let i1 = (u_hi - 0.5).floor().min(w - 1.0);
-    let j0 = (v_lo - 0.5).ceil().max(0.0);
-    let j1 = (v_hi - 0.5).floor().min(h - 1.0);
+    // Pixel centres i + 0.5 within [u_lo, u_hi] (integer casts: `floor`/`ceil` are
+    // library calls on the baseline x86-64 target).
+    if u_hi < 0.5 || v_hi < 0.5 || u_lo > w - 0.5 || v_lo > h - 0.5 {
+        return;
+    }
+    let i0 = ceil_nonneg((u_lo - 0.5).max(0.0));
+    let i1 = ((u_hi - 0.5) as u32).min(cam.width - 1);
+    let j0 = ceil_nonneg((v_lo - 0.5).max(0.0));
+    let j1 = ((v_hi - 0.5) as u32).min(cam.height - 1);
     if i0 > i1 || j0 > j1 {
         return;
     }
     const EPS: f32 = -1e-5;
-    for j in j0 as u32..=j1 as u32 {
+    for j in j0..=j1 {
         let y = j as f32 + 0.5;
-        for i in i0 as u32..=i1 as u32 {
+        for i in i0..=i1 {
             let x = i as f32 + 0.5;
             let wa = ((b.u - x) * (c.v - y) - (b.v - y) * (c.u - x)) * inv;
             let wb = ((c.u - x) * (a.v - y) - (c.v - y) * (a.u - x)) * inv;
@@ -383,6 +437,22 @@ fn raster_triangle(
                 depth[k] = z;
                 out[k] = wa * a.iof + wb * b.iof + wc * c.iof;
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::world::terrain::MapProjection;
+
+    #[test]
+    fn site_point_is_the_projection() {
+        let map = MapProjection { radius_m: 1_737_400.0 };
+        for (e, n, h) in [(0.0, 0.0, 3.0), (1500.0, -2500.0, -40.0), (-9000.0, 12_000.0, 800.0), (20_000.0, 5.0, 1.0)] {
+            let a = site_point(&map, e, n, h);
+            let b = map.site_of_map(e, n, h);
+            assert!((a - b).norm() < 1e-8, "{e},{n}: {}", (a - b).norm());
         }
     }
 }
