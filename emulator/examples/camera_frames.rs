@@ -1,8 +1,9 @@
 //! Writes the navigation camera's frames (and the flash lidar's range images) over the
-//! default synthetic surface, at 5 km, 1 km, 100 m and 10 m above it, as 8-bit PNGs,
+//! default synthetic surface (10 km wide), at 5 km, 1 km, 100 m and 10 m above it, as 8-bit PNGs,
 //! and prints each frame's render time (wall clock: this is a tool, not the loop).
 //!
-//! `cargo run --release -p oils-emulator --example camera_frames -- DIR`
+//! `cargo run --release -p oils-emulator --example camera_frames -- DIR [half]`
+//! (`half`: the camera's PNGs binned 2 x 2 to 512 x 512, as committed in `docs/img/`).
 //!
 //! Geometry (assumed, as a terminal descent's): the boresight 15 deg off nadir towards
 //! north, the sun 12 deg above the horizon at azimuth 100 deg, the camera over the
@@ -30,10 +31,16 @@ fn write_png(path: &Path, w: u32, h: u32, gray: &[u8]) -> Result<(), Box<dyn std
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "frames".into()));
+    let half = std::env::args().nth(2).as_deref() == Some("half");
     std::fs::create_dir_all(&dir)?;
     let (lat, lon) = (-69.373, 32.319);
     let site = SiteFrame::from_deg(lat, lon, R_M);
-    let spec = TerrainSpec::Synthetic(SyntheticSpec::default());
+    // The default synthetic surface, widened from 4 km to 10 km so the 5 km view (4.1 km
+    // across) stays on it.
+    let spec = TerrainSpec::Synthetic(SyntheticSpec {
+        extent_m: 10_000.0,
+        ..SyntheticSpec::default()
+    });
     let ground = Ground::new(&spec, lat, lon, R_M)?;
     let Ground::Terrain { terrain, .. } = &ground else {
         unreachable!()
@@ -79,7 +86,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .chunks_exact(2)
             .map(|b| ((u16::from_le_bytes([b[0], b[1]]) as f64 / max).sqrt() * 255.0).round() as u8)
             .collect();
-        write_png(&dir.join(format!("camera-{name}.png")), meta.width, meta.height, &gray)?;
+        if half {
+            let (w, h) = (meta.width as usize / 2, meta.height as usize / 2);
+            let full_w = meta.width as usize;
+            let binned: Vec<u8> = (0..w * h)
+                .map(|k| {
+                    let (x, y) = (2 * (k % w), 2 * (k / w));
+                    let sum: u32 = [0, 1, full_w, full_w + 1]
+                        .iter()
+                        .map(|d| gray[y * full_w + x + d] as u32)
+                        .sum();
+                    ((sum + 2) / 4) as u8
+                })
+                .collect();
+            write_png(&dir.join(format!("camera-{name}.png")), w as u32, h as u32, &binned)?;
+        } else {
+            write_png(&dir.join(format!("camera-{name}.png")), meta.width, meta.height, &gray)?;
+        }
         let t = Instant::now();
         let lmeta = lidar.render(&truth, &mut range)?;
         let lms = t.elapsed().as_secs_f64() * 1e3;
@@ -91,6 +114,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .filter(|r| **r > 0.0)
             .fold((f32::MAX, 0f32), |(lo, hi), r| (lo.min(*r), hi.max(*r)));
+        let (lo, hi) = if hi > 0.0 { (lo, hi) } else { (0.0, 0.0) };
         println!("lidar {name}: {lms:.1} ms, {} no-return, range {lo:.2}..{hi:.2} m", lmeta.empty_pixels);
         let gray: Vec<u8> = ranges
             .iter()
