@@ -26,7 +26,11 @@ fn frames(c: &mut Criterion) {
     };
     let [east, north, up] = site.axes_mcmf();
     let (el, az) = (12f64.to_radians(), 100f64.to_radians());
-    let sun = site.mcmf_dir_from_site(&Vector3::new(el.cos() * az.sin(), el.cos() * az.cos(), el.sin()));
+    let sun = site.mcmf_dir_from_site(&Vector3::new(
+        el.cos() * az.sin(),
+        el.cos() * az.cos(),
+        el.sin(),
+    ));
     let tilt = 15f64.to_radians();
     let look = -up * tilt.cos() + north * tilt.sin();
     let q = looking_along(&look, &east);
@@ -47,9 +51,18 @@ fn frames(c: &mut Criterion) {
     .unwrap();
     cam.set_shadow_map(Some(map));
     let mut out = vec![0u8; cam.frame_bytes()];
-    for (name, h) in [("5km", 5000.0), ("1km", 1000.0), ("100m", 100.0), ("10m", 10.0)] {
+    for (name, h) in [
+        ("5km", 5000.0),
+        ("1km", 1000.0),
+        ("100m", 100.0),
+        ("10m", 10.0),
+    ] {
         let (e, n) = (-h * tilt.tan(), 0.0);
-        let p = site.mcmf_from_site(&terrain.map().site_of_map(e, n, terrain.elevation_m(e, n) + h));
+        let p = site.mcmf_from_site(&terrain.map().site_of_map(
+            e,
+            n,
+            terrain.elevation_m(e, n) + h,
+        ));
         let truth = still_truth(&ground, &p, &q, 0);
         g.bench_function(format!("camera_1024_{name}"), |b| {
             b.iter(|| black_box(cam.render(black_box(&truth), &sun, &mut out).unwrap()))
@@ -64,7 +77,11 @@ fn frames(c: &mut Criterion) {
     )
     .unwrap();
     let mut lout = vec![0u8; lidar.frame_bytes()];
-    let p = site.mcmf_from_site(&terrain.map().site_of_map(0.0, 0.0, terrain.elevation_m(0.0, 0.0) + 500.0));
+    let p = site.mcmf_from_site(&terrain.map().site_of_map(
+        0.0,
+        0.0,
+        terrain.elevation_m(0.0, 0.0) + 500.0,
+    ));
     let truth = still_truth(&ground, &p, &q, 0);
     g.bench_function("lidar_128_500m", |b| {
         b.iter(|| black_box(lidar.render(black_box(&truth), &mut lout).unwrap()))

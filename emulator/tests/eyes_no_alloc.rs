@@ -7,7 +7,9 @@ mod eyes_common;
 
 use eyes_common::{site, sun_mcmf, R_M};
 use oils_emulator::plant::ground::Ground;
-use oils_emulator::sensors::camera::{looking_along, still_truth, Renderer, ShadowMap, ShadowMapConfig};
+use oils_emulator::sensors::camera::{
+    looking_along, still_truth, Renderer, ShadowMap, ShadowMapConfig,
+};
 use oils_emulator::sensors::{Camera, CameraConfig, Lidar, LidarConfig, SensorTruth};
 use oils_emulator::world::terrain::{SyntheticSpec, TerrainSpec};
 use std::sync::Arc;
@@ -49,7 +51,16 @@ fn frames_do_not_allocate() {
     )
     .unwrap();
     cam.set_shadow_map(Some(map));
-    let mut lidar = Lidar::new(&LidarConfig { enabled: true, width_px: 32, height_px: 32, ..LidarConfig::default() }, 5).unwrap();
+    let mut lidar = Lidar::new(
+        &LidarConfig {
+            enabled: true,
+            width_px: 32,
+            height_px: 32,
+            ..LidarConfig::default()
+        },
+        5,
+    )
+    .unwrap();
     let mut frame = vec![0u8; cam.frame_bytes()];
     let mut range = vec![0u8; lidar.frame_bytes()];
     let truths: Vec<SensorTruth<'_>> = [400.0, 120.0, 30.0]
@@ -73,5 +84,10 @@ fn frames_do_not_allocate() {
         }
     }
     let after = common::allocations();
-    assert_eq!(after - before, 0, "frames allocated {} times", after - before);
+    assert_eq!(
+        after - before,
+        0,
+        "frames allocated {} times",
+        after - before
+    );
 }

@@ -143,15 +143,39 @@ fn beyond_the_maximum_range_there_is_no_return_and_frames_repeat() {
     let s = site();
     let [east, _, up] = s.axes_mcmf();
     let q = looking_along(&-up, &east);
-    let far = still_truth(&ground, &s.mcmf_from_site(&Vector3::new(0.0, 0.0, 1500.0)), &q, 0);
-    let mut lidar = Lidar::new(&LidarConfig { enabled: true, ..LidarConfig::default() }, 9).unwrap();
+    let far = still_truth(
+        &ground,
+        &s.mcmf_from_site(&Vector3::new(0.0, 0.0, 1500.0)),
+        &q,
+        0,
+    );
+    let mut lidar = Lidar::new(
+        &LidarConfig {
+            enabled: true,
+            ..LidarConfig::default()
+        },
+        9,
+    )
+    .unwrap();
     let mut a = vec![0u8; lidar.frame_bytes()];
     let meta = lidar.render(&far, &mut a).unwrap();
     assert_eq!(meta.empty_pixels, 128 * 128);
     assert!(ranges(&a).iter().all(|r| *r == 0.0));
-    let near = still_truth(&ground, &s.mcmf_from_site(&Vector3::new(0.0, 0.0, 300.0)), &q, 400_000_000);
+    let near = still_truth(
+        &ground,
+        &s.mcmf_from_site(&Vector3::new(0.0, 0.0, 300.0)),
+        &q,
+        400_000_000,
+    );
     lidar.render(&near, &mut a).unwrap();
-    let mut fresh = Lidar::new(&LidarConfig { enabled: true, ..LidarConfig::default() }, 9).unwrap();
+    let mut fresh = Lidar::new(
+        &LidarConfig {
+            enabled: true,
+            ..LidarConfig::default()
+        },
+        9,
+    )
+    .unwrap();
     let mut b = vec![0u8; fresh.frame_bytes()];
     fresh.render(&near, &mut b).unwrap();
     assert_eq!(a, b);
@@ -161,6 +185,9 @@ fn beyond_the_maximum_range_there_is_no_return_and_frames_repeat() {
     let (o, d) = lidar.pixel_ray_mcmf(&near, 64, 64);
     let want = s.site_from_mcmf(&o).z / -s.site_dir_from_mcmf(&d).z;
     let centre = r[64 * 128 + 64] as f64;
-    assert!((centre - want).abs() < 0.3 && !close(centre as f32, want), "{centre} vs {want}");
+    assert!(
+        (centre - want).abs() < 0.3 && !close(centre as f32, want),
+        "{centre} vs {want}"
+    );
     assert!(lidar.render(&near, &mut b[..10]).is_err());
 }

@@ -969,8 +969,18 @@ fn check_axes(
 ) -> Result<(), ConfigError> {
     let b = nalgebra::Vector3::from(bore);
     let r = nalgebra::Vector3::from(right);
-    check(b.norm() > 1e-9, bore_field, b.norm(), "a non-zero finite vector")?;
-    check(r.norm() > 1e-9, right_field, r.norm(), "a non-zero finite vector")?;
+    check(
+        b.norm() > 1e-9,
+        bore_field,
+        b.norm(),
+        "a non-zero finite vector",
+    )?;
+    check(
+        r.norm() > 1e-9,
+        right_field,
+        r.norm(),
+        "a non-zero finite vector",
+    )?;
     let cross = b.normalize().cross(&r.normalize()).norm();
     check(
         cross > 1e-3,
@@ -1005,7 +1015,13 @@ impl CameraConfig {
             "sensors.camera.height_px",
             self.height_px,
         )?;
-        within("sensors.camera.fov_deg", self.fov_deg, 1.0, 120.0, "1 to 120 deg")?;
+        within(
+            "sensors.camera.fov_deg",
+            self.fov_deg,
+            1.0,
+            120.0,
+            "1 to 120 deg",
+        )?;
         within("sensors.camera.k1", self.k1, -0.5, 0.5, "|k1| <= 0.5")?;
         within("sensors.camera.k2", self.k2, -0.5, 0.5, "|k2| <= 0.5")?;
         check_axes(
@@ -1015,7 +1031,13 @@ impl CameraConfig {
             self.image_right_body,
         )?;
         for p in self.position_body_m {
-            within("sensors.camera.position_body_m", p, -100.0, 100.0, "within 100 m")?;
+            within(
+                "sensors.camera.position_body_m",
+                p,
+                -100.0,
+                100.0,
+                "within 100 m",
+            )?;
         }
         check(
             self.exposure_ms > 0.0 && self.exposure_ms <= self.period_ms,
@@ -1023,11 +1045,41 @@ impl CameraConfig {
             self.exposure_ms,
             "positive and at most the frame period",
         )?;
-        within("sensors.camera.bits", self.bits as f64, 8.0, 16.0, "8 to 16 bits")?;
-        within("sensors.camera.full_well_e", self.full_well_e, 1.0, 1e8, "1 to 1e8 e-")?;
-        within("sensors.camera.read_noise_e", self.read_noise_e, 0.0, 1e4, "0 to 1e4 e-")?;
-        within("sensors.camera.f_number", self.f_number, 0.5, 100.0, "0.5 to 100")?;
-        within("sensors.camera.pixel_pitch_um", self.pixel_pitch_um, 0.1, 100.0, "0.1 to 100 um")?;
+        within(
+            "sensors.camera.bits",
+            self.bits as f64,
+            8.0,
+            16.0,
+            "8 to 16 bits",
+        )?;
+        within(
+            "sensors.camera.full_well_e",
+            self.full_well_e,
+            1.0,
+            1e8,
+            "1 to 1e8 e-",
+        )?;
+        within(
+            "sensors.camera.read_noise_e",
+            self.read_noise_e,
+            0.0,
+            1e4,
+            "0 to 1e4 e-",
+        )?;
+        within(
+            "sensors.camera.f_number",
+            self.f_number,
+            0.5,
+            100.0,
+            "0.5 to 100",
+        )?;
+        within(
+            "sensors.camera.pixel_pitch_um",
+            self.pixel_pitch_um,
+            0.1,
+            100.0,
+            "0.1 to 100 um",
+        )?;
         check(
             self.throughput > 0.0 && self.throughput <= 1.0,
             "sensors.camera.throughput",
@@ -1041,10 +1093,34 @@ impl CameraConfig {
             1e4,
             "0 to 1e4 W/m^2",
         )?;
-        within("sensors.camera.wavelength_nm", self.wavelength_nm, 100.0, 20_000.0, "100 to 20000 nm")?;
-        within("sensors.camera.normal_albedo", self.normal_albedo, 0.0, 1.0, "0 to 1")?;
-        within("sensors.camera.shadow_floor_iof", self.shadow_floor_iof, 0.0, 1.0, "0 to 1")?;
-        within("sensors.camera.blur_samples", self.blur_samples as f64, 1.0, 64.0, "1 to 64")?;
+        within(
+            "sensors.camera.wavelength_nm",
+            self.wavelength_nm,
+            100.0,
+            20_000.0,
+            "100 to 20000 nm",
+        )?;
+        within(
+            "sensors.camera.normal_albedo",
+            self.normal_albedo,
+            0.0,
+            1.0,
+            "0 to 1",
+        )?;
+        within(
+            "sensors.camera.shadow_floor_iof",
+            self.shadow_floor_iof,
+            0.0,
+            1.0,
+            "0 to 1",
+        )?;
+        within(
+            "sensors.camera.blur_samples",
+            self.blur_samples as f64,
+            1.0,
+            64.0,
+            "1 to 64",
+        )?;
         within(
             "sensors.camera.shadow_map_tolerance_deg",
             self.shadow_map_tolerance_deg,
@@ -1070,7 +1146,13 @@ impl LidarConfig {
             "sensors.lidar.height_px",
             self.height_px,
         )?;
-        within("sensors.lidar.fov_deg", self.fov_deg, 0.1, 120.0, "0.1 to 120 deg")?;
+        within(
+            "sensors.lidar.fov_deg",
+            self.fov_deg,
+            0.1,
+            120.0,
+            "0.1 to 120 deg",
+        )?;
         check_axes(
             "sensors.lidar.boresight_body",
             self.boresight_body,
@@ -1078,16 +1160,34 @@ impl LidarConfig {
             self.image_right_body,
         )?;
         for p in self.position_body_m {
-            within("sensors.lidar.position_body_m", p, -100.0, 100.0, "within 100 m")?;
+            within(
+                "sensors.lidar.position_body_m",
+                p,
+                -100.0,
+                100.0,
+                "within 100 m",
+            )?;
         }
-        within("sensors.lidar.range_noise_m", self.range_noise_m, 0.0, 100.0, "0 to 100 m")?;
+        within(
+            "sensors.lidar.range_noise_m",
+            self.range_noise_m,
+            0.0,
+            100.0,
+            "0 to 100 m",
+        )?;
         check(
             self.min_range_m >= 0.0 && self.min_range_m < self.max_range_m,
             "sensors.lidar.min_range_m",
             self.min_range_m,
             "at least 0 and below max_range_m",
         )?;
-        within("sensors.lidar.max_range_m", self.max_range_m, 1e-3, 1e6, "1e-3 to 1e6 m")?;
+        within(
+            "sensors.lidar.max_range_m",
+            self.max_range_m,
+            1e-3,
+            1e6,
+            "1e-3 to 1e6 m",
+        )?;
         within(
             "sensors.lidar.max_incidence_deg",
             self.max_incidence_deg,

@@ -12,7 +12,9 @@
 //! normal is drawn per pixel whether or not it returns, from a ChaCha8 stream set to
 //! the frame's index, so the noise does not depend on the scene or on earlier frames.
 
-use super::camera::{mounted_pose, ms_to_ns, optics, truth_is_finite, FrameError, FrameMeta, Pinhole};
+use super::camera::{
+    mounted_pose, ms_to_ns, optics, truth_is_finite, FrameError, FrameMeta, Pinhole,
+};
 use super::{device_rng, gauss, SensorTruth};
 use crate::config::ConfigError;
 use crate::sensors::LidarConfig;
@@ -73,17 +75,32 @@ impl Lidar {
 
     /// The unit `mcmf` direction of pixel `(i, j)` and the receiver's `mcmf` position at
     /// the truth's instant (for tests that intersect by hand).
-    pub fn pixel_ray_mcmf(&self, truth: &SensorTruth<'_>, i: u32, j: u32) -> (Vector3<f64>, Vector3<f64>) {
+    pub fn pixel_ray_mcmf(
+        &self,
+        truth: &SensorTruth<'_>,
+        i: u32,
+        j: u32,
+    ) -> (Vector3<f64>, Vector3<f64>) {
         let pose = mounted_pose(truth, &self.lever_body, &self.body_from_lidar, 0.0);
-        (pose.origin_mcmf, pose.mcmf_from_sensor * self.pinhole.pixel_ray(i, j))
+        (
+            pose.origin_mcmf,
+            pose.mcmf_from_sensor * self.pinhole.pixel_ray(i, j),
+        )
     }
 
     /// Renders the range image at `truth.t_ns` into `out` (exactly
     /// [`Self::frame_bytes`]). Allocates nothing.
-    pub fn render(&mut self, truth: &SensorTruth<'_>, out: &mut [u8]) -> Result<FrameMeta, FrameError> {
+    pub fn render(
+        &mut self,
+        truth: &SensorTruth<'_>,
+        out: &mut [u8],
+    ) -> Result<FrameMeta, FrameError> {
         let want = self.frame_bytes();
         if out.len() != want {
-            return Err(FrameError::BufferSize { got: out.len(), want });
+            return Err(FrameError::BufferSize {
+                got: out.len(),
+                want,
+            });
         }
         if !truth_is_finite(truth) {
             return Err(FrameError::NonFinite);
@@ -102,10 +119,15 @@ impl Lidar {
                     .ground
                     .ray_cast_mcmf(&pose.origin_mcmf, &d, self.max_range_m)
                     .filter(|hit| {
-                        hit.range_m >= self.min_range_m && hit.incidence_deg <= self.max_incidence_deg
+                        hit.range_m >= self.min_range_m
+                            && hit.incidence_deg <= self.max_incidence_deg
                     })
                     .map(|hit| {
-                        let noise = if self.noise { self.range_noise_m * n } else { 0.0 };
+                        let noise = if self.noise {
+                            self.range_noise_m * n
+                        } else {
+                            0.0
+                        };
                         (hit.range_m + noise).max(0.0) as f32
                     });
                 let value = range.unwrap_or(0.0);

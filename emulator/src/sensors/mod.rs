@@ -29,8 +29,8 @@ pub mod lidar;
 
 pub use camera::{Camera, FrameError, FrameMeta};
 pub use config::{
-    CameraConfig, ImuConfig, LaserAltimeterConfig, LidarConfig, RfAltimeterConfig,
-    SensorsConfig, StarTrackerConfig, VelocimeterConfig,
+    CameraConfig, ImuConfig, LaserAltimeterConfig, LidarConfig, RfAltimeterConfig, SensorsConfig,
+    StarTrackerConfig, VelocimeterConfig,
 };
 pub use lidar::Lidar;
 

@@ -42,8 +42,9 @@ impl Detector {
         let p = cfg.pixel_pitch_um * 1e-6;
         let t = cfg.exposure_ms * 1e-3;
         let lambda = cfg.wavelength_nm * 1e-9;
-        let electrons_per_iof = cfg.solar_band_irradiance_w_m2 * p * p * t * cfg.throughput * lambda
-            / (4.0 * cfg.f_number * cfg.f_number * HC_J_M);
+        let electrons_per_iof =
+            cfg.solar_band_irradiance_w_m2 * p * p * t * cfg.throughput * lambda
+                / (4.0 * cfg.f_number * cfg.f_number * HC_J_M);
         let max_dn = ((1u32 << cfg.bits) - 1) as u16;
         Self {
             electrons_per_iof,

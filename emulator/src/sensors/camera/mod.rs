@@ -93,10 +93,8 @@ pub(crate) fn mounted_pose(
     let q = q * UnitQuaternion::from_scaled_axis(w * dt_s);
     let pos = Vector3::from(truth.pos_mci_m) + Vector3::from(truth.vel_mci_m_s) * dt_s;
     let t_s = truth.t_ns as f64 * 1e-9 + dt_s;
-    let to_mcmf = Rotation3::from_axis_angle(
-        &Vector3::z_axis(),
-        -truth.moon_rotation_rate_rad_s * t_s,
-    );
+    let to_mcmf =
+        Rotation3::from_axis_angle(&Vector3::z_axis(), -truth.moon_rotation_rate_rad_s * t_s);
     let rot = to_mcmf * q.to_rotation_matrix();
     Pose {
         origin_mcmf: to_mcmf * (pos + q * lever_body),
@@ -202,7 +200,11 @@ impl Camera {
     /// The image point `(u, v)` (pixels; pixel `(i, j)` spans `[i, i+1) x [j, j+1)`) of a
     /// Moon-fixed point seen at the truth's instant, `None` behind the camera. For tests
     /// and for the flight software's ground truth.
-    pub fn project_mcmf(&self, truth: &SensorTruth<'_>, p_mcmf: &Vector3<f64>) -> Option<(f64, f64)> {
+    pub fn project_mcmf(
+        &self,
+        truth: &SensorTruth<'_>,
+        p_mcmf: &Vector3<f64>,
+    ) -> Option<(f64, f64)> {
         let pose = mounted_pose(truth, &self.lever_body, &self.body_from_cam, 0.0);
         let p_cam = pose.mcmf_from_sensor.transpose() * (p_mcmf - pose.origin_mcmf);
         self.pinhole.project(&p_cam)
@@ -247,10 +249,9 @@ impl Camera {
             return Err(FrameError::NonFinite);
         }
         let sun = sun_dir_mcmf / sun_norm;
-        let shadow = self
-            .shadow
-            .as_deref()
-            .filter(|m| m.is_for(truth.ground) && m.sun_dir_mcmf().dot(&sun) >= self.shadow_tolerance_cos);
+        let shadow = self.shadow.as_deref().filter(|m| {
+            m.is_for(truth.ground) && m.sun_dir_mcmf().dot(&sun) >= self.shadow_tolerance_cos
+        });
         let params = render::Shading {
             albedo: self.albedo,
             floor_iof: self.floor_iof,
@@ -325,7 +326,12 @@ pub fn still_truth<'a>(
     q_mcmf_from_body: &UnitQuaternion<f64>,
     t_ns: i64,
 ) -> SensorTruth<'a> {
-    let q = [q_mcmf_from_body.w, q_mcmf_from_body.i, q_mcmf_from_body.j, q_mcmf_from_body.k];
+    let q = [
+        q_mcmf_from_body.w,
+        q_mcmf_from_body.i,
+        q_mcmf_from_body.j,
+        q_mcmf_from_body.k,
+    ];
     SensorTruth {
         t_ns,
         dt_ns: 1_000_000,

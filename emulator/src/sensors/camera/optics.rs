@@ -128,10 +128,19 @@ mod tests {
     #[test]
     fn ray_inverts_project() {
         let cam = Pinhole::new(1024, 768, 45.0, -0.05, 0.005);
-        for (u, v) in [(0.0, 0.0), (512.0, 384.0), (1024.0, 768.0), (100.5, 700.25), (900.0, 20.0)] {
+        for (u, v) in [
+            (0.0, 0.0),
+            (512.0, 384.0),
+            (1024.0, 768.0),
+            (100.5, 700.25),
+            (900.0, 20.0),
+        ] {
             let d = cam.ray(u, v);
             let (pu, pv) = cam.project(&d).unwrap();
-            assert!((pu - u).abs() < 1e-9 && (pv - v).abs() < 1e-9, "{u},{v} -> {pu},{pv}");
+            assert!(
+                (pu - u).abs() < 1e-9 && (pv - v).abs() < 1e-9,
+                "{u},{v} -> {pu},{pv}"
+            );
         }
     }
 }

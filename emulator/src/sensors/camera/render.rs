@@ -97,7 +97,10 @@ impl Scratch {
         Self {
             depth: vec![f32::INFINITY; pixels],
             sample: vec![0.0; pixels],
-            rows: [vec![Vertex::default(); row_nodes], vec![Vertex::default(); row_nodes]],
+            rows: [
+                vec![Vertex::default(); row_nodes],
+                vec![Vertex::default(); row_nodes],
+            ],
             sky_pixels: 0,
             nodes: 0,
             fallback_pixels: 0,
@@ -177,7 +180,10 @@ fn exact_pixel(
                 return (shading.floor_iof as f32, false);
             }
             let v = dir.normalize();
-            ((iof_at(shading.albedo, &n, &v, s) + shading.floor_iof) as f32, false)
+            (
+                (iof_at(shading.albedo, &n, &v, s) + shading.floor_iof) as f32,
+                false,
+            )
         }
     }
 }
@@ -293,7 +299,12 @@ fn render_fast(
         let (e_lo, e_hi, n_lo, n_hi) = (e_lo - pad, e_hi + pad, n_lo - pad, n_hi + pad);
         let row_cap = scratch.rows[0].len();
         let mut spacing = (NODE_SPACING_PX * t_min * cam.pixel_angle_rad()).max(1e-4);
-        let count = |s: f64| (((e_hi - e_lo) / s).ceil() + 1.0, ((n_hi - n_lo) / s).ceil() + 1.0);
+        let count = |s: f64| {
+            (
+                ((e_hi - e_lo) / s).ceil() + 1.0,
+                ((n_hi - n_lo) / s).ceil() + 1.0,
+            )
+        };
         let (nx, ny) = count(spacing);
         if nx * ny > MAX_NODES {
             spacing *= (nx * ny / MAX_NODES).sqrt();
@@ -319,7 +330,9 @@ fn render_fast(
                 *vert = match cam.project(&pc) {
                     // Off the image by more than a triangle's size (at most about a
                     // pixel): no pixel centre of its triangles is in the frame.
-                    Some((u, v)) if u < -OFF_IMAGE_PX || v < -OFF_IMAGE_PX || u > w_px || v > h_px => {
+                    Some((u, v))
+                        if u < -OFF_IMAGE_PX || v < -OFF_IMAGE_PX || u > w_px || v > h_px =>
+                    {
                         Vertex {
                             u: u as f32,
                             v: v as f32,
@@ -448,8 +461,15 @@ mod tests {
 
     #[test]
     fn site_point_is_the_projection() {
-        let map = MapProjection { radius_m: 1_737_400.0 };
-        for (e, n, h) in [(0.0, 0.0, 3.0), (1500.0, -2500.0, -40.0), (-9000.0, 12_000.0, 800.0), (20_000.0, 5.0, 1.0)] {
+        let map = MapProjection {
+            radius_m: 1_737_400.0,
+        };
+        for (e, n, h) in [
+            (0.0, 0.0, 3.0),
+            (1500.0, -2500.0, -40.0),
+            (-9000.0, 12_000.0, 800.0),
+            (20_000.0, 5.0, 1.0),
+        ] {
             let a = site_point(&map, e, n, h);
             let b = map.site_of_map(e, n, h);
             assert!((a - b).norm() < 1e-8, "{e},{n}: {}", (a - b).norm());
