@@ -1197,3 +1197,50 @@ impl LidarConfig {
         )
     }
 }
+
+#[cfg(test)]
+mod eyes_tests {
+    use super::*;
+
+    #[test]
+    fn camera_and_lidar_defaults_are_off_and_valid() {
+        let (c, l) = (CameraConfig::default(), LidarConfig::default());
+        assert!(!c.enabled && !l.enabled);
+        c.validate().unwrap();
+        l.validate().unwrap();
+    }
+
+    #[test]
+    fn bad_camera_and_lidar_fields_are_named() {
+        let c = CameraConfig {
+            exposure_ms: 300.0,
+            ..CameraConfig::default()
+        };
+        assert_eq!(
+            c.validate().unwrap_err().field,
+            "sensors.camera.exposure_ms"
+        );
+        let c = CameraConfig {
+            image_right_body: [0.0, 0.0, -2.0],
+            ..CameraConfig::default()
+        };
+        assert_eq!(
+            c.validate().unwrap_err().field,
+            "sensors.camera.image_right_body"
+        );
+        let l = LidarConfig {
+            min_range_m: 2000.0,
+            ..LidarConfig::default()
+        };
+        assert_eq!(l.validate().unwrap_err().field, "sensors.lidar.min_range_m");
+        let l = LidarConfig {
+            fov_deg: f64::NAN,
+            ..LidarConfig::default()
+        };
+        assert_eq!(l.validate().unwrap_err().field, "sensors.lidar.fov_deg");
+        assert!(toml::from_str::<CameraConfig>("enabled = true\nfocal = 3").is_err());
+        assert!(toml::from_str::<LidarConfig>("boresight_body = [0, 0, -1, 0]").is_err());
+        let c: CameraConfig = toml::from_str("enabled = true\nwidth_px = 640").unwrap();
+        assert!(c.enabled && c.width_px == 640 && c.height_px == 1024);
+    }
+}
