@@ -21,6 +21,12 @@ fixed_len! {
     rf_pos: [f64; 3] => "sensors.rf_altimeter.position_body_m",
     v_beams: [[f64; 3]; 3] => "sensors.velocimeter.beams_body",
     v_pos: [f64; 3] => "sensors.velocimeter.position_body_m",
+    cam_bore: [f64; 3] => "sensors.camera.boresight_body",
+    cam_right: [f64; 3] => "sensors.camera.image_right_body",
+    cam_pos: [f64; 3] => "sensors.camera.position_body_m",
+    lid_bore: [f64; 3] => "sensors.lidar.boresight_body",
+    lid_right: [f64; 3] => "sensors.lidar.image_right_body",
+    lid_pos: [f64; 3] => "sensors.lidar.position_body_m",
 }
 
 /// Every device on board, each with its rate, latency, error model and mounting.
@@ -802,5 +808,439 @@ impl SensorsConfig {
             }
         }
         out
+    }
+}
+
+/// Navigation camera: a global-shutter pinhole with Brown-Conrady radial distortion,
+/// lunar-Lambert radiance, shot and read noise, a full well and an ADC
+/// (`docs/sensors.md`, "Navigation camera"). Off by default: nothing existing changes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraConfig {
+    /// Produce frames at all.
+    pub enabled: bool,
+    /// Frame period, ms (integer nanoseconds once built).
+    pub period_ms: f64,
+    /// Image width, pixels.
+    pub width_px: u32,
+    /// Image height, pixels.
+    pub height_px: u32,
+    /// Full field of view across the image width (undistorted), degrees.
+    pub fov_deg: f64,
+    /// Brown-Conrady radial distortion, `r^2` coefficient.
+    pub k1: f64,
+    /// Brown-Conrady radial distortion, `r^4` coefficient.
+    pub k2: f64,
+    /// Boresight (camera +z), body axes (normalised when built).
+    #[serde(deserialize_with = "cam_bore")]
+    pub boresight_body: [f64; 3],
+    /// Direction of increasing column (camera +x), body axes; made perpendicular to the
+    /// boresight when built. Rows increase along boresight x right.
+    #[serde(deserialize_with = "cam_right")]
+    pub image_right_body: [f64; 3],
+    /// Optical centre relative to the centre of mass, body axes, m.
+    #[serde(deserialize_with = "cam_pos")]
+    pub position_body_m: [f64; 3],
+    /// Exposure (integration) time, ms.
+    pub exposure_ms: f64,
+    /// ADC bits per pixel (8 to 16; stored in a u16).
+    pub bits: u32,
+    /// Full-well capacity, electrons.
+    pub full_well_e: f64,
+    /// Read noise, one sigma, electrons.
+    pub read_noise_e: f64,
+    /// Focal ratio f/D of the optics.
+    pub f_number: f64,
+    /// Pixel pitch, micrometres.
+    pub pixel_pitch_um: f64,
+    /// Optical transmission times quantum efficiency (0..1].
+    pub throughput: f64,
+    /// Solar irradiance at the Moon in the camera's band, W/m^2.
+    pub solar_band_irradiance_w_m2: f64,
+    /// Mean wavelength of the band, nm (photon energy).
+    pub wavelength_nm: f64,
+    /// Normal albedo `A` of the lunar-Lambert model (I/F at zero phase, normal view).
+    pub normal_albedo: f64,
+    /// I/F of surfaces the sun does not reach (earthshine, scatter), 0: black.
+    pub shadow_floor_iof: f64,
+    /// Shot and read noise on (off: the noiseless expected signal, for tests).
+    pub noise: bool,
+    /// Poses rendered across the exposure and averaged (motion blur); 1: none.
+    pub blur_samples: u32,
+    /// Largest angle between the frame's sun and the shadow map's for the map to be
+    /// used, degrees (beyond it every lit point casts an exact shadow ray).
+    pub shadow_map_tolerance_deg: f64,
+}
+
+impl Default for CameraConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            period_ms: 200.0,
+            width_px: 1024,
+            height_px: 1024,
+            fov_deg: 45.0,
+            k1: -0.05,
+            k2: 0.005,
+            boresight_body: [0.0, 0.0, -1.0],
+            image_right_body: [0.0, 1.0, 0.0],
+            position_body_m: [0.9, 0.0, -0.6],
+            exposure_ms: 0.3,
+            bits: 12,
+            full_well_e: 20_000.0,
+            read_noise_e: 10.0,
+            f_number: 4.0,
+            pixel_pitch_um: 5.5,
+            throughput: 0.5,
+            solar_band_irradiance_w_m2: 520.0,
+            wavelength_nm: 550.0,
+            normal_albedo: 0.15,
+            shadow_floor_iof: 0.0,
+            noise: true,
+            blur_samples: 1,
+            shadow_map_tolerance_deg: 0.25,
+        }
+    }
+}
+
+/// Flash lidar: a range image over a square field of view, one exact ray cast per
+/// pixel, Gaussian range noise, no-return pixels 0 (`docs/sensors.md`, "Flash lidar").
+/// Off by default.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LidarConfig {
+    /// Produce frames at all.
+    pub enabled: bool,
+    /// Frame period, ms.
+    pub period_ms: f64,
+    /// Image width, pixels.
+    pub width_px: u32,
+    /// Image height, pixels.
+    pub height_px: u32,
+    /// Full field of view across the width (a pinhole, no distortion), degrees.
+    pub fov_deg: f64,
+    /// Boresight, body axes.
+    #[serde(deserialize_with = "lid_bore")]
+    pub boresight_body: [f64; 3],
+    /// Direction of increasing column, body axes.
+    #[serde(deserialize_with = "lid_right")]
+    pub image_right_body: [f64; 3],
+    /// Receiver position relative to the centre of mass, body axes, m.
+    #[serde(deserialize_with = "lid_pos")]
+    pub position_body_m: [f64; 3],
+    /// Range noise, one sigma, m.
+    pub range_noise_m: f64,
+    /// Shortest range with a return, m.
+    pub min_range_m: f64,
+    /// Longest range with a return, m.
+    pub max_range_m: f64,
+    /// Largest incidence with a return, degrees.
+    pub max_incidence_deg: f64,
+    /// Range noise on.
+    pub noise: bool,
+}
+
+impl Default for LidarConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            period_ms: 200.0,
+            width_px: 128,
+            height_px: 128,
+            fov_deg: 20.0,
+            boresight_body: [0.0, 0.0, -1.0],
+            image_right_body: [0.0, 1.0, 0.0],
+            position_body_m: [0.9, 0.3, -0.6],
+            range_noise_m: 0.05,
+            min_range_m: 1.0,
+            max_range_m: 1000.0,
+            max_incidence_deg: 85.0,
+            noise: true,
+        }
+    }
+}
+
+/// A boresight and an image-right axis that are unit-able and not parallel.
+fn check_axes(
+    bore_field: &'static str,
+    bore: [f64; 3],
+    right_field: &'static str,
+    right: [f64; 3],
+) -> Result<(), ConfigError> {
+    let b = nalgebra::Vector3::from(bore);
+    let r = nalgebra::Vector3::from(right);
+    check(
+        b.norm() > 1e-9,
+        bore_field,
+        b.norm(),
+        "a non-zero finite vector",
+    )?;
+    check(
+        r.norm() > 1e-9,
+        right_field,
+        r.norm(),
+        "a non-zero finite vector",
+    )?;
+    let cross = b.normalize().cross(&r.normalize()).norm();
+    check(
+        cross > 1e-3,
+        right_field,
+        cross,
+        "not parallel to the boresight (|boresight x right| > 1e-3)",
+    )
+}
+
+fn check_frame_size(
+    w_field: &'static str,
+    w: u32,
+    h_field: &'static str,
+    h: u32,
+) -> Result<(), ConfigError> {
+    within(w_field, w as f64, 1.0, 8192.0, "1 to 8192 pixels")?;
+    within(h_field, h as f64, 1.0, 8192.0, "1 to 8192 pixels")
+}
+
+impl CameraConfig {
+    /// Refuses, naming the field, any value the model cannot use.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check(
+            self.period_ms >= 1e-3 && self.period_ms <= 1e6,
+            "sensors.camera.period_ms",
+            self.period_ms,
+            "1e-3 to 1e6 ms",
+        )?;
+        check_frame_size(
+            "sensors.camera.width_px",
+            self.width_px,
+            "sensors.camera.height_px",
+            self.height_px,
+        )?;
+        within(
+            "sensors.camera.fov_deg",
+            self.fov_deg,
+            1.0,
+            120.0,
+            "1 to 120 deg",
+        )?;
+        within("sensors.camera.k1", self.k1, -0.5, 0.5, "|k1| <= 0.5")?;
+        within("sensors.camera.k2", self.k2, -0.5, 0.5, "|k2| <= 0.5")?;
+        check_axes(
+            "sensors.camera.boresight_body",
+            self.boresight_body,
+            "sensors.camera.image_right_body",
+            self.image_right_body,
+        )?;
+        for p in self.position_body_m {
+            within(
+                "sensors.camera.position_body_m",
+                p,
+                -100.0,
+                100.0,
+                "within 100 m",
+            )?;
+        }
+        check(
+            self.exposure_ms > 0.0 && self.exposure_ms <= self.period_ms,
+            "sensors.camera.exposure_ms",
+            self.exposure_ms,
+            "positive and at most the frame period",
+        )?;
+        within(
+            "sensors.camera.bits",
+            self.bits as f64,
+            8.0,
+            16.0,
+            "8 to 16 bits",
+        )?;
+        within(
+            "sensors.camera.full_well_e",
+            self.full_well_e,
+            1.0,
+            1e8,
+            "1 to 1e8 e-",
+        )?;
+        within(
+            "sensors.camera.read_noise_e",
+            self.read_noise_e,
+            0.0,
+            1e4,
+            "0 to 1e4 e-",
+        )?;
+        within(
+            "sensors.camera.f_number",
+            self.f_number,
+            0.5,
+            100.0,
+            "0.5 to 100",
+        )?;
+        within(
+            "sensors.camera.pixel_pitch_um",
+            self.pixel_pitch_um,
+            0.1,
+            100.0,
+            "0.1 to 100 um",
+        )?;
+        check(
+            self.throughput > 0.0 && self.throughput <= 1.0,
+            "sensors.camera.throughput",
+            self.throughput,
+            "in (0, 1]",
+        )?;
+        within(
+            "sensors.camera.solar_band_irradiance_w_m2",
+            self.solar_band_irradiance_w_m2,
+            0.0,
+            1e4,
+            "0 to 1e4 W/m^2",
+        )?;
+        within(
+            "sensors.camera.wavelength_nm",
+            self.wavelength_nm,
+            100.0,
+            20_000.0,
+            "100 to 20000 nm",
+        )?;
+        within(
+            "sensors.camera.normal_albedo",
+            self.normal_albedo,
+            0.0,
+            1.0,
+            "0 to 1",
+        )?;
+        within(
+            "sensors.camera.shadow_floor_iof",
+            self.shadow_floor_iof,
+            0.0,
+            1.0,
+            "0 to 1",
+        )?;
+        within(
+            "sensors.camera.blur_samples",
+            self.blur_samples as f64,
+            1.0,
+            64.0,
+            "1 to 64",
+        )?;
+        within(
+            "sensors.camera.shadow_map_tolerance_deg",
+            self.shadow_map_tolerance_deg,
+            0.0,
+            10.0,
+            "0 to 10 deg",
+        )
+    }
+}
+
+impl LidarConfig {
+    /// Refuses, naming the field, any value the model cannot use.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        check(
+            self.period_ms >= 1e-3 && self.period_ms <= 1e6,
+            "sensors.lidar.period_ms",
+            self.period_ms,
+            "1e-3 to 1e6 ms",
+        )?;
+        check_frame_size(
+            "sensors.lidar.width_px",
+            self.width_px,
+            "sensors.lidar.height_px",
+            self.height_px,
+        )?;
+        within(
+            "sensors.lidar.fov_deg",
+            self.fov_deg,
+            0.1,
+            120.0,
+            "0.1 to 120 deg",
+        )?;
+        check_axes(
+            "sensors.lidar.boresight_body",
+            self.boresight_body,
+            "sensors.lidar.image_right_body",
+            self.image_right_body,
+        )?;
+        for p in self.position_body_m {
+            within(
+                "sensors.lidar.position_body_m",
+                p,
+                -100.0,
+                100.0,
+                "within 100 m",
+            )?;
+        }
+        within(
+            "sensors.lidar.range_noise_m",
+            self.range_noise_m,
+            0.0,
+            100.0,
+            "0 to 100 m",
+        )?;
+        check(
+            self.min_range_m >= 0.0 && self.min_range_m < self.max_range_m,
+            "sensors.lidar.min_range_m",
+            self.min_range_m,
+            "at least 0 and below max_range_m",
+        )?;
+        within(
+            "sensors.lidar.max_range_m",
+            self.max_range_m,
+            1e-3,
+            1e6,
+            "1e-3 to 1e6 m",
+        )?;
+        within(
+            "sensors.lidar.max_incidence_deg",
+            self.max_incidence_deg,
+            0.0,
+            90.0,
+            "0 to 90 deg",
+        )
+    }
+}
+
+#[cfg(test)]
+mod eyes_tests {
+    use super::*;
+
+    #[test]
+    fn camera_and_lidar_defaults_are_off_and_valid() {
+        let (c, l) = (CameraConfig::default(), LidarConfig::default());
+        assert!(!c.enabled && !l.enabled);
+        c.validate().unwrap();
+        l.validate().unwrap();
+    }
+
+    #[test]
+    fn bad_camera_and_lidar_fields_are_named() {
+        let c = CameraConfig {
+            exposure_ms: 300.0,
+            ..CameraConfig::default()
+        };
+        assert_eq!(
+            c.validate().unwrap_err().field,
+            "sensors.camera.exposure_ms"
+        );
+        let c = CameraConfig {
+            image_right_body: [0.0, 0.0, -2.0],
+            ..CameraConfig::default()
+        };
+        assert_eq!(
+            c.validate().unwrap_err().field,
+            "sensors.camera.image_right_body"
+        );
+        let l = LidarConfig {
+            min_range_m: 2000.0,
+            ..LidarConfig::default()
+        };
+        assert_eq!(l.validate().unwrap_err().field, "sensors.lidar.min_range_m");
+        let l = LidarConfig {
+            fov_deg: f64::NAN,
+            ..LidarConfig::default()
+        };
+        assert_eq!(l.validate().unwrap_err().field, "sensors.lidar.fov_deg");
+        assert!(toml::from_str::<CameraConfig>("enabled = true\nfocal = 3").is_err());
+        assert!(toml::from_str::<LidarConfig>("boresight_body = [0, 0, -1, 0]").is_err());
+        let c: CameraConfig = toml::from_str("enabled = true\nwidth_px = 640").unwrap();
+        assert!(c.enabled && c.width_px == 640 && c.height_px == 1024);
     }
 }

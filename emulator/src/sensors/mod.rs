@@ -21,14 +21,18 @@
 //! noise scale, a dropout (no samples), a frozen output, a one-sample spike, an
 //! inhibited device (samples invalid, flagged).
 
+pub mod camera;
 pub mod config;
 mod devices;
 mod imu;
+pub mod lidar;
 
+pub use camera::{Camera, FrameError, FrameMeta};
 pub use config::{
-    ImuConfig, LaserAltimeterConfig, RfAltimeterConfig, SensorsConfig, StarTrackerConfig,
-    VelocimeterConfig,
+    CameraConfig, ImuConfig, LaserAltimeterConfig, LidarConfig, RfAltimeterConfig, SensorsConfig,
+    StarTrackerConfig, VelocimeterConfig,
 };
+pub use lidar::Lidar;
 
 use crate::config::ConfigError;
 use crate::plant::ground::{Ground, GroundHit};
