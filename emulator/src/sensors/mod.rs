@@ -23,12 +23,15 @@
 
 pub mod config;
 mod devices;
+pub mod frame_source;
 mod imu;
+pub mod test_card;
 
 pub use config::{
     ImuConfig, LaserAltimeterConfig, RfAltimeterConfig, SensorsConfig, StarTrackerConfig,
-    VelocimeterConfig,
+    TestCardConfig, VelocimeterConfig,
 };
+pub use frame_source::{FrameMeta, FrameRack, FrameSink, FrameSource};
 
 use crate::config::ConfigError;
 use crate::plant::ground::{Ground, GroundHit};
@@ -450,9 +453,9 @@ impl SensorSuite {
     /// Fills `frame` with every sample delivered by `t_ns` (time of validity plus
     /// latency) and not yet handed over, oldest first per device, up to each array's
     /// capacity; the rest of each array is zeroed and what did not fit is counted in
-    /// [`Self::dropped`]. A disabled device's count is 0.
+    /// [`Self::dropped`]. A disabled device's count is 0. The frame announcements
+    /// (`frame_count`, `frames`) are the [`FrameRack`]'s, untouched here.
     pub fn fill_frame(&mut self, t_ns: i64, frame: &mut SensorFrame) {
-        frame.reserved = 0;
         frame.imu_count = match self.imu.as_mut() {
             Some(d) => d.queue.drain(t_ns, &mut frame.imu),
             None => Queue::<oils_shared::ImuSample>::clear(&mut frame.imu),
