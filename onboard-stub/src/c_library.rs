@@ -16,8 +16,7 @@ type LayoutHashFn = unsafe extern "C" fn() -> u64;
 type InitFn = unsafe extern "C" fn(*const FswConfig) -> *mut c_void;
 type StepFn = unsafe extern "C" fn(*mut c_void, *const Telemetry, *mut Command) -> i32;
 type FiniFn = unsafe extern "C" fn(*mut c_void);
-type FrameFn =
-    unsafe extern "C" fn(*mut c_void, *const FrameAnnouncement, *const u8, usize) -> i32;
+type FrameFn = unsafe extern "C" fn(*mut c_void, *const FrameAnnouncement, *const u8, usize) -> i32;
 
 /// Why a C flight software could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -167,8 +166,7 @@ impl CLibraryFsw {
         let step_fn: StepFn = unsafe { symbol(&library, path, "oils_fsw_step")? };
         let fini_fn: FiniFn = unsafe { symbol(&library, path, "oils_fsw_fini")? };
         // SAFETY: the type `oils.h` declares for the optional `oils_fsw_frame`.
-        let frame_fn: Option<FrameFn> =
-            unsafe { symbol(&library, path, "oils_fsw_frame") }.ok();
+        let frame_fn: Option<FrameFn> = unsafe { symbol(&library, path, "oils_fsw_frame") }.ok();
         let params =
             CString::new(params).map_err(|_| CLibraryError::ParamsNul { path: owned() })?;
         let config = FswConfig {

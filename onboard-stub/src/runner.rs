@@ -11,8 +11,8 @@
 
 use crate::fsw::FlightSoftware;
 use oils_shared::clock::monotonic_ns;
-use oils_shared::link::{LinkError, StubLink};
 use oils_shared::fsw::announced_frames;
+use oils_shared::link::{LinkError, StubLink};
 use oils_shared::TLM_FLAG_END_OF_RUN;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 

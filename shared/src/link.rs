@@ -18,7 +18,9 @@
 use crate::clock::monotonic_ns;
 use crate::domain::{Domain, DomainError};
 use crate::service::RunServices;
-use crate::{frame_device_name, Command, FrameAnnouncement, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH};
+use crate::{
+    frame_device_name, Command, FrameAnnouncement, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH,
+};
 use core::fmt::Debug;
 use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use core::time::Duration;
@@ -26,9 +28,9 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
+use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
@@ -147,7 +149,9 @@ pub enum LinkError {
         device: u32,
     },
     /// A frame larger than its service's slices (set at creation).
-    #[error("a frame of {bytes} bytes for frame device {device} exceeds its service's {max_bytes}")]
+    #[error(
+        "a frame of {bytes} bytes for frame device {device} exceeds its service's {max_bytes}"
+    )]
     FrameTooLarge {
         /// The `FRAME_DEVICE_*` id.
         device: u32,
@@ -163,7 +167,9 @@ pub enum LinkError {
         device: u32,
     },
     /// The emulator's `oils.frames` attribute does not parse.
-    #[error("the run's oils.frames attribute `{value}` does not parse (expected device:max_bytes,...)")]
+    #[error(
+        "the run's oils.frames attribute `{value}` does not parse (expected device:max_bytes,...)"
+    )]
     BadFrameAttribute {
         /// The attribute's text.
         value: String,

@@ -209,7 +209,8 @@ impl SpawnedStub {
         let fsw_failure = field("fsw_failure").and_then(|v| serde_json::from_value(v).ok());
         let realtime = field("realtime").and_then(|v| serde_json::from_value(v).ok());
         let count = |name: &str| field(name).and_then(|v| v.as_u64());
-        let frames = count("frames").zip(count("frames_missed"))
+        let frames = count("frames")
+            .zip(count("frames_missed"))
             .filter(|(n, missed)| n + missed > 0);
         let _ = std::fs::remove_file(&self.outcome);
         StubEnd {

@@ -15,11 +15,11 @@
 pub mod nav_noise;
 
 use crate::config::ScenarioConfig;
-use crate::plant::Plant;
 use crate::link::ExchangeError;
+use crate::plant::Plant;
 use crate::sensors::{FrameRack, FrameSink, SensorSuite};
-use oils_shared::link::FrameSpec;
 use nav_noise::{NavNoise, StateVectorUplink};
+use oils_shared::link::FrameSpec;
 use oils_shared::{
     NavState, PacketHeader, Telemetry, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_IDEAL_NAV,
     TLM_FLAG_NAV_NOISE, TLM_FLAG_SENSORS, TLM_FLAG_STATE_VECTOR,

@@ -3,9 +3,9 @@
 
 use super::{Abort, StepObserver};
 use crate::devices::Devices;
-use crate::sensors::FrameSink;
 use crate::faults::{PlantFault, MAX_FAULTS};
 use crate::plant::{ActuatorCommand, Plant, PlantStatus};
+use crate::sensors::FrameSink;
 
 /// The plant's side of a cycle: its status, its steps, the faults it carries out.
 pub(super) struct TruthStage {

@@ -20,7 +20,7 @@ use super::SensorTruth;
 use crate::config::ConfigError;
 use crate::link::ExchangeError;
 use oils_shared::link::FrameSpec;
-use oils_shared::{frame_hash, frame_device_name, FrameAnnouncement, SensorFrame, FRAMES_MAX};
+use oils_shared::{frame_device_name, frame_hash, FrameAnnouncement, SensorFrame, FRAMES_MAX};
 
 /// What a source says of the frame it rendered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
