@@ -194,6 +194,11 @@ class FrameAnnouncement(ctypes.Structure):
         ("hash", _u64),
     ]
 
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 user-header type name, as the Rust struct declares it."""
+        return "oils.v4.FrameAnnouncement"
+
 
 class SensorFrame(ctypes.Structure):
     """Every device sample since the last cycle; *_count entries of each array are used."""

@@ -56,6 +56,7 @@ class LayoutMatchesRust(unittest.TestCase):
     def test_type_names_are_the_rust_ones(self):
         self.assertEqual(p.Telemetry.type_name(), "oils.v4.Telemetry")
         self.assertEqual(p.Command.type_name(), "oils.v4.Command")
+        self.assertEqual(p.FrameAnnouncement.type_name(), "oils.v4.FrameAnnouncement")
         self.assertEqual(ctypes.alignment(p.Telemetry), 8)
 
 
