@@ -15,7 +15,7 @@
 //!            "OILSEND8" | records u64 | crc32 u32 (of the 16 bytes before it)
 //! ```
 //! A record is RECORD_SIZE bytes:
-//! flags u32 | crc32 u32 | Telemetry (1176 bytes) | Command (336 bytes) | applied
+//! flags u32 | crc32 u32 | Telemetry (1400 bytes) | Command (336 bytes) | applied
 //! command, true state, active faults and the step's timing: TRUTH_VALUES f64s, the slots
 //! of `log_fields::FIELDS` (a timing figure the step has not is NaN). Its CRC-32 covers
 //! the flags and everything after the CRC, so a damaged record is found and named by its

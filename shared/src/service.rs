@@ -109,7 +109,7 @@ impl RunServices {
 }
 
 /// The two services' payload types as a client must declare them: the iceoryx2 type
-/// name each packet carries and its size (`oils.v3.Telemetry, 1176 bytes`), taken from
+/// name each packet carries and its size (`oils.v4.Telemetry, 1400 bytes`), taken from
 /// the types themselves.
 pub fn payload_types() -> (String, String) {
     use iceoryx2::prelude::ZeroCopySend;

@@ -97,7 +97,7 @@ pub fn pattern(width: u32, height: u32, seq: u64, out: &mut [u8]) {
         for (x, px) in row.chunks_exact_mut(2).enumerate() {
             let v = if y < h / 2 {
                 (((x + shift) % 256) * 256) as u16
-            } else if (x / 64 + y / 64 + phase) % 2 == 0 {
+            } else if (x / 64 + y / 64 + phase).is_multiple_of(2) {
                 16384
             } else {
                 49152
