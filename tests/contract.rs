@@ -169,7 +169,7 @@ fn contract_record_equals_replay() {
     // An edited header (the run's configuration) is refused by its CRC; one whose CRC
     // was recomputed no longer matches its records and does not replay.
     let bytes = std::fs::read(&log).unwrap();
-    assert_eq!(&bytes[..8], b"OILSLOG7");
+    assert_eq!(&bytes[..8], b"OILSLOG8");
     let header_len = u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize;
     let mut header: serde_json::Value =
         serde_json::from_slice(&bytes[16..16 + header_len]).unwrap();

@@ -499,3 +499,83 @@ fn config_from_refuses_a_c_library_that_changed_since_the_report() {
     assert_eq!(r["fsw_failure"]["step"], 200);
     assert_ne!(r["fsw_library"]["blake3"], then);
 }
+
+/// `onboard-stub/examples/c/frames.c` (the C example plus `oils_fsw_frame`), built as a
+/// user would, linked with the machine's libxxhash for the hash check.
+fn frames_library(dir: &Path) -> PathBuf {
+    let src = c_build::include_dir().join("../../onboard-stub/examples/c/frames.c");
+    let out = dir.join("libframes.so");
+    let output = c_build::c_compiler()
+        .args([
+            "-std=c11",
+            "-Wall",
+            "-Wextra",
+            "-Werror",
+            "-pedantic",
+            "-shared",
+            "-fPIC",
+        ])
+        .arg("-I")
+        .arg(c_build::include_dir())
+        .arg("-I")
+        .arg(src.parent().unwrap())
+        .arg(&src)
+        .arg("-o")
+        .arg(&out)
+        .args(["-lm", "-l:libxxhash.so.0"])
+        .output()
+        .expect("running the C compiler");
+    assert!(
+        output.status.success(),
+        "building frames.c:\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    out
+}
+
+#[test]
+fn c_flight_software_reads_every_frame_in_place_and_checks_its_hash() {
+    let dir = scratch("c-frames");
+    let lib = frames_library(&dir);
+    // The terminal descent with the test card on (a 2 MiB frame a second).
+    let scenario = dir.join("terminal-descent-test-card.toml");
+    let mut text_toml = std::fs::read_to_string(terminal_descent_scenario()).unwrap();
+    text_toml.push_str("\n[sensors.test_card]\nenabled = true\n");
+    std::fs::write(&scenario, text_toml).unwrap();
+    let rep = dir.join("report.json");
+    let outcome = dir.join("stub-outcome.json");
+    let id = run_id(0xc7);
+    let mut stub = c_stub(&id, &lib);
+    stub.arg("--outcome").arg(&outcome);
+    let (emulator, stub) = fly_with_client(
+        &[
+            "--no-log",
+            "--report",
+            rep.to_str().unwrap(),
+            "--scenario",
+            scenario.to_str().unwrap(),
+        ],
+        &id,
+        stub,
+    );
+    assert!(stub.status.success(), "stub: {}", text(&stub));
+    assert!(emulator.status.success(), "oils run: {}", text(&emulator));
+    let r = report(&rep);
+    assert_soft_touchdown(&r, &terminal_descent_scenario());
+    // The stub checked each frame before the library saw it; the library checked it
+    // again (length, XXH3-64, the card's counter) and counted it.
+    let o: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&outcome).unwrap()).unwrap();
+    let frames = o["frames"].as_u64().unwrap();
+    assert_eq!(o["frames_missed"], 0);
+    assert!(
+        frames + 1 >= r["sim_time_s"].as_f64().unwrap() as u64 && frames > 10,
+        "{frames} frames in {} s",
+        r["sim_time_s"]
+    );
+    assert!(
+        text(&stub).contains(&format!("frames: {frames} checked")),
+        "{}",
+        text(&stub)
+    );
+}

@@ -315,7 +315,8 @@ fn a_peer_speaking_another_protocol_is_refused_by_name() {
     assert_eq!(r["outcome"], "aborted");
     let e = r["error"].as_str().unwrap();
     assert!(
-        e.contains("v3") && e.contains("v2 (schema 0x6b7aac819410d7f5)"),
+        e.contains(&format!("v{}", oils_shared::PROTOCOL_VERSION))
+            && e.contains("v2 (schema 0x6b7aac819410d7f5)"),
         "{e}"
     );
 }
@@ -350,7 +351,9 @@ fn a_stub_refuses_an_emulator_announcing_another_protocol() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("v3") && err.contains("v2") && err.contains("0x6b7aac819410d7f5"),
+        err.contains(&format!("v{}", oils_shared::PROTOCOL_VERSION))
+            && err.contains("v2")
+            && err.contains("0x6b7aac819410d7f5"),
         "{err}"
     );
 }

@@ -23,6 +23,7 @@ use oils_emulator::plant::Plant;
 use oils_emulator::propulsion::{build, PropulsionKind, PropulsionSpec};
 use oils_emulator::recorder::Recorder;
 use oils_emulator::scheduler::{run_observed, MissPolicy, Outcome, SchedulerConfig};
+use oils_emulator::sensors::{FrameRack, SensorsConfig, TestCardConfig};
 use oils_emulator::timing::TimingThresholds;
 use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
 use oils_onboard_stub::runner::serve;
@@ -75,8 +76,28 @@ fn scenario() -> ScenarioConfig {
     }
 }
 
-/// Runs a whole lockstep descent over `link` with a log; returns (allocations after
-/// step `from`, allocations after the last step, last step index, outcome).
+/// The test card at its defaults (1024 x 1024 u16, 2 MiB, 1 Hz): a frame device whose
+/// frames go through the link's frame buffers.
+fn test_card() -> FrameRack {
+    let cfg = SensorsConfig {
+        test_card: TestCardConfig {
+            enabled: true,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    FrameRack::from_config(&cfg, 1).unwrap().unwrap()
+}
+
+/// Frames the test card has published by simulated time `t_ns` (one at each whole
+/// second).
+fn test_card_frames_by(t_ns: i64) -> u64 {
+    (t_ns / 1_000_000_000) as u64
+}
+
+/// Runs a whole lockstep descent over `link` with a log (and the test card on board
+/// when `frames`); returns (allocations after step `from`, allocations after the last
+/// step, last step index, outcome, frames published between the two).
 fn allocations_over<L: Link + ?Sized>(
     link: &mut L,
     run_id: u64,
@@ -85,6 +106,29 @@ fn allocations_over<L: Link + ?Sized>(
     faults: &mut FaultPlan,
     (dt_ns, fsw_period_ns): (u64, u64),
 ) -> (u64, u64, u64, Outcome) {
+    let (a, b, c, d, _) = allocations_with_frames(
+        link,
+        run_id,
+        from,
+        counter,
+        faults,
+        (dt_ns, fsw_period_ns),
+        false,
+    );
+    (a, b, c, d)
+}
+
+/// [`allocations_over`], with the test card on board when `frames`.
+#[allow(clippy::too_many_arguments)]
+fn allocations_with_frames<L: Link + ?Sized>(
+    link: &mut L,
+    run_id: u64,
+    from: u64,
+    counter: &'static AtomicU64,
+    faults: &mut FaultPlan,
+    (dt_ns, fsw_period_ns): (u64, u64),
+    frames: bool,
+) -> (u64, u64, u64, Outcome, u64) {
     let scenario = scenario();
     let mut plant = Plant::new(
         &scenario,
@@ -96,6 +140,9 @@ fn allocations_over<L: Link + ?Sized>(
     )
     .unwrap();
     let mut devices = oils_emulator::devices::Devices::new(&scenario, 1);
+    if frames {
+        devices.attach_frames(test_card());
+    }
     let stop = AtomicBool::new(false);
     let log = std::env::temp_dir().join(format!("oils-noalloc-{run_id:x}.oilslog"));
     let recorder = Recorder::create(&log, "{}").unwrap();
@@ -111,12 +158,15 @@ fn allocations_over<L: Link + ?Sized>(
         time_exchanges: true,
     };
     let (mut at_from, mut at_last, mut last) = (0u64, 0u64, 0u64);
-    let mut observe = |k: u64, _: &oils_emulator::plant::Plant| {
+    let (mut frames_from, mut frames_last) = (0u64, 0u64);
+    let mut observe = |k: u64, plant: &oils_emulator::plant::Plant| {
         let now = counter.load(Ordering::SeqCst);
         if k == from {
             at_from = now;
+            frames_from = test_card_frames_by(plant.time_ns());
         }
         at_last = now;
+        frames_last = test_card_frames_by(plant.time_ns());
         last = k;
     };
     let summary = run_observed(
@@ -133,18 +183,31 @@ fn allocations_over<L: Link + ?Sized>(
     .unwrap();
     recorder.finish().unwrap();
     std::fs::remove_file(&log).ok();
-    (at_from, at_last, last, summary.outcome)
+    if frames {
+        let published: Vec<(u32, u64)> = devices.frames().unwrap().published().collect();
+        assert_eq!(published[0].1, frames_last, "one test-card frame a second");
+    }
+    (
+        at_from,
+        at_last,
+        last,
+        summary.outcome,
+        frames_last - frames_from,
+    )
 }
 
-/// A whole descent over iceoryx2 with the stub on a thread of this process.
+/// A whole descent over iceoryx2 with the stub on a thread of this process (with the
+/// test card's frames on their own service when `frames`).
 fn allocations_through_descent(
     run_id: u64,
     wait: WaitStrategy,
     from: u64,
-) -> (u64, u64, u64, Outcome) {
+    frames: bool,
+) -> (u64, u64, u64, Outcome, u64) {
     let stop = AtomicBool::new(false);
     let node = create_node("no-alloc-emulator").unwrap();
-    let link = EmulatorLink::create(&node, run_id, wait).unwrap();
+    let specs = if frames { test_card().specs() } else { vec![] };
+    let link = EmulatorLink::create_with_frames(&node, run_id, wait, &specs).unwrap();
     let stub = std::thread::spawn(move || {
         let stop = AtomicBool::new(false);
         let node = create_node("no-alloc-stub").unwrap();
@@ -157,17 +220,63 @@ fn allocations_through_descent(
     // As a session runs it: bound to the stub that joined (checked on every command).
     let mut link = BoundLink::new(link, joined, false);
     STEPPING.with(|s| s.set(true));
-    let out = allocations_over(
+    let out = allocations_with_frames(
         &mut link,
         run_id,
         from,
         &STEPPING_ALLOCATIONS,
         &mut FaultPlan::none(),
         (10_000_000, 10_000_000),
+        frames,
     );
     STEPPING.with(|s| s.set(false));
-    stub.join().unwrap();
+    let served = stub.join().unwrap();
+    if frames {
+        assert_eq!(served.frames_missed, 0);
+        assert!(served.frames > 900, "{} frames checked", served.frames);
+    }
     out
+}
+
+/// Allocations of one frame's loan, render-free publish and in-place read (2 MiB over
+/// a frame service), measured as [`iceoryx2_cost_per_publish_and_receive`].
+fn iceoryx2_cost_per_frame() -> u64 {
+    let run_id = 0xfeee_0000_0000 + std::process::id() as u64;
+    let stop = AtomicBool::new(false);
+    let node = create_node("probe-frames-emulator").unwrap();
+    let specs = test_card().specs();
+    let mut emulator =
+        EmulatorLink::create_with_frames(&node, run_id, WaitStrategy::BusyPoll, &specs).unwrap();
+    let stub_node = create_node("probe-frames-stub").unwrap();
+    let stub = StubLink::open(&stub_node, run_id, None, 1000, &stop).unwrap();
+    emulator.wait_for_peer(1000, &stop).unwrap();
+    let bytes = specs[0].max_bytes;
+    let mut one = |seq: u64| {
+        let buf = emulator
+            .frame_buffer(oils_shared::FRAME_DEVICE_TEST_CARD, bytes)
+            .unwrap();
+        buf[0] = seq as u8;
+        let ann = oils_shared::FrameAnnouncement {
+            device: oils_shared::FRAME_DEVICE_TEST_CARD,
+            seq,
+            bytes: bytes as u32,
+            ..Default::default()
+        };
+        emulator.publish_frame(&ann).unwrap();
+        let got = stub.with_frame(&ann, |h, px| (h.seq, px.len())).unwrap();
+        assert_eq!(got, Some((seq, bytes)));
+    };
+    for seq in 0..10 {
+        one(seq);
+    }
+    const N: u64 = 200;
+    let a0 = ALLOCATIONS.load(Ordering::SeqCst);
+    for seq in 10..10 + N {
+        one(seq);
+    }
+    let allocs = ALLOCATIONS.load(Ordering::SeqCst) - a0;
+    assert_eq!(allocs % N, 0, "{allocs} allocations for {N} frames");
+    allocs / N
 }
 
 /// Allocations of one `publish` and of one `try_receive`, measured on a live link with
@@ -222,8 +331,8 @@ fn step_paths_do_not_allocate() {
     .into_iter()
     .enumerate()
     {
-        let (at_from, at_last, last, outcome) =
-            allocations_through_descent(base + i as u64, wait, FROM);
+        let (at_from, at_last, last, outcome, _) =
+            allocations_through_descent(base + i as u64, wait, FROM, false);
         assert_eq!(
             outcome,
             Outcome::Landed,
@@ -240,8 +349,48 @@ fn step_paths_do_not_allocate() {
             2 * per_publish * steps
         );
     }
+    // Frames (protocol v4): the test card's 2 MiB frames over their own service, loaned,
+    // rendered in place, read in place and hash-checked by the stub: one iceoryx2 loan a
+    // frame, like a packet's, and nothing of ours.
+    let per_frame = iceoryx2_cost_per_frame();
+    assert_eq!(
+        per_frame, per_publish,
+        "a frame's loan costs what a packet's does"
+    );
+    let (at_from, at_last, last, outcome, frames) =
+        allocations_through_descent(base + 5, WaitStrategy::BusyPoll, FROM, true);
+    assert_eq!(outcome, Outcome::Landed);
+    assert!(frames > 900, "{frames} frames in the window");
+    let steps = last - FROM;
+    assert_eq!(
+        at_last - at_from,
+        2 * per_publish * steps + per_frame * frames,
+        "with frames: steps {FROM}..{last} and {frames} frames made {} allocations",
+        at_last - at_from
+    );
     // In process there is no iceoryx2 loan: not a single allocation on the stepping
-    // thread, which runs the emulator and the flight software.
+    // thread, which runs the emulator and the flight software (frames included, into
+    // buffers allocated before tick 0).
+    let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()))
+        .with_frames(&test_card().specs());
+    STEPPING.with(|s| s.set(true));
+    let (at_from, at_last, last, outcome, frames) = allocations_with_frames(
+        &mut link,
+        base + 6,
+        FROM,
+        &STEPPING_ALLOCATIONS,
+        &mut FaultPlan::none(),
+        (10_000_000, 10_000_000),
+        true,
+    );
+    STEPPING.with(|s| s.set(false));
+    assert_eq!(outcome, Outcome::Landed);
+    assert!(frames > 900, "{frames} frames");
+    assert_eq!(
+        at_last - at_from,
+        0,
+        "in-process steps {FROM}..{last} with frames allocated"
+    );
     let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()));
     STEPPING.with(|s| s.set(true));
     let (at_from, at_last, last, outcome) = allocations_over(

@@ -8,12 +8,17 @@
 //! * [`ReplayLink`]: a recorded log's commands played back, checking that the emulator
 //!   produces the recorded telemetry again (record == replay).
 //!
+//! Every link is also a [`FrameSink`] (protocol v4): the frame devices render into the
+//! buffer it hands out (an iceoryx2 loan on [`BoundLink`]; [`FrameSlots`] allocated before
+//! tick 0 in process and in a replay) and it publishes the frame.
+//!
 //! Calls on the step path do not allocate.
 
 use crate::recorder::{Log, REC_COMMAND_RECEIVED, REC_END_OF_RUN};
-use oils_shared::fsw::{answer, FlightSoftware, FswFailure};
-use oils_shared::link::{EmulatorLink, LinkError, PeerPort};
-use oils_shared::{AsBytes, Command, Telemetry, TLM_FLAG_END_OF_RUN};
+use crate::sensors::FrameSink;
+use oils_shared::fsw::{announced_frames, answer, FlightSoftware, FswFailure};
+use oils_shared::link::{EmulatorLink, FrameSpec, LinkError, PeerPort};
+use oils_shared::{AsBytes, Command, FrameAnnouncement, Telemetry, TLM_FLAG_END_OF_RUN};
 use std::sync::atomic::AtomicBool;
 
 /// What can stop an exchange.
@@ -53,8 +58,9 @@ pub enum ExchangeError {
     },
 }
 
-/// The emulator's end of a telemetry/command exchange.
-pub trait Link {
+/// The emulator's end of a telemetry/command exchange (and of the frame services: a
+/// frame published through its [`FrameSink`] goes out before the telemetry announcing it).
+pub trait Link: FrameSink {
     /// Hands Telemetry(k) to the flight software.
     fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError>;
     /// The next command, waiting until the monotonic time `deadline_ns` at most.
@@ -138,6 +144,91 @@ impl BoundLink {
     }
 }
 
+impl FrameSink for BoundLink {
+    fn frame_buffer(&mut self, device: u32, bytes: usize) -> Result<&mut [u8], ExchangeError> {
+        Ok(self.link.frame_buffer(device, bytes)?)
+    }
+
+    fn publish_frame(&mut self, ann: &FrameAnnouncement) -> Result<(), ExchangeError> {
+        Ok(self.link.publish_frame(ann)?)
+    }
+}
+
+/// Frame buffers of a link without shared memory (in process, a replay): one per frame
+/// device, allocated before tick 0 at its largest frame, each holding the last frame
+/// published until the next one is rendered.
+#[derive(Debug, Default)]
+pub struct FrameSlots {
+    slots: Vec<FrameSlot>,
+}
+
+#[derive(Debug)]
+struct FrameSlot {
+    spec: FrameSpec,
+    buf: Vec<u8>,
+    /// The frame in `buf`, once published.
+    published: Option<FrameAnnouncement>,
+}
+
+impl FrameSlots {
+    /// A buffer for each of `specs` (allocated now).
+    pub fn new(specs: &[FrameSpec]) -> Self {
+        Self {
+            slots: specs
+                .iter()
+                .map(|spec| FrameSlot {
+                    spec: *spec,
+                    buf: vec![0; spec.max_bytes],
+                    published: None,
+                })
+                .collect(),
+        }
+    }
+
+    fn slot(&mut self, device: u32) -> Result<&mut FrameSlot, ExchangeError> {
+        self.slots
+            .iter_mut()
+            .find(|s| s.spec.device == device)
+            .ok_or(ExchangeError::Link(LinkError::NoFrameService { device }))
+    }
+
+    /// The published frame `ann` announces, if it is the one held.
+    pub fn pixels(&self, ann: &FrameAnnouncement) -> Option<&[u8]> {
+        let slot = self.slots.iter().find(|s| s.spec.device == ann.device)?;
+        (slot.published.as_ref() == Some(ann)).then(|| &slot.buf[..ann.bytes as usize])
+    }
+}
+
+impl FrameSink for FrameSlots {
+    fn frame_buffer(&mut self, device: u32, bytes: usize) -> Result<&mut [u8], ExchangeError> {
+        let slot = self.slot(device)?;
+        if bytes > slot.spec.max_bytes {
+            return Err(LinkError::FrameTooLarge {
+                device,
+                bytes,
+                max_bytes: slot.spec.max_bytes,
+            }
+            .into());
+        }
+        slot.published = None;
+        Ok(&mut slot.buf[..bytes])
+    }
+
+    fn publish_frame(&mut self, ann: &FrameAnnouncement) -> Result<(), ExchangeError> {
+        let slot = self.slot(ann.device)?;
+        if ann.bytes as usize > slot.spec.max_bytes {
+            return Err(LinkError::FrameTooLarge {
+                device: ann.device,
+                bytes: ann.bytes as usize,
+                max_bytes: slot.spec.max_bytes,
+            }
+            .into());
+        }
+        slot.published = Some(*ann);
+        Ok(())
+    }
+}
+
 impl Link for BoundLink {
     fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {
         self.step = tlm.header.step;
@@ -199,6 +290,8 @@ pub struct InProcLink<F: FlightSoftware + ?Sized> {
     pending: Option<Command>,
     /// Whether the flight software's compute time is measured ([`Self::untimed`]).
     timed: bool,
+    /// The frames handed to the flight software (the same bytes the renderer wrote).
+    frames: FrameSlots,
 }
 
 impl<F: FlightSoftware + ?Sized> InProcLink<F> {
@@ -208,7 +301,16 @@ impl<F: FlightSoftware + ?Sized> InProcLink<F> {
             fsw,
             pending: None,
             timed: true,
+            frames: FrameSlots::default(),
         }
+    }
+
+    /// With a frame buffer for each of `specs` (the run's frame devices,
+    /// [`crate::sensors::FrameRack::specs`]), allocated now: each frame the telemetry
+    /// announces is handed to [`FlightSoftware::frame`] before its step.
+    pub fn with_frames(mut self, specs: &[FrameSpec]) -> Self {
+        self.frames = FrameSlots::new(specs);
+        self
     }
 
     /// The same, with nothing timed on the wall clock: the commands' `stub_compute_ns`
@@ -221,6 +323,7 @@ impl<F: FlightSoftware + ?Sized> InProcLink<F> {
             fsw,
             pending: None,
             timed: false,
+            frames: FrameSlots::default(),
         }
     }
 
@@ -230,8 +333,26 @@ impl<F: FlightSoftware + ?Sized> InProcLink<F> {
     }
 }
 
+impl<F: FlightSoftware + ?Sized> FrameSink for InProcLink<F> {
+    fn frame_buffer(&mut self, device: u32, bytes: usize) -> Result<&mut [u8], ExchangeError> {
+        self.frames.frame_buffer(device, bytes)
+    }
+
+    fn publish_frame(&mut self, ann: &FrameAnnouncement) -> Result<(), ExchangeError> {
+        self.frames.publish_frame(ann)
+    }
+}
+
 impl<F: FlightSoftware + ?Sized> Link for InProcLink<F> {
     fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {
+        // The announced frames first, in place, as the stub hands them over.
+        if self.fsw.failure().is_none() {
+            for ann in announced_frames(tlm) {
+                if let Some(pixels) = self.frames.pixels(ann) {
+                    self.fsw.frame(ann, pixels);
+                }
+            }
+        }
         // The end-of-run telemetry is not answered, as on the wire; nor is anything once
         // a step has failed.
         self.pending = (tlm.header.flags & oils_shared::TLM_FLAG_END_OF_RUN == 0
@@ -268,6 +389,8 @@ impl<F: FlightSoftware + ?Sized> Link for InProcLink<F> {
 /// publishes against the recorded one (the run id aside, which names services only).
 pub struct ReplayLink {
     log: Log,
+    /// The replay's frames: rendered again, checked through the telemetry's hashes.
+    frames: FrameSlots,
     next: usize,
     pending: Option<Command>,
     /// The recorded run was aborted at this step after its telemetry had gone out: the
@@ -282,12 +405,20 @@ impl ReplayLink {
     pub fn new(log: Log) -> Self {
         Self {
             log,
+            frames: FrameSlots::default(),
             next: 0,
             pending: None,
             abort_at: None,
             abort_now: false,
             diverged: None,
         }
+    }
+
+    /// With a frame buffer for each of `specs` (the run's frame devices): the replay
+    /// renders every frame again, and its telemetry's hashes must be the log's.
+    pub fn with_frames(mut self, specs: &[FrameSpec]) -> Self {
+        self.frames = FrameSlots::new(specs);
+        self
     }
 
     /// Ends the replay's step `step` as the recorded run ended it: aborted once its
@@ -315,6 +446,16 @@ fn same_telemetry(a: &Telemetry, b: &Telemetry) -> bool {
     a.header.run_id = 0;
     b.header.run_id = 0;
     a.as_bytes() == b.as_bytes()
+}
+
+impl FrameSink for ReplayLink {
+    fn frame_buffer(&mut self, device: u32, bytes: usize) -> Result<&mut [u8], ExchangeError> {
+        self.frames.frame_buffer(device, bytes)
+    }
+
+    fn publish_frame(&mut self, ann: &FrameAnnouncement) -> Result<(), ExchangeError> {
+        self.frames.publish_frame(ann)
+    }
 }
 
 impl Link for ReplayLink {

@@ -572,6 +572,7 @@ const IMU_N: usize = oils_shared::IMU_SAMPLES_MAX;
 const ST_N: usize = oils_shared::STAR_TRACKER_SAMPLES_MAX;
 const ALT_N: usize = oils_shared::ALTIMETER_SAMPLES_MAX;
 const VEL_N: usize = oils_shared::VELOCIMETER_SAMPLES_MAX;
+const FRM_N: usize = oils_shared::FRAMES_MAX;
 const THR_N: usize = oils_shared::THRUSTER_COUNT;
 
 /// `estimate - truth` when the flight software's report holds an estimate, else NaN.
@@ -1259,6 +1260,95 @@ pub static FIELDS: &[Field] = &[
             .sensors
             .velocimeter[i]
             .flags)
+    },
+    // Protocol v4: the frames announced (their pixels are not logged: a replay renders
+    // them again, and these hashes must match).
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_count", U32, |r| r
+            .telemetry
+            .sensors
+            .frame_count)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_device", U32, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .device)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_format", U32, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .format)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_width", U32, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .width)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_height", U32, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .height)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_seq", U64, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .seq)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_t_ns", I64, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .t_ns)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_exposure_ns", U64, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .exposure_ns)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_bytes", U32, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .bytes)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_flags", U32, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .flags)
+    },
+    Field {
+        since: 4,
+        ..packet!(Devices, "frame_hash", Hex, FRM_N, |r, i| r
+            .telemetry
+            .sensors
+            .frames[i]
+            .hash)
     },
     Field {
         since: 3,

@@ -4,7 +4,7 @@
 //!
 //! File layout (little-endian):
 //! ```text
-//! magic      8 bytes  "OILSLOG7"
+//! magic      8 bytes  "OILSLOG8"
 //! header_len u32      length of the JSON header that follows
 //! header_crc u32      CRC-32 of the header bytes (an edited header is refused)
 //! header     JSON     the run's whole configuration (RunConfig), run id, protocol version
@@ -12,10 +12,10 @@
 //!                     | packed_len bytes: one zstd frame (with its content checksum) of
 //!                     `records` records, packed (see below)
 //! trailer    TRAILER_SIZE bytes, written when the log is closed:
-//!            "OILSEND7" | records u64 | crc32 u32 (of the 16 bytes before it)
+//!            "OILSEND8" | records u64 | crc32 u32 (of the 16 bytes before it)
 //! ```
 //! A record is RECORD_SIZE bytes:
-//! flags u32 | crc32 u32 | Telemetry (1176 bytes) | Command (336 bytes) | applied
+//! flags u32 | crc32 u32 | Telemetry (1400 bytes) | Command (336 bytes) | applied
 //! command, true state, active faults and the step's timing: TRUTH_VALUES f64s, the slots
 //! of `log_fields::FIELDS` (a timing figure the step has not is NaN). Its CRC-32 covers
 //! the flags and everything after the CRC, so a damaged record is found and named by its
@@ -33,9 +33,9 @@
 //!
 //! A log without its trailer (or whose trailer counts other records than it holds) is
 //! read, with a warning: the run was interrupted (kill -9, a full disk) or the file was
-//! cut; every whole frame before is read. OILSLOG6 logs (the same records, uncompressed,
-//! one after the other, "OILSEND6" trailer) are read too. The formats before, OILSLOG1
-//! to OILSLOG5, are refused with a message that says how to record them again.
+//! cut; every whole frame before is read. The formats before, OILSLOG1 to OILSLOG7, are
+//! refused with a message that says how to record them again (OILSLOG8 is OILSLOG7 with
+//! protocol v4 packets: a longer telemetry, its frame announcements).
 //!
 //! The file is created 0600 and locked (`flock`, exclusive) for the whole run: a second
 //! run given the same `--log` fails at once, before it touches the file.
@@ -58,9 +58,11 @@ use std::thread::JoinHandle;
 use thiserror::Error;
 
 /// File magic of this format.
-pub const MAGIC: &[u8; 8] = b"OILSLOG7";
-/// Magic of the format with the same records, uncompressed (still read).
-pub const MAGIC_V6: &[u8; 8] = b"OILSLOG6";
+pub const MAGIC: &[u8; 8] = b"OILSLOG8";
+/// Magic of the formats with protocol v3 packets: OILSLOG7 (these frames) and OILSLOG6
+/// (uncompressed records): refused with a clear message.
+const MAGIC_V7: &[u8; 8] = b"OILSLOG7";
+const MAGIC_V6: &[u8; 8] = b"OILSLOG6";
 /// Magic of the formats with protocol v1 packets (OILSLOG4; OILSLOG3 before the header
 /// CRC and the trailer): refused with a clear message.
 const MAGIC_V4: &[u8; 8] = b"OILSLOG4";
@@ -68,9 +70,7 @@ const MAGIC_V4: &[u8; 8] = b"OILSLOG4";
 const MAGIC_V5: &[u8; 8] = b"OILSLOG5";
 const MAGIC_V3: &[u8; 8] = b"OILSLOG3";
 /// Magic of the trailer that closes a log.
-pub const TRAILER_MAGIC: &[u8; 8] = b"OILSEND7";
-/// Magic of an OILSLOG6 log's trailer.
-const TRAILER_MAGIC_V6: &[u8; 8] = b"OILSEND6";
+pub const TRAILER_MAGIC: &[u8; 8] = b"OILSEND8";
 /// Bytes of a frame's header: records u32, packed length u32, their CRC-32.
 pub const FRAME_HEADER_SIZE: usize = 12;
 /// Records a frame holds when full: 2.1 MB of records, packed to about 0.3 MB for the
@@ -867,29 +867,33 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
     };
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V1 {
         return Err(not_log(
-            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG6 log",
+            "an OILSLOG1 log, the format before the true state was recorded; run again to get an OILSLOG8 log",
         ));
     }
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V2 {
         return Err(not_log(
-            "an OILSLOG2 log, the format before per-step timing was recorded; run again (`oils run --config-from` its report) to get an OILSLOG6 log",
+            "an OILSLOG2 log, the format before per-step timing was recorded; run again (`oils run --config-from` its report) to get an OILSLOG8 log",
         ));
     }
     if bytes.len() >= 8 && (&bytes[..8] == MAGIC_V3 || &bytes[..8] == MAGIC_V4) {
         return Err(not_log(
-            "an OILSLOG3/OILSLOG4 log, with protocol v1 packets; run again (`oils run --config-from` its report) to get an OILSLOG6 log",
+            "an OILSLOG3/OILSLOG4 log, with protocol v1 packets; run again (`oils run --config-from` its report) to get an OILSLOG8 log",
         ));
     }
     if bytes.len() >= 8 && &bytes[..8] == MAGIC_V5 {
         return Err(not_log(
-            "an OILSLOG5 log, with protocol v2 packets; run again (`oils run --config-from` its report) to get an OILSLOG6 log",
+            "an OILSLOG5 log, with protocol v2 packets; run again (`oils run --config-from` its report) to get an OILSLOG8 log",
+        ));
+    }
+    if bytes.len() >= 8 && (&bytes[..8] == MAGIC_V6 || &bytes[..8] == MAGIC_V7) {
+        return Err(not_log(
+            "an OILSLOG6/OILSLOG7 log, with protocol v3 packets; run again (`oils run --config-from` its report) to get an OILSLOG8 log",
         ));
     }
     let v3 = false;
-    let compressed = bytes.len() >= 8 && &bytes[..8] == MAGIC;
-    if bytes.len() < 12 || !(compressed || &bytes[..8] == MAGIC_V6) {
+    if bytes.len() < 12 || &bytes[..8] != MAGIC {
         return Err(not_log(
-            "missing OILSLOG7 magic (this program reads OILSLOG7 and OILSLOG6)",
+            "missing OILSLOG8 magic (this program reads OILSLOG8)",
         ));
     }
     let header_len = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
@@ -909,43 +913,10 @@ pub fn parse_log(path: &Path, bytes: &[u8]) -> Result<Log, RecorderError> {
     }
     let header_json =
         String::from_utf8(header.to_vec()).map_err(|_| not_log("header is not UTF-8"))?;
-    let mut body = &bytes[body_start..];
-    if compressed {
-        return parse_frames(path, header_json, body);
-    }
-    let trailer = if v3 {
-        None
-    } else {
-        trailer_count(body, TRAILER_MAGIC_V6)
-            .filter(|_| (body.len() - TRAILER_SIZE).is_multiple_of(RECORD_SIZE))
-    };
-    if trailer.is_some() {
-        body = &body[..body.len() - TRAILER_SIZE];
-    }
-    let mut log = Log {
-        header_json,
-        records: Vec::with_capacity(body.len() / RECORD_SIZE),
-        trailing_bytes: body.len() % RECORD_SIZE,
-        ..Log::default()
-    };
-    for (i, chunk) in body.chunks_exact(RECORD_SIZE).enumerate() {
-        match Record::decode(chunk) {
-            Some(r) => log.records.push(r),
-            None => log.damaged_records.push(i as u64),
-        }
-    }
-    log.check_one_run(path)?;
-    let held = (body.len() / RECORD_SIZE) as u64;
-    log.check_end(v3 || trailer == Some(held));
-    if let Some(n) = trailer.filter(|n| *n != held) {
-        log.warnings.push(format!(
-            "its trailer counts {n} records, the file holds {held}"
-        ));
-    }
-    Ok(log)
+    parse_frames(path, header_json, &bytes[body_start..])
 }
 
-/// The records of an OILSLOG7 body: every whole frame's, a frame that does not
+/// The records of an OILSLOG8 body: every whole frame's, a frame that does not
 /// decompress counted damaged record by record.
 fn parse_frames(path: &Path, header_json: String, body: &[u8]) -> Result<Log, RecorderError> {
     let (list, rest) = frames(body);
@@ -1180,6 +1151,14 @@ pub(crate) mod tests {
             f.rf_altimeter_count,
             f.velocimeter_count,
         ) = (1, 2, 1);
+        // Protocol v4: the frame announcements.
+        f.frame_count = 3;
+        for (k, a) in f.frames.iter_mut().enumerate() {
+            let k = k as u32;
+            (a.device, a.format, a.width, a.height) = (k + 1, k + 2, 100 + k, 200 + k);
+            (a.seq, a.t_ns, a.exposure_ns) = (u64::from(k) + 40, 8_000_000 + i64::from(k), 4000);
+            (a.bytes, a.flags, a.hash) = (300 + k, k, 0x1234_5678_9abc_def0 ^ u64::from(k));
+        }
         for (k, s) in f.imu.iter_mut().enumerate() {
             s.t_ns = 5_000_000 + k as i64;
             s.delta_v_body_m_s = [next(), next(), next()];
@@ -1251,15 +1230,16 @@ pub(crate) mod tests {
     }
 
     /// The record's byte layout, pinned: the CRC-32 of a record with a different value in
-    /// every field, as OILSLOG6 writes it (protocol v3 packets, the devices' slots). A
+    /// every field, as OILSLOG8 writes it (protocol v4 packets, the devices' slots and
+    /// frame announcements). A
     /// field moved, converted differently or dropped changes it.
     #[test]
     fn the_record_layout_is_pinned() {
         let r = distinct_record();
         let mut bytes = [0u8; RECORD_SIZE];
         r.encode(&mut bytes);
-        assert_eq!(RECORD_SIZE, 2080);
-        assert_eq!(crc32fast::hash(&bytes), 733_859_406, "layout changed");
+        assert_eq!(RECORD_SIZE, 2304);
+        assert_eq!(crc32fast::hash(&bytes), 820_754_004, "layout changed");
         assert_eq!(Record::decode(&bytes), Some(r));
     }
 

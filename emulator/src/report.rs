@@ -336,6 +336,14 @@ pub struct OnboardProcess {
     pub ended: String,
     /// The last lines it wrote to its standard error.
     pub stderr_tail: Vec<String>,
+    /// Frames (protocol v4) it read from their services and handed to its flight
+    /// software, each checked against its announcement's length and XXH3-64 hash, as its
+    /// outcome file says (absent: it wrote none, or the run had no frames).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames_checked: Option<u64>,
+    /// Frames announced that it did not find on their services.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames_missed: Option<u64>,
 }
 
 /// The propulsion diagnostics in a few table lines.

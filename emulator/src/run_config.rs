@@ -473,6 +473,16 @@ impl RunConfig {
                 }
             }
         }
+        self.scenario
+            .sensors
+            .check_frame_rates(self.dt_ns(), self.fsw_period_ns())
+            .map_err(|e| {
+                invalid(
+                    "sensors",
+                    e.to_string(),
+                    "the frame devices' periods must fit the plant step and the flight-software cycle",
+                )
+            })?;
         if self.telemetry.sensors() {
             self.scenario
                 .sensors

@@ -162,6 +162,9 @@ pub fn build_devices(cfg: &RunConfig) -> Result<Devices, SessionError> {
             cfg.seed,
         )?);
     }
+    if let Some(rack) = crate::sensors::FrameRack::from_config(&cfg.scenario.sensors, cfg.seed)? {
+        devices.attach_frames(rack);
+    }
     Ok(devices)
 }
 
@@ -355,7 +358,8 @@ pub fn run(
                 InProcLink::untimed(fsw)
             } else {
                 InProcLink::new(fsw)
-            };
+            }
+            .with_frames(&devices.frame_specs());
             let recorder = open_recorder(cfg, run_id, extras.sinks)?;
             realtime = pin_and_tell(&mut hygiene);
             let summary = run_and_close(
@@ -387,7 +391,8 @@ pub fn run(
             let domain = Domain::from_env().map_err(LinkError::from)?;
             warnings.extend(domain.notes().iter().cloned());
             let node = create_node_in("oils-emulator", &domain)?;
-            let link = EmulatorLink::create(&node, run_id, wait)?;
+            let link =
+                EmulatorLink::create_with_frames(&node, run_id, wait, &devices.frame_specs())?;
             let recorder = open_recorder(cfg, run_id, extras.sinks)?;
             let launched = launch(&StubLaunch { run_id, wait })?
                 .and_then(|pid| PeerProcess::watch(i32::try_from(pid).ok()?));
@@ -576,7 +581,9 @@ pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, Se
     if !after_publish {
         sched.max_duration_ns = sched.max_duration_ns.min(end_t_ns);
     }
-    let mut link = ReplayLink::new(log).aborting_at(after_publish.then_some(last_step));
+    let mut link = ReplayLink::new(log)
+        .with_frames(&devices.frame_specs())
+        .aborting_at(after_publish.then_some(last_step));
     let mut clock = ReplayClock::default();
     let mut summary = scheduler::run(
         &sched,

@@ -1,12 +1,13 @@
 //! Flight software from a shared library with the C ABI of `shared/include/oils.h`
 //! (`--fsw c:PATH`): hashed (BLAKE3, for the run report), loaded with libloading,
 //! checked (ABI version and layout hash) before anything else is called, and wrapped as
-//! a [`FlightSoftware`].
+//! a [`FlightSoftware`]. The optional `oils_fsw_frame` (ABI v2) gets the frames the
+//! telemetry announces, in place.
 
 use crate::fsw::{FlightSoftware, FswFailure};
 use libloading::Library;
 use oils_shared::c_abi::{FswConfig, FSW_ABI_VERSION, FSW_LAYOUT_HASH, FSW_STATUS_OK};
-use oils_shared::{Command, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH};
+use oils_shared::{Command, FrameAnnouncement, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH};
 use std::ffi::{c_void, CString};
 use std::path::{Path, PathBuf};
 
@@ -15,6 +16,7 @@ type LayoutHashFn = unsafe extern "C" fn() -> u64;
 type InitFn = unsafe extern "C" fn(*const FswConfig) -> *mut c_void;
 type StepFn = unsafe extern "C" fn(*mut c_void, *const Telemetry, *mut Command) -> i32;
 type FiniFn = unsafe extern "C" fn(*mut c_void);
+type FrameFn = unsafe extern "C" fn(*mut c_void, *const FrameAnnouncement, *const u8, usize) -> i32;
 
 /// Why a C flight software could not be loaded.
 #[derive(Debug, thiserror::Error)]
@@ -94,6 +96,10 @@ pub struct CLibraryFsw {
     ctx: *mut c_void,
     step_fn: StepFn,
     fini_fn: FiniFn,
+    /// `oils_fsw_frame`, if the library exports it.
+    frame_fn: Option<FrameFn>,
+    /// A nonzero status `oils_fsw_frame` returned: the step it came before fails.
+    frame_status: Option<i32>,
     failure: Option<FswFailure>,
     blake3: String,
     // Last field: dropped after `Drop::drop` has called `oils_fsw_fini`.
@@ -159,6 +165,8 @@ impl CLibraryFsw {
         let init_fn: InitFn = unsafe { symbol(&library, path, "oils_fsw_init")? };
         let step_fn: StepFn = unsafe { symbol(&library, path, "oils_fsw_step")? };
         let fini_fn: FiniFn = unsafe { symbol(&library, path, "oils_fsw_fini")? };
+        // SAFETY: the type `oils.h` declares for the optional `oils_fsw_frame`.
+        let frame_fn: Option<FrameFn> = unsafe { symbol(&library, path, "oils_fsw_frame") }.ok();
         let params =
             CString::new(params).map_err(|_| CLibraryError::ParamsNul { path: owned() })?;
         let config = FswConfig {
@@ -179,6 +187,8 @@ impl CLibraryFsw {
             ctx,
             step_fn,
             fini_fn,
+            frame_fn,
+            frame_status: None,
             failure: None,
             blake3,
             _library: library,
@@ -219,6 +229,13 @@ impl FlightSoftware for CLibraryFsw {
         if self.failure.is_some() {
             return cmd;
         }
+        if let Some(status) = self.frame_status.take() {
+            self.failure = Some(FswFailure {
+                step: tlm.header.step,
+                status,
+            });
+            return cmd;
+        }
         // SAFETY: `ctx` came from this library's init and is not yet finalised; both
         // packets are valid for the call.
         let status = unsafe { (self.step_fn)(self.ctx, tlm, &mut cmd) };
@@ -234,6 +251,21 @@ impl FlightSoftware for CLibraryFsw {
 
     fn failure(&self) -> Option<FswFailure> {
         self.failure
+    }
+
+    fn frame(&mut self, ann: &FrameAnnouncement, pixels: &[u8]) {
+        let Some(frame_fn) = self.frame_fn else {
+            return;
+        };
+        if self.failure.is_some() || self.frame_status.is_some() {
+            return;
+        }
+        // SAFETY: `ctx` is live; `ann` and `pixels` are valid for the call, which is all
+        // the ABI promises the library.
+        let status = unsafe { frame_fn(self.ctx, ann, pixels.as_ptr(), pixels.len()) };
+        if status != FSW_STATUS_OK {
+            self.frame_status = Some(status);
+        }
     }
 }
 

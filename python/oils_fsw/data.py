@@ -42,8 +42,10 @@ PathLike = Union[str, "os.PathLike[str]"]
 
 LAYOUT_FORMAT = "oils-log-layout-1"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
-OILSLOG_MAGIC = b"OILSLOG7"
-# The same records uncompressed, one after the other (still read).
+OILSLOG_MAGIC = b"OILSLOG8"
+# The same zstd frames with protocol v3 records (read by the layout their header carries).
+OILSLOG7_MAGIC = b"OILSLOG7"
+# Protocol v3 records uncompressed, one after the other (still read, by their layout).
 OILSLOG6_MAGIC = b"OILSLOG6"
 
 __all__ = [
@@ -85,8 +87,8 @@ def _load_layout(layout: Union[PathLike, Dict[str, Any], None], header: Dict[str
 
 def _read_header(path: Path, data) -> Dict[str, Any]:
     """The JSON header of an OILSLOG7 or OILSLOG6 file (its CRC checked)."""
-    if len(data) < 16 or bytes(data[:8]) not in (OILSLOG_MAGIC, OILSLOG6_MAGIC):
-        raise LogError(f"{path}: not an OILSLOG7 or OILSLOG6 log (magic {bytes(data[:8])!r})")
+    if len(data) < 16 or bytes(data[:8]) not in (OILSLOG_MAGIC, OILSLOG7_MAGIC, OILSLOG6_MAGIC):
+        raise LogError(f"{path}: not an OILSLOG8, OILSLOG7 or OILSLOG6 log (magic {bytes(data[:8])!r})")
     n = int.from_bytes(bytes(data[8:12]), "little")
     crc = int.from_bytes(bytes(data[12:16]), "little")
     if 16 + n > len(data):
@@ -142,7 +144,7 @@ def _binary_records(path: Path, layout, verify: bool):
     tsize, tmagic = int(trailer["size"]), trailer["magic"].encode()
     count = None
     problems = []
-    if bytes(data[:8]) == OILSLOG_MAGIC:
+    if bytes(data[:8]) in (OILSLOG_MAGIC, OILSLOG7_MAGIC):
         body, count, problems = _unframe(path, body, layout)
     elif len(body) >= tsize and (len(body) - tsize) % size == 0:
         t = bytes(body[len(body) - tsize:])

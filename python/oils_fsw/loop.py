@@ -72,8 +72,13 @@ def fly(
     run_id: int,
     startup_timeout_s: float = 10.0,
     silence_timeout_s: float = 5.0,
+    frame: Optional[Callable] = None,
 ) -> Summary:
     """Flies run ``run_id`` with ``step`` until the emulator's end-of-run telemetry.
+
+    ``frame``, if given, is called before ``step`` as ``frame(announcement, pixels)`` for
+    each frame Telemetry(k) announces (protocol v4), ``pixels`` a read-only numpy view of
+    the frame in shared memory, valid during the call only (``oils_fsw.frames``).
 
     ``step`` gets Telemetry(k) (a copy, yours to keep) and returns a ``Command`` with
     ``thrust_cmd_n``, ``engine_on`` and ``torque_cmd_body_nm`` filled; this loop stamps
@@ -94,6 +99,11 @@ def fly(
             f"(schema {SCHEMA_HASH:#018x}), the emulator v{version} (schema {schema_hash})"
         )
     wait = _attribute(tlm_event.attributes, "oils.wait") or "hybrid"
+    reader = None
+    if frame is not None:
+        from .frames import FrameReader
+
+        reader = FrameReader(node, run_id, _attribute(tlm_event.attributes, "oils.frames"))
 
     svc = lambda name: node.service_builder(iox2.ServiceName.new(names[name]))  # noqa: E731
     command_service = svc("command").publish_subscribe(Command).open()
@@ -133,6 +143,11 @@ def fly(
             )
         if h.flags & TLM_FLAG_END_OF_RUN:
             return Summary(commands=commands, last_step=last_step, wait=wait)
+        if reader is not None:
+            from .frames import announced
+
+            for ann in announced(tlm):
+                reader.with_frame(ann, frame)
         started = time.perf_counter_ns()
         cmd = step(tlm)
         compute_ns = time.perf_counter_ns() - started

@@ -1,4 +1,4 @@
-"""ctypes mirrors of the oils wire packets (protocol v3).
+"""ctypes mirrors of the oils wire packets (protocol v4).
 
 Field for field the Rust structs of ``shared/src/lib.rs`` and the C structs of
 ``shared/include/oils.h``; ``docs/protocol.md`` gives every unit and frame. The test
@@ -8,7 +8,7 @@ hash against what the Rust side prints (``cargo run -p oils-shared --example lay
 
 import ctypes
 
-PROTOCOL_VERSION = 3
+PROTOCOL_VERSION = 4
 ENGINE_COUNT = 4
 THRUSTER_COUNT = 8
 VELOCIMETER_BEAMS = 3
@@ -16,6 +16,15 @@ IMU_SAMPLES_MAX = 8
 STAR_TRACKER_SAMPLES_MAX = 2
 ALTIMETER_SAMPLES_MAX = 2
 VELOCIMETER_SAMPLES_MAX = 2
+FRAMES_MAX = 4  # frame announcements a SensorFrame can carry (protocol v4)
+FRAME_DEVICE_CAMERA = 1  # service oils/<run>/frame/camera
+FRAME_DEVICE_LIDAR = 2  # service oils/<run>/frame/lidar
+FRAME_DEVICE_TEST_CARD = 3  # service oils/<run>/frame/test-card
+FRAME_FORMAT_U16_LE = 1  # uint16 little-endian DN, row-major
+FRAME_FORMAT_F32_LE_M = 2  # float32 little-endian range in metres, row-major; 0 = no return
+FRAME_FLAG_SATURATED = 1 << 0
+FRAME_FLAG_OUTAGE = 1 << 1
+FRAME_FLAG_FROZEN = 1 << 2
 TLM_FLAG_END_OF_RUN = 1 << 0  # last telemetry of the run: answer nothing
 TLM_FLAG_NAV_NOISE = 1 << 1  # navigation values carry seeded noise
 TLM_FLAG_FOOTPAD_CONTACT = 1 << 2  # a footpad touches the ground: engines off
@@ -49,8 +58,9 @@ SCHEMA = (
     "StarTrackerSample{t_ns:i64@0,q_mci_from_body:[f64;4]@8,valid:u32@40,flags:u32@44}=48|"
     "AltimeterSample{t_ns:i64@0,range_m:f64@8,valid:u32@16,flags:u32@20}=24|"
     "VelocimeterSample{t_ns:i64@0,los_velocity_m_s:[f64;3]@8,range_m:[f64;3]@32,valid:[u32;3]@56,flags:u32@68}=72|"
-    "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,reserved:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728}=872|"
-    "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1176|"
+    "FrameAnnouncement{device:u32@0,format:u32@4,width:u32@8,height:u32@12,seq:u64@16,t_ns:i64@24,exposure_ns:u64@32,bytes:u32@40,flags:u32@44,hash:u64@48}=56|"
+    "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,frame_count:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728,frames:[FrameAnnouncement;4]@872}=1096|"
+    "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1400|"
     "FswReport{nav_pos_mci_m:[f64;3]@0,nav_vel_mci_m_s:[f64;3]@24,nav_pos_sigma_m:[f64;3]@48,nav_vel_sigma_m_s:[f64;3]@72,nav_altitude_m:f64@96,nav_altitude_sigma_m:f64@104,group_compute_ns:[u32;4]@112,nav_flags:u32@128,phase:u32@132,boot_count:u32@136,cycle_slips:u32@140}=144|"
     "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188,fsw:FswReport@192}=336|"
 )
@@ -165,6 +175,31 @@ class VelocimeterSample(ctypes.Structure):
     ]
 
 
+class FrameAnnouncement(ctypes.Structure):
+    """A frame published on oils/<run>/frame/<device> before this telemetry (protocol v4).
+
+    Its pixels are the sample's payload (``bytes`` long, ``format``), this struct its user
+    header; ``hash`` is XXH3-64 (seed 0) of the pixels."""
+
+    _fields_ = [
+        ("device", _u32),  # FRAME_DEVICE_*
+        ("format", _u32),  # FRAME_FORMAT_*
+        ("width", _u32),
+        ("height", _u32),
+        ("seq", _u64),  # the device's frame counter from 0
+        ("t_ns", _i64),  # time of validity (mid-exposure)
+        ("exposure_ns", _u64),
+        ("bytes", _u32),
+        ("flags", _u32),  # FRAME_FLAG_*
+        ("hash", _u64),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        """The iceoryx2 user-header type name, as the Rust struct declares it."""
+        return "oils.v4.FrameAnnouncement"
+
+
 class SensorFrame(ctypes.Structure):
     """Every device sample since the last cycle; *_count entries of each array are used."""
 
@@ -174,17 +209,18 @@ class SensorFrame(ctypes.Structure):
         ("laser_altimeter_count", _u32),
         ("rf_altimeter_count", _u32),
         ("velocimeter_count", _u32),
-        ("reserved", _u32),
+        ("frame_count", _u32),
         ("imu", ImuSample * IMU_SAMPLES_MAX),
         ("star_tracker", StarTrackerSample * STAR_TRACKER_SAMPLES_MAX),
         ("laser_altimeter", AltimeterSample * ALTIMETER_SAMPLES_MAX),
         ("rf_altimeter", AltimeterSample * ALTIMETER_SAMPLES_MAX),
         ("velocimeter", VelocimeterSample * VELOCIMETER_SAMPLES_MAX),
+        ("frames", FrameAnnouncement * FRAMES_MAX),
     ]
 
 
 class Telemetry(ctypes.Structure):
-    """Emulator -> flight software, once per cycle, at t_k (1176 bytes)."""
+    """Emulator -> flight software, once per cycle, at t_k (1400 bytes)."""
 
     _fields_ = [
         ("header", PacketHeader),
@@ -199,7 +235,7 @@ class Telemetry(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """iceoryx2 type name (must match the Rust side)."""
-        return "oils.v3.Telemetry"
+        return "oils.v4.Telemetry"
 
 
 class FswReport(ctypes.Structure):
@@ -238,4 +274,4 @@ class Command(ctypes.Structure):
     @staticmethod
     def type_name() -> str:
         """iceoryx2 type name (must match the Rust side)."""
-        return "oils.v3.Command"
+        return "oils.v4.Command"

@@ -176,7 +176,7 @@ class LogsEqualTheCsvExport(unittest.TestCase):
     def test_not_a_log_is_refused(self):
         junk = self.tmp / "junk.oilslog"
         junk.write_bytes(b"OILSLOG1" + bytes(64))
-        with self.assertRaisesRegex(data.LogError, "not an OILSLOG7 or OILSLOG6 log"):
+        with self.assertRaisesRegex(data.LogError, "not an OILSLOG8, OILSLOG7 or OILSLOG6 log"):
             oils_fsw.read_log(junk)
 
 

@@ -43,7 +43,7 @@ class LayoutMatchesRust(unittest.TestCase):
                 want = rust["fields"][field]
                 self.assertEqual(getattr(cls, field).offset, want["offset"], f"{name}.{field}")
                 self.assertEqual(getattr(cls, field).size, self.size_of(want["type"]), f"{name}.{field}")
-        self.assertEqual(mirrored, 12)  # protocol v3: FswReport is the twelfth
+        self.assertEqual(mirrored, 13)  # protocol v4: FrameAnnouncement is the thirteenth
 
     def size_of(self, ty: str) -> int:
         if ty.startswith("["):
@@ -54,8 +54,9 @@ class LayoutMatchesRust(unittest.TestCase):
         return self.rust["structs"][ty]["size"]
 
     def test_type_names_are_the_rust_ones(self):
-        self.assertEqual(p.Telemetry.type_name(), "oils.v3.Telemetry")
-        self.assertEqual(p.Command.type_name(), "oils.v3.Command")
+        self.assertEqual(p.Telemetry.type_name(), "oils.v4.Telemetry")
+        self.assertEqual(p.Command.type_name(), "oils.v4.Command")
+        self.assertEqual(p.FrameAnnouncement.type_name(), "oils.v4.FrameAnnouncement")
         self.assertEqual(ctypes.alignment(p.Telemetry), 8)
 
 

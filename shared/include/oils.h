@@ -1,4 +1,4 @@
-/* oils.h: the oils bench's wire packets and flight-software C ABI, v1.
+/* oils.h: the oils bench's wire packets and flight-software C ABI, v2.
  *
  * GENERATED from shared/src/lib.rs (SCHEMA) and shared/src/c_abi.rs; do not edit.
  * Regenerate: cargo run -p oils-shared --example c_header > shared/include/oils.h
@@ -16,10 +16,10 @@
 extern "C" {
 #endif
 
-#define OILS_PROTOCOL_VERSION 3u
-#define OILS_SCHEMA_HASH UINT64_C(0x93604debf7838a12)
-#define OILS_FSW_ABI_VERSION 1u
-#define OILS_FSW_LAYOUT_HASH UINT64_C(0x7fd827c5eac8e267)
+#define OILS_PROTOCOL_VERSION 4u
+#define OILS_SCHEMA_HASH UINT64_C(0x4a5af273d1422863)
+#define OILS_FSW_ABI_VERSION 2u
+#define OILS_FSW_LAYOUT_HASH UINT64_C(0xb7367e4057532798)
 #define OILS_ENGINE_COUNT 4
 #define OILS_TLM_FLAG_END_OF_RUN 1u /* last telemetry: answer nothing */
 #define OILS_TLM_FLAG_NAV_NOISE 2u  /* nav values carry seeded noise */
@@ -47,6 +47,15 @@ extern "C" {
 #define OILS_SAMPLE_FLAG_NO_LOCK 2u
 #define OILS_SAMPLE_FLAG_INHIBITED 4u
 #define OILS_SAMPLE_FLAG_OUTAGE 8u
+#define OILS_FRAMES_MAX 4
+#define OILS_FRAME_DEVICE_CAMERA 1u
+#define OILS_FRAME_DEVICE_LIDAR 2u
+#define OILS_FRAME_DEVICE_TEST_CARD 3u
+#define OILS_FRAME_FORMAT_U16_LE 1u  /* uint16 little-endian DN, row-major */
+#define OILS_FRAME_FORMAT_F32_LE_M 2u  /* float32 little-endian range, metres; 0 = no return */
+#define OILS_FRAME_FLAG_SATURATED 1u
+#define OILS_FRAME_FLAG_OUTAGE 2u
+#define OILS_FRAME_FLAG_FROZEN 4u
 #define OILS_ATTITUDE_MODE_IDEAL_TORQUE 0u
 #define OILS_ATTITUDE_MODE_THRUSTERS 1u
 #define OILS_FSW_STATUS_OK 0 /* any other value from oils_fsw_step stops the run */
@@ -61,8 +70,9 @@ extern "C" {
   "StarTrackerSample{t_ns:i64@0,q_mci_from_body:[f64;4]@8,valid:u32@40,flags:u32@44}=48|" \
   "AltimeterSample{t_ns:i64@0,range_m:f64@8,valid:u32@16,flags:u32@20}=24|" \
   "VelocimeterSample{t_ns:i64@0,los_velocity_m_s:[f64;3]@8,range_m:[f64;3]@32,valid:[u32;3]@56,flags:u32@68}=72|" \
-  "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,reserved:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728}=872|" \
-  "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1176|" \
+  "FrameAnnouncement{device:u32@0,format:u32@4,width:u32@8,height:u32@12,seq:u64@16,t_ns:i64@24,exposure_ns:u64@32,bytes:u32@40,flags:u32@44,hash:u64@48}=56|" \
+  "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,frame_count:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728,frames:[FrameAnnouncement;4]@872}=1096|" \
+  "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1400|" \
   "FswReport{nav_pos_mci_m:[f64;3]@0,nav_vel_mci_m_s:[f64;3]@24,nav_pos_sigma_m:[f64;3]@48,nav_vel_sigma_m_s:[f64;3]@72,nav_altitude_m:f64@96,nav_altitude_sigma_m:f64@104,group_compute_ns:[u32;4]@112,nav_flags:u32@128,phase:u32@132,boot_count:u32@136,cycle_slips:u32@140}=144|" \
   "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188,fsw:FswReport@192}=336|"
 
@@ -126,18 +136,32 @@ typedef struct oils_velocimeter_sample {
   uint32_t flags;
 } oils_velocimeter_sample;
 
+typedef struct oils_frame_announcement {
+  uint32_t device;
+  uint32_t format;
+  uint32_t width;
+  uint32_t height;
+  uint64_t seq;
+  int64_t t_ns;
+  uint64_t exposure_ns;
+  uint32_t bytes;
+  uint32_t flags;
+  uint64_t hash;
+} oils_frame_announcement;
+
 typedef struct oils_sensor_frame {
   uint32_t imu_count;
   uint32_t star_tracker_count;
   uint32_t laser_altimeter_count;
   uint32_t rf_altimeter_count;
   uint32_t velocimeter_count;
-  uint32_t reserved;
+  uint32_t frame_count;
   oils_imu_sample imu[8];
   oils_star_tracker_sample star_tracker[2];
   oils_altimeter_sample laser_altimeter[2];
   oils_altimeter_sample rf_altimeter[2];
   oils_velocimeter_sample velocimeter[2];
+  oils_frame_announcement frames[4];
 } oils_sensor_frame;
 
 typedef struct oils_telemetry {
@@ -235,18 +259,30 @@ OILS_STATIC_ASSERT(offsetof(oils_velocimeter_sample, range_m) == 32, "oils_veloc
 OILS_STATIC_ASSERT(offsetof(oils_velocimeter_sample, valid) == 56, "oils_velocimeter_sample.valid offset");
 OILS_STATIC_ASSERT(offsetof(oils_velocimeter_sample, flags) == 68, "oils_velocimeter_sample.flags offset");
 OILS_STATIC_ASSERT(sizeof(oils_velocimeter_sample) == 72, "oils_velocimeter_sample size");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, device) == 0, "oils_frame_announcement.device offset");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, format) == 4, "oils_frame_announcement.format offset");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, width) == 8, "oils_frame_announcement.width offset");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, height) == 12, "oils_frame_announcement.height offset");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, seq) == 16, "oils_frame_announcement.seq offset");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, t_ns) == 24, "oils_frame_announcement.t_ns offset");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, exposure_ns) == 32, "oils_frame_announcement.exposure_ns offset");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, bytes) == 40, "oils_frame_announcement.bytes offset");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, flags) == 44, "oils_frame_announcement.flags offset");
+OILS_STATIC_ASSERT(offsetof(oils_frame_announcement, hash) == 48, "oils_frame_announcement.hash offset");
+OILS_STATIC_ASSERT(sizeof(oils_frame_announcement) == 56, "oils_frame_announcement size");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, imu_count) == 0, "oils_sensor_frame.imu_count offset");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, star_tracker_count) == 4, "oils_sensor_frame.star_tracker_count offset");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, laser_altimeter_count) == 8, "oils_sensor_frame.laser_altimeter_count offset");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, rf_altimeter_count) == 12, "oils_sensor_frame.rf_altimeter_count offset");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, velocimeter_count) == 16, "oils_sensor_frame.velocimeter_count offset");
-OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, reserved) == 20, "oils_sensor_frame.reserved offset");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, frame_count) == 20, "oils_sensor_frame.frame_count offset");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, imu) == 24, "oils_sensor_frame.imu offset");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, star_tracker) == 536, "oils_sensor_frame.star_tracker offset");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, laser_altimeter) == 632, "oils_sensor_frame.laser_altimeter offset");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, rf_altimeter) == 680, "oils_sensor_frame.rf_altimeter offset");
 OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, velocimeter) == 728, "oils_sensor_frame.velocimeter offset");
-OILS_STATIC_ASSERT(sizeof(oils_sensor_frame) == 872, "oils_sensor_frame size");
+OILS_STATIC_ASSERT(offsetof(oils_sensor_frame, frames) == 872, "oils_sensor_frame.frames offset");
+OILS_STATIC_ASSERT(sizeof(oils_sensor_frame) == 1096, "oils_sensor_frame size");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, header) == 0, "oils_telemetry.header offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, nav) == 40, "oils_telemetry.nav offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, accel_body_m_s2) == 144, "oils_telemetry.accel_body_m_s2 offset");
@@ -254,7 +290,7 @@ OILS_STATIC_ASSERT(offsetof(oils_telemetry, altitude_m) == 168, "oils_telemetry.
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, mass_estimate_kg) == 176, "oils_telemetry.mass_estimate_kg offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, propulsion) == 184, "oils_telemetry.propulsion offset");
 OILS_STATIC_ASSERT(offsetof(oils_telemetry, sensors) == 304, "oils_telemetry.sensors offset");
-OILS_STATIC_ASSERT(sizeof(oils_telemetry) == 1176, "oils_telemetry size");
+OILS_STATIC_ASSERT(sizeof(oils_telemetry) == 1400, "oils_telemetry size");
 OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_pos_mci_m) == 0, "oils_fsw_report.nav_pos_mci_m offset");
 OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_vel_mci_m_s) == 24, "oils_fsw_report.nav_vel_mci_m_s offset");
 OILS_STATIC_ASSERT(offsetof(oils_fsw_report, nav_pos_sigma_m) == 48, "oils_fsw_report.nav_pos_sigma_m offset");
@@ -306,6 +342,14 @@ int32_t oils_fsw_step(void *ctx, const oils_telemetry *tlm, oils_command *cmd);
 
 /* Called once after the last step (also after a failed step): free the context. */
 void oils_fsw_fini(void *ctx);
+
+/* Optional (ABI v2): called before oils_fsw_step once per frame that telemetry
+ * announces (tlm->sensors.frames), with the frame's pixels in shared memory: len ==
+ * ann->bytes bytes, read-only, valid until this call returns (copy what you keep).
+ * Must not block or allocate. Return OILS_FSW_STATUS_OK, or any other value to stop
+ * the run. A library that does not export it never sees frames. */
+int32_t oils_fsw_frame(void *ctx, const oils_frame_announcement *ann,
+                       const uint8_t *pixels, size_t len);
 
 #ifdef __cplusplus
 } /* extern "C" */

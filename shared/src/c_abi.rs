@@ -10,6 +10,11 @@
 //! | `oils_fsw_init` | `void *(const oils_fsw_config *)` | a context, or NULL on failure |
 //! | `oils_fsw_step` | `int32_t (void *ctx, const oils_telemetry *, oils_command *)` | [`FSW_STATUS_OK`] or an error code |
 //! | `oils_fsw_fini` | `void (void *ctx)` | frees the context |
+//! | `oils_fsw_frame` (optional) | `int32_t (void *ctx, const oils_frame_announcement *, const uint8_t *pixels, size_t len)` | a frame announced in the coming telemetry |
+//!
+//! `oils_fsw_frame` (ABI v2) is called before `oils_fsw_step` once per frame the telemetry
+//! announces, with a pointer into the frame's shared memory (no copy), valid during the
+//! call only; a library without it never sees frames.
 //!
 //! The loader checks the first two before calling anything else. The header is generated
 //! from [`crate::SCHEMA`] and [`FSW_ABI_SCHEMA`] by [`c_header`], so it cannot drift from
@@ -24,6 +29,10 @@ use crate::{
 };
 use crate::{ENGINE_COUNT, PROTOCOL_VERSION, SCHEMA, SCHEMA_HASH};
 use crate::{
+    FRAMES_MAX, FRAME_DEVICE_CAMERA, FRAME_DEVICE_LIDAR, FRAME_DEVICE_TEST_CARD, FRAME_FLAG_FROZEN,
+    FRAME_FLAG_OUTAGE, FRAME_FLAG_SATURATED, FRAME_FORMAT_F32_LE_M, FRAME_FORMAT_U16_LE,
+};
+use crate::{
     NAV_FLAG_FROM_SENSORS, NAV_FLAG_LASER_LOST, NAV_FLAG_LASER_USED, NAV_FLAG_REINIT,
     NAV_FLAG_RF_USED, NAV_FLAG_STAR_TRACKER_USED, NAV_FLAG_VALID, NAV_FLAG_VELOCIMETER_USED,
     RATE_GROUPS, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_STATE_VECTOR,
@@ -32,9 +41,9 @@ use crate::{TLM_FLAG_END_OF_RUN, TLM_FLAG_FOOTPAD_CONTACT, TLM_FLAG_NAV_NOISE};
 use core::ffi::c_char;
 use std::fmt::Write;
 
-/// Version of the C ABI (the five functions, [`FswConfig`] and the status codes); bump
-/// on any change to them.
-pub const FSW_ABI_VERSION: u32 = 1;
+/// Version of the C ABI (the five functions, the optional `oils_fsw_frame`, [`FswConfig`]
+/// and the status codes); bump on any change to them. v2 added `oils_fsw_frame`.
+pub const FSW_ABI_VERSION: u32 = 2;
 
 /// Layout of the structs only the C ABI uses, in the same notation as [`crate::SCHEMA`]
 /// (`ptr` is a `const char *`, 8 bytes: the ABI is for 64-bit targets).
@@ -198,6 +207,15 @@ pub fn c_header() -> String {
          #define OILS_SAMPLE_FLAG_NO_LOCK {SAMPLE_FLAG_NO_LOCK}u\n\
          #define OILS_SAMPLE_FLAG_INHIBITED {SAMPLE_FLAG_INHIBITED}u\n\
          #define OILS_SAMPLE_FLAG_OUTAGE {SAMPLE_FLAG_OUTAGE}u\n\
+         #define OILS_FRAMES_MAX {FRAMES_MAX}\n\
+         #define OILS_FRAME_DEVICE_CAMERA {FRAME_DEVICE_CAMERA}u\n\
+         #define OILS_FRAME_DEVICE_LIDAR {FRAME_DEVICE_LIDAR}u\n\
+         #define OILS_FRAME_DEVICE_TEST_CARD {FRAME_DEVICE_TEST_CARD}u\n\
+         #define OILS_FRAME_FORMAT_U16_LE {FRAME_FORMAT_U16_LE}u  /* uint16 little-endian DN, row-major */\n\
+         #define OILS_FRAME_FORMAT_F32_LE_M {FRAME_FORMAT_F32_LE_M}u  /* float32 little-endian range, metres; 0 = no return */\n\
+         #define OILS_FRAME_FLAG_SATURATED {FRAME_FLAG_SATURATED}u\n\
+         #define OILS_FRAME_FLAG_OUTAGE {FRAME_FLAG_OUTAGE}u\n\
+         #define OILS_FRAME_FLAG_FROZEN {FRAME_FLAG_FROZEN}u\n\
          #define OILS_ATTITUDE_MODE_IDEAL_TORQUE {ATTITUDE_MODE_IDEAL_TORQUE}u\n\
          #define OILS_ATTITUDE_MODE_THRUSTERS {ATTITUDE_MODE_THRUSTERS}u\n\
          #define OILS_FSW_STATUS_OK {FSW_STATUS_OK} /* any other value from oils_fsw_step stops the run */\n"
@@ -269,7 +287,14 @@ pub fn c_header() -> String {
          * the run with that error code. */\n\
          int32_t oils_fsw_step(void *ctx, const oils_telemetry *tlm, oils_command *cmd);\n\
          \n/* Called once after the last step (also after a failed step): free the context. */\n\
-         void oils_fsw_fini(void *ctx);\n"
+         void oils_fsw_fini(void *ctx);\n\
+         \n/* Optional (ABI v2): called before oils_fsw_step once per frame that telemetry\n \
+         * announces (tlm->sensors.frames), with the frame's pixels in shared memory: len ==\n \
+         * ann->bytes bytes, read-only, valid until this call returns (copy what you keep).\n \
+         * Must not block or allocate. Return OILS_FSW_STATUS_OK, or any other value to stop\n \
+         * the run. A library that does not export it never sees frames. */\n\
+         int32_t oils_fsw_frame(void *ctx, const oils_frame_announcement *ann,\n\
+         \x20                      const uint8_t *pixels, size_t len);\n"
     );
     let _ = writeln!(
         w,
@@ -390,18 +415,31 @@ mod tests {
                 valid,
                 flags
             },
+            FrameAnnouncement {
+                device,
+                format,
+                width,
+                height,
+                seq,
+                t_ns,
+                exposure_ns,
+                bytes,
+                flags,
+                hash
+            },
             SensorFrame {
                 imu_count,
                 star_tracker_count,
                 laser_altimeter_count,
                 rf_altimeter_count,
                 velocimeter_count,
-                reserved,
+                frame_count,
                 imu,
                 star_tracker,
                 laser_altimeter,
                 rf_altimeter,
-                velocimeter
+                velocimeter,
+                frames
             },
             Telemetry {
                 header,

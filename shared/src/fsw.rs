@@ -6,7 +6,10 @@
 //! calls one in its own thread (the in-process link). Neither needs the other's code.
 
 use crate::clock::monotonic_ns;
-use crate::{Command, PacketHeader, Telemetry, TLM_FLAG_COMPUTER_RESET};
+use crate::{
+    Command, FrameAnnouncement, PacketHeader, Telemetry, FRAMES_MAX, TLM_FLAG_COMPUTER_RESET,
+    TLM_FLAG_END_OF_RUN,
+};
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::path::PathBuf;
@@ -39,6 +42,24 @@ pub trait FlightSoftware {
     /// [`answer_untimed`]): nothing it reports uses those figures, and the digest never
     /// covers them. Default: nothing (flight software that times nothing).
     fn set_compute_timing(&mut self, _on: bool) {}
+    /// A frame the coming telemetry announces (protocol v4, `tlm.sensors.frames`), called
+    /// before that telemetry's `step`, once per frame that arrived: `pixels` are the
+    /// frame's bytes in place (in the iceoryx2 sample's shared memory, or the in-process
+    /// link's buffer), valid during the call only; copy what you keep. Not called while the
+    /// computer resets. Must not allocate. A frame that was lost is announced but never
+    /// handed over (see [`announced_frames`]). Default: frames are ignored.
+    fn frame(&mut self, _ann: &FrameAnnouncement, _pixels: &[u8]) {}
+}
+
+/// The frames `tlm` announces that a flight software is to be handed
+/// ([`FlightSoftware::frame`]): none in an end-of-run telemetry or while the computer
+/// resets (nothing runs on board).
+pub fn announced_frames(tlm: &Telemetry) -> &[FrameAnnouncement] {
+    if tlm.header.flags & (TLM_FLAG_END_OF_RUN | TLM_FLAG_COMPUTER_RESET) != 0 {
+        return &[];
+    }
+    let n = (tlm.sensors.frame_count as usize).min(FRAMES_MAX);
+    &tlm.sensors.frames[..n]
 }
 
 /// Runs the flight software on Telemetry(k) and returns Command(k) stamped as the wire

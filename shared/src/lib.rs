@@ -13,6 +13,11 @@
 //! sensor: lockstep and the run digest stay one exchange per cycle, and C and Python
 //! clients keep their single subscription (see `docs/protocol.md`).
 //!
+//! Protocol v4 adds imaging devices: a frame (hundreds of kilobytes) travels on its own
+//! service, `oils/<run>/frame/<device>`, as a zero-copy dynamic slice whose user header
+//! is its [`FrameAnnouncement`]; the next telemetry announces it in
+//! [`SensorFrame::frames`], so lockstep and the digest still cover every exchange.
+//!
 //! Every field is `f64`, `u64`, `i64` or `u32` and every struct is padded by hand to a
 //! multiple of 8 bytes, so the layout is the same in Rust, C, C++ and Python `ctypes`.
 //! `docs/protocol.md` lists every offset; the test `layout_is_pinned` fails if one moves.
@@ -35,7 +40,7 @@ pub mod service;
 pub mod signals;
 
 /// Protocol version; bump on any change to a packet layout or meaning.
-pub const PROTOCOL_VERSION: u32 = 3;
+pub const PROTOCOL_VERSION: u32 = 4;
 
 /// Number of main engines.
 pub const ENGINE_COUNT: usize = 4;
@@ -51,6 +56,51 @@ pub const STAR_TRACKER_SAMPLES_MAX: usize = 2;
 pub const ALTIMETER_SAMPLES_MAX: usize = 2;
 /// Velocimeter samples a [`SensorFrame`] can carry.
 pub const VELOCIMETER_SAMPLES_MAX: usize = 2;
+/// Frame announcements a [`SensorFrame`] can carry: one per imaging device per cycle
+/// (a frame device's period is at least the flight-software cycle, checked before tick 0).
+pub const FRAMES_MAX: usize = 4;
+
+/// [`FrameAnnouncement::device`]: the navigation camera (service `.../frame/camera`).
+pub const FRAME_DEVICE_CAMERA: u32 = 1;
+/// [`FrameAnnouncement::device`]: the flash lidar (service `.../frame/lidar`).
+pub const FRAME_DEVICE_LIDAR: u32 = 2;
+/// [`FrameAnnouncement::device`]: the test card, a deterministic pattern for checking a
+/// frame path (service `.../frame/test-card`).
+pub const FRAME_DEVICE_TEST_CARD: u32 = 3;
+
+/// The name of frame device `device` (`FRAME_DEVICE_*`): its service's last segment
+/// (`oils/<run>/frame/<name>`) and the prefix of its exported files.
+pub const fn frame_device_name(device: u32) -> Option<&'static str> {
+    match device {
+        FRAME_DEVICE_CAMERA => Some("camera"),
+        FRAME_DEVICE_LIDAR => Some("lidar"),
+        FRAME_DEVICE_TEST_CARD => Some("test-card"),
+        _ => None,
+    }
+}
+
+/// Bytes per pixel of frame format `format` (`FRAME_FORMAT_*`).
+pub const fn frame_format_bytes_per_pixel(format: u32) -> Option<usize> {
+    match format {
+        FRAME_FORMAT_U16_LE => Some(2),
+        FRAME_FORMAT_F32_LE_M => Some(4),
+        _ => None,
+    }
+}
+
+/// [`FrameAnnouncement::format`]: unsigned 16-bit little-endian digital numbers, row-major
+/// from the top-left pixel.
+pub const FRAME_FORMAT_U16_LE: u32 = 1;
+/// [`FrameAnnouncement::format`]: 32-bit little-endian IEEE floats, range in metres,
+/// row-major from the top-left pixel; 0 = no return.
+pub const FRAME_FORMAT_F32_LE_M: u32 = 2;
+
+/// Frame flag: at least one pixel saturated.
+pub const FRAME_FLAG_SATURATED: u32 = 1 << 0;
+/// Frame flag: the device is in an outage (blinded, a dropout): the pixels mean nothing.
+pub const FRAME_FLAG_OUTAGE: u32 = 1 << 1;
+/// Frame flag: the device is frozen: these are the pixels of an earlier frame.
+pub const FRAME_FLAG_FROZEN: u32 = 1 << 2;
 
 /// Telemetry flag: this is the last telemetry of the run; the stub answers nothing and exits.
 pub const TLM_FLAG_END_OF_RUN: u32 = 1 << 0;
@@ -125,8 +175,9 @@ pub const SCHEMA: &str = concat!(
     "StarTrackerSample{t_ns:i64@0,q_mci_from_body:[f64;4]@8,valid:u32@40,flags:u32@44}=48|",
     "AltimeterSample{t_ns:i64@0,range_m:f64@8,valid:u32@16,flags:u32@20}=24|",
     "VelocimeterSample{t_ns:i64@0,los_velocity_m_s:[f64;3]@8,range_m:[f64;3]@32,valid:[u32;3]@56,flags:u32@68}=72|",
-    "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,reserved:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728}=872|",
-    "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1176|",
+    "FrameAnnouncement{device:u32@0,format:u32@4,width:u32@8,height:u32@12,seq:u64@16,t_ns:i64@24,exposure_ns:u64@32,bytes:u32@40,flags:u32@44,hash:u64@48}=56|",
+    "SensorFrame{imu_count:u32@0,star_tracker_count:u32@4,laser_altimeter_count:u32@8,rf_altimeter_count:u32@12,velocimeter_count:u32@16,frame_count:u32@20,imu:[ImuSample;8]@24,star_tracker:[StarTrackerSample;2]@536,laser_altimeter:[AltimeterSample;2]@632,rf_altimeter:[AltimeterSample;2]@680,velocimeter:[VelocimeterSample;2]@728,frames:[FrameAnnouncement;4]@872}=1096|",
+    "Telemetry{header:PacketHeader@0,nav:NavState@40,accel_body_m_s2:[f64;3]@144,altitude_m:f64@168,mass_estimate_kg:f64@176,propulsion:PropulsionReadings@184,sensors:SensorFrame@304}=1400|",
     "FswReport{nav_pos_mci_m:[f64;3]@0,nav_vel_mci_m_s:[f64;3]@24,nav_pos_sigma_m:[f64;3]@48,nav_vel_sigma_m_s:[f64;3]@72,nav_altitude_m:f64@96,nav_altitude_sigma_m:f64@104,group_compute_ns:[u32;4]@112,nav_flags:u32@128,phase:u32@132,boot_count:u32@136,cycle_slips:u32@140}=144|",
     "Command{header:PacketHeader@0,thrust_cmd_n:[f64;4]@40,engine_on:[u32;4]@72,torque_cmd_body_nm:[f64;3]@88,stub_compute_ns:u64@112,thruster_on_time_ns:[u64;8]@120,attitude_mode:u32@184,reserved:u32@188,fsw:FswReport@192}=336|",
 );
@@ -153,7 +204,7 @@ pub const SCHEMA_HASH: u64 = schema_hash_of(SCHEMA);
 /// Header at the start of every packet.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.PacketHeader")]
+#[type_name("oils.v4.PacketHeader")]
 pub struct PacketHeader {
     /// [`PROTOCOL_VERSION`] of the sender.
     pub protocol_version: u32,
@@ -225,7 +276,7 @@ impl core::error::Error for ProtocolMismatch {}
 /// Navigation state as the onboard computer sees it (possibly with seeded noise).
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.NavState")]
+#[type_name("oils.v4.NavState")]
 pub struct NavState {
     /// Position of the centre of mass, Moon-centred inertial, metres.
     pub pos_mci_m: [f64; 3],
@@ -240,7 +291,7 @@ pub struct NavState {
 /// One main engine's readings.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.EngineReading")]
+#[type_name("oils.v4.EngineReading")]
 pub struct EngineReading {
     /// Thrust as sensed (the propulsion model's output), newtons.
     pub thrust_n: f64,
@@ -255,7 +306,7 @@ pub struct EngineReading {
 /// Propulsion system readings.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.PropulsionReadings")]
+#[type_name("oils.v4.PropulsionReadings")]
 pub struct PropulsionReadings {
     /// Helium bottle pressure, pascals.
     pub gas_pressure_pa: f64,
@@ -270,7 +321,7 @@ pub struct PropulsionReadings {
 /// One IMU sample: velocity and angle increments over the IMU period ending at `t_ns`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.ImuSample")]
+#[type_name("oils.v4.ImuSample")]
 pub struct ImuSample {
     /// End of the integration period (time of validity), ns since the start of the run.
     pub t_ns: i64,
@@ -287,7 +338,7 @@ pub struct ImuSample {
 /// One star-tracker sample: the body attitude it measured.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.StarTrackerSample")]
+#[type_name("oils.v4.StarTrackerSample")]
 pub struct StarTrackerSample {
     /// Time of validity, ns since the start of the run.
     pub t_ns: i64,
@@ -303,7 +354,7 @@ pub struct StarTrackerSample {
 /// One altimeter sample: slant range along the beam to the terrain.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.AltimeterSample")]
+#[type_name("oils.v4.AltimeterSample")]
 pub struct AltimeterSample {
     /// Time of validity, ns since the start of the run.
     pub t_ns: i64,
@@ -319,7 +370,7 @@ pub struct AltimeterSample {
 /// to the surface and the range.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.VelocimeterSample")]
+#[type_name("oils.v4.VelocimeterSample")]
 pub struct VelocimeterSample {
     /// Time of validity, ns since the start of the run.
     pub t_ns: i64,
@@ -334,11 +385,55 @@ pub struct VelocimeterSample {
     pub flags: u32,
 }
 
+/// One frame published on its own service since the last cycle (protocol v4): what it
+/// is, when it is valid, and the XXH3-64 hash of its pixel bytes. The frame's bytes
+/// travel as an iceoryx2 dynamic slice on `oils/<run>/frame/<device>` with this struct as
+/// the sample's user header, published before the telemetry that announces it; the run
+/// digest covers the telemetry, hence every frame through its hash.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, ZeroCopySend)]
+#[repr(C)]
+#[type_name("oils.v4.FrameAnnouncement")]
+pub struct FrameAnnouncement {
+    /// `FRAME_DEVICE_*`.
+    pub device: u32,
+    /// `FRAME_FORMAT_*`: how to read the pixel bytes.
+    pub format: u32,
+    /// Pixels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+    /// The device's frame counter, from 0 (a gap means a frame was lost).
+    pub seq: u64,
+    /// Time of validity (mid-exposure), ns since the start of the run.
+    pub t_ns: i64,
+    /// Exposure (integration) time, ns.
+    pub exposure_ns: u64,
+    /// Length of the pixel bytes: `width * height * bytes per pixel`.
+    pub bytes: u32,
+    /// `FRAME_FLAG_*` bits.
+    pub flags: u32,
+    /// XXH3-64 (seed 0) of the pixel bytes.
+    pub hash: u64,
+}
+
+impl FrameAnnouncement {
+    /// Whether `pixels` are the frame this announces: their length and XXH3-64 hash.
+    pub fn matches(&self, pixels: &[u8]) -> bool {
+        pixels.len() == self.bytes as usize && frame_hash(pixels) == self.hash
+    }
+}
+
+/// The hash a [`FrameAnnouncement`] carries: XXH3-64 with seed 0 (`xxhash`'s
+/// `XXH3_64bits`, Python's `xxhash.xxh3_64_intdigest`).
+pub fn frame_hash(pixels: &[u8]) -> u64 {
+    xxhash_rust::xxh3::xxh3_64(pixels)
+}
+
 /// Every device sample produced since the last cycle, oldest first per device; the
 /// counts say how many entries of each array hold samples (the rest are zero).
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.SensorFrame")]
+#[type_name("oils.v4.SensorFrame")]
 pub struct SensorFrame {
     /// Entries of `imu` in use.
     pub imu_count: u32,
@@ -350,8 +445,8 @@ pub struct SensorFrame {
     pub rf_altimeter_count: u32,
     /// Entries of `velocimeter` in use.
     pub velocimeter_count: u32,
-    /// Zero.
-    pub reserved: u32,
+    /// Entries of `frames` in use (protocol v4; the field was `reserved` in v3).
+    pub frame_count: u32,
     /// IMU samples.
     pub imu: [ImuSample; IMU_SAMPLES_MAX],
     /// Star-tracker samples.
@@ -362,12 +457,15 @@ pub struct SensorFrame {
     pub rf_altimeter: [AltimeterSample; ALTIMETER_SAMPLES_MAX],
     /// Laser Doppler velocimeter samples.
     pub velocimeter: [VelocimeterSample; VELOCIMETER_SAMPLES_MAX],
+    /// The frames published since the last cycle, one per device at most, in device
+    /// order ([`FrameAnnouncement`]); independent of [`TLM_FLAG_SENSORS`].
+    pub frames: [FrameAnnouncement; FRAMES_MAX],
 }
 
 /// Emulator -> onboard computer, once per flight-software cycle, at `t_k`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.Telemetry")]
+#[type_name("oils.v4.Telemetry")]
 pub struct Telemetry {
     /// Packet header.
     pub header: PacketHeader,
@@ -391,7 +489,7 @@ pub struct Telemetry {
 /// bench never acts on it. All zero (`nav_flags` 0) means "nothing said".
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.FswReport")]
+#[type_name("oils.v4.FswReport")]
 pub struct FswReport {
     /// Estimated position, `mci`, metres.
     pub nav_pos_mci_m: [f64; 3],
@@ -422,7 +520,7 @@ pub struct FswReport {
 /// Onboard computer -> emulator, once per step: held over `[t_k, t_k+1)`.
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[repr(C)]
-#[type_name("oils.v3.Command")]
+#[type_name("oils.v4.Command")]
 pub struct Command {
     /// Packet header; `step` must echo the telemetry it answers.
     pub header: PacketHeader,
@@ -537,14 +635,23 @@ mod tests {
         assert_eq!(size_of::<VelocimeterSample>(), 72);
         assert_eq!(offset_of!(VelocimeterSample, valid), 56);
         assert_eq!(offset_of!(VelocimeterSample, flags), 68);
-        assert_eq!(size_of::<SensorFrame>(), 872);
+        assert_eq!(size_of::<FrameAnnouncement>(), 56);
+        assert_eq!(offset_of!(FrameAnnouncement, seq), 16);
+        assert_eq!(offset_of!(FrameAnnouncement, t_ns), 24);
+        assert_eq!(offset_of!(FrameAnnouncement, exposure_ns), 32);
+        assert_eq!(offset_of!(FrameAnnouncement, bytes), 40);
+        assert_eq!(offset_of!(FrameAnnouncement, flags), 44);
+        assert_eq!(offset_of!(FrameAnnouncement, hash), 48);
+        assert_eq!(size_of::<SensorFrame>(), 1096);
+        assert_eq!(offset_of!(SensorFrame, frame_count), 20);
         assert_eq!(offset_of!(SensorFrame, imu), 24);
         assert_eq!(offset_of!(SensorFrame, star_tracker), 536);
         assert_eq!(offset_of!(SensorFrame, laser_altimeter), 632);
         assert_eq!(offset_of!(SensorFrame, rf_altimeter), 680);
         assert_eq!(offset_of!(SensorFrame, velocimeter), 728);
+        assert_eq!(offset_of!(SensorFrame, frames), 872);
 
-        assert_eq!(size_of::<Telemetry>(), 1176);
+        assert_eq!(size_of::<Telemetry>(), 1400);
         assert_eq!(offset_of!(Telemetry, header), 0);
         assert_eq!(offset_of!(Telemetry, nav), 40);
         assert_eq!(offset_of!(Telemetry, accel_body_m_s2), 144);
@@ -585,12 +692,14 @@ mod tests {
         assert_eq!(8 + 32 + 4 + 4, size_of::<StarTrackerSample>());
         assert_eq!(8 + 8 + 4 + 4, size_of::<AltimeterSample>());
         assert_eq!(8 + 24 + 24 + 12 + 4, size_of::<VelocimeterSample>());
+        assert_eq!(4 * 4 + 8 * 3 + 4 * 2 + 8, size_of::<FrameAnnouncement>());
         assert_eq!(
             6 * 4
                 + IMU_SAMPLES_MAX * size_of::<ImuSample>()
                 + STAR_TRACKER_SAMPLES_MAX * size_of::<StarTrackerSample>()
                 + 2 * ALTIMETER_SAMPLES_MAX * size_of::<AltimeterSample>()
-                + VELOCIMETER_SAMPLES_MAX * size_of::<VelocimeterSample>(),
+                + VELOCIMETER_SAMPLES_MAX * size_of::<VelocimeterSample>()
+                + FRAMES_MAX * size_of::<FrameAnnouncement>(),
             size_of::<SensorFrame>()
         );
         assert_eq!(
@@ -620,6 +729,7 @@ mod tests {
             ("StarTrackerSample", size_of::<StarTrackerSample>()),
             ("AltimeterSample", size_of::<AltimeterSample>()),
             ("VelocimeterSample", size_of::<VelocimeterSample>()),
+            ("FrameAnnouncement", size_of::<FrameAnnouncement>()),
             ("SensorFrame", size_of::<SensorFrame>()),
             ("Telemetry", size_of::<Telemetry>()),
             ("FswReport", size_of::<FswReport>()),
@@ -640,7 +750,7 @@ mod tests {
         h.protocol_version = 7;
         h.schema_hash = 0xdead;
         let err = h.check_peer().unwrap_err().to_string();
-        assert!(err.contains("v3") && err.contains("v7"), "{err}");
+        assert!(err.contains("v4") && err.contains("v7"), "{err}");
         assert!(err.contains("0x000000000000dead"), "{err}");
     }
 

@@ -8,11 +8,19 @@
 //!
 //! Hot-path calls ([`Link::publish`], [`Link::try_receive`], [`Link::receive_until`]) do
 //! not allocate: iceoryx2 loans come from shared memory set up at creation.
+//!
+//! Frames (protocol v4): the emulator may also create one publish-subscribe service per
+//! imaging device ([`FrameSpec`], `oils/<run>/frame/<device>`) carrying `[u8]` dynamic
+//! slices with a [`FrameAnnouncement`] user header. The renderer writes straight into the
+//! loan ([`EmulatorLink::frame_buffer`], then [`EmulatorLink::publish_frame`]); the stub
+//! reads the sample in place ([`StubLink::with_frame`]). No frame byte is ever copied.
 
 use crate::clock::monotonic_ns;
 use crate::domain::{Domain, DomainError};
 use crate::service::RunServices;
-use crate::{Command, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH};
+use crate::{
+    frame_device_name, Command, FrameAnnouncement, Telemetry, PROTOCOL_VERSION, SCHEMA_HASH,
+};
 use core::fmt::Debug;
 use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use core::time::Duration;
@@ -22,6 +30,7 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::*;
+use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue};
 use iceoryx2::service::port_factory::event::PortFactory as EventFactory;
 use iceoryx2::service::port_factory::publish_subscribe::PortFactory as PubSubFactory;
@@ -133,6 +142,38 @@ pub enum LinkError {
         /// How long the emulator had waited for it.
         waited_ms: u64,
     },
+    /// A frame for a device that has no frame service on this link.
+    #[error("no frame service for frame device {device} on this link")]
+    NoFrameService {
+        /// The `FRAME_DEVICE_*` id.
+        device: u32,
+    },
+    /// A frame larger than its service's slices (set at creation).
+    #[error(
+        "a frame of {bytes} bytes for frame device {device} exceeds its service's {max_bytes}"
+    )]
+    FrameTooLarge {
+        /// The `FRAME_DEVICE_*` id.
+        device: u32,
+        /// The frame's length.
+        bytes: usize,
+        /// The service's largest frame.
+        max_bytes: usize,
+    },
+    /// A frame device id that is not a `FRAME_DEVICE_*`.
+    #[error("unknown frame device {device}")]
+    UnknownFrameDevice {
+        /// The id.
+        device: u32,
+    },
+    /// The emulator's `oils.frames` attribute does not parse.
+    #[error(
+        "the run's oils.frames attribute `{value}` does not parse (expected device:max_bytes,...)"
+    )]
+    BadFrameAttribute {
+        /// The attribute's text.
+        value: String,
+    },
     /// The peer process this side watches ([`Link::watch_peer`]) has exited, and nothing
     /// it sent is left to receive.
     #[error("the peer process (pid {pid}) exited")]
@@ -162,6 +203,73 @@ pub mod attribute_keys {
     pub const SCHEMA_HASH: &str = "oils.schema_hash";
     /// The emulator's wait strategy (`busy`, `event`, `hybrid`).
     pub const WAIT: &str = "oils.wait";
+    /// The run's frame services (protocol v4): `device:max_bytes` pairs separated by
+    /// commas, device the `FRAME_DEVICE_*` id (`3:2097152`); empty or absent: none.
+    pub const FRAMES: &str = "oils.frames";
+}
+
+/// One frame service of a run: the device and its largest frame (the slice length its
+/// publisher is created with).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameSpec {
+    /// `FRAME_DEVICE_*`.
+    pub device: u32,
+    /// Largest frame, bytes.
+    pub max_bytes: usize,
+}
+
+/// Most frames a frame subscriber keeps unread: frames are announced by the next
+/// telemetry and read before its step, so one is waiting at a time; two leave room for
+/// a slow reader without making the publisher hold more shared memory.
+pub const FRAME_SUBSCRIBER_BUFFER: usize = 2;
+
+type FrameService = PubSubFactory<ipc::Service, [u8], FrameAnnouncement>;
+
+/// The emulator's port of one frame service, with the loan the renderer writes into.
+struct FrameTx {
+    spec: FrameSpec,
+    _service: FrameService,
+    publisher: Publisher<ipc::Service, [u8], FrameAnnouncement>,
+    loan: Option<SampleMut<ipc::Service, [u8], FrameAnnouncement>>,
+}
+
+/// The onboard side's port of one frame service.
+struct FrameRx {
+    device: u32,
+    _service: FrameService,
+    subscriber: Subscriber<ipc::Service, [u8], FrameAnnouncement>,
+}
+
+/// `device:max_bytes,...` of [`attribute_keys::FRAMES`].
+fn frames_attribute(frames: &[FrameSpec]) -> String {
+    let parts: Vec<String> = frames
+        .iter()
+        .map(|f| format!("{}:{}", f.device, f.max_bytes))
+        .collect();
+    parts.join(",")
+}
+
+/// Parses [`attribute_keys::FRAMES`].
+pub fn parse_frames_attribute(value: &str) -> Result<Vec<FrameSpec>, LinkError> {
+    let bad = || LinkError::BadFrameAttribute {
+        value: value.to_string(),
+    };
+    value
+        .split(',')
+        .filter(|p| !p.is_empty())
+        .map(|p| {
+            let (d, n) = p.split_once(':').ok_or_else(bad)?;
+            Ok(FrameSpec {
+                device: d.parse().map_err(|_| bad())?,
+                max_bytes: n.parse().map_err(|_| bad())?,
+            })
+        })
+        .collect()
+}
+
+fn frame_service_name(run_id: u64, device: u32) -> Result<ServiceName, LinkError> {
+    let name = frame_device_name(device).ok_or(LinkError::UnknownFrameDevice { device })?;
+    service_name(RunServices::new(run_id).frame(name).as_str())
 }
 
 /// Creates an iceoryx2 node for one side of the link, in the oils domain this
@@ -217,6 +325,10 @@ where
     watched_peer: std::sync::OnceLock<PeerProcess>,
     /// When the watched peer is checked next, monotonic nanoseconds.
     next_peer_check_ns: AtomicU64,
+    /// The emulator's frame publishers (empty on the onboard side).
+    frames_tx: Vec<FrameTx>,
+    /// The onboard side's frame subscribers (empty on the emulator's side).
+    frames_rx: Vec<FrameRx>,
 }
 
 /// A peer's iceoryx2 publisher: who sent a packet. iceoryx2 stamps it on every sample
@@ -310,15 +422,33 @@ impl EmulatorLink {
         run_id: u64,
         wait: WaitStrategy,
     ) -> Result<Self, LinkError> {
+        Self::create_with_frames(node, run_id, wait, &[])
+    }
+
+    /// Creates the run's services and one frame service per entry of `frames` (protocol
+    /// v4), announced on the telemetry event's `oils.frames` attribute so the stub opens
+    /// them with the rest.
+    pub fn create_with_frames(
+        node: &Node<ipc::Service>,
+        run_id: u64,
+        wait: WaitStrategy,
+        frames: &[FrameSpec],
+    ) -> Result<Self, LinkError> {
         let names = RunServices::new(run_id);
         let version = PROTOCOL_VERSION.to_string();
         let hash = format!("{SCHEMA_HASH:#x}");
+        let frames_attr = frames_attribute(frames);
         let mut attrs = AttributeSpecifier::new();
         for (k, v) in [
             (attribute_keys::PROTOCOL_VERSION, version.as_str()),
             (attribute_keys::SCHEMA_HASH, hash.as_str()),
             (attribute_keys::WAIT, wait.as_str()),
+            (attribute_keys::FRAMES, frames_attr.as_str()),
         ] {
+            // iceoryx2 refuses an empty value: a run without frames has no `oils.frames`.
+            if v.is_empty() {
+                continue;
+            }
             attrs = attrs
                 .define(&key(k)?, &value(v)?)
                 .map_err(ice("service attributes"))?;
@@ -353,6 +483,31 @@ impl EmulatorLink {
             .event()
             .create()
             .map_err(ice("create command event"))?;
+        let mut frames_tx = Vec::with_capacity(frames.len());
+        for spec in frames {
+            let service = node
+                .service_builder(&frame_service_name(run_id, spec.device)?)
+                .publish_subscribe::<[u8]>()
+                .user_header::<FrameAnnouncement>()
+                .max_publishers(1)
+                .max_subscribers(4)
+                .subscriber_max_buffer_size(FRAME_SUBSCRIBER_BUFFER)
+                .history_size(0)
+                .create()
+                .map_err(ice("create frame service"))?;
+            let publisher = service
+                .publisher_builder()
+                .initial_max_slice_len(spec.max_bytes)
+                .max_loaned_samples(1)
+                .create()
+                .map_err(ice("create frame publisher"))?;
+            frames_tx.push(FrameTx {
+                spec: *spec,
+                _service: service,
+                publisher,
+                loan: None,
+            });
+        }
         // Created last: the telemetry event carries the announcement, and a client that
         // finds it may open every other service at once (the stub does; a client that
         // found it before the command event existed failed with `DoesNotExist`).
@@ -361,7 +516,76 @@ impl EmulatorLink {
             .event()
             .create_with_attributes(&attrs)
             .map_err(ice("create telemetry event"))?;
-        Self::from_services(run_id, wait, tlm_service, cmd_service, tlm_event, cmd_event)
+        let mut link =
+            Self::from_services(run_id, wait, tlm_service, cmd_service, tlm_event, cmd_event)?;
+        link.frames_tx = frames_tx;
+        Ok(link)
+    }
+
+    /// The frame services this link publishes on.
+    pub fn frame_specs(&self) -> impl Iterator<Item = FrameSpec> + '_ {
+        self.frames_tx.iter().map(|f| f.spec)
+    }
+
+    /// A writable buffer of `bytes` in the shared memory of `device`'s next frame: an
+    /// iceoryx2 loan, held until [`EmulatorLink::publish_frame`] (a second call before it
+    /// hands out the same loan if the length matches). The renderer must write every
+    /// byte. No allocation.
+    pub fn frame_buffer(&mut self, device: u32, bytes: usize) -> Result<&mut [u8], LinkError> {
+        let tx = self
+            .frames_tx
+            .iter_mut()
+            .find(|f| f.spec.device == device)
+            .ok_or(LinkError::NoFrameService { device })?;
+        if bytes > tx.spec.max_bytes {
+            return Err(LinkError::FrameTooLarge {
+                device,
+                bytes,
+                max_bytes: tx.spec.max_bytes,
+            });
+        }
+        if tx.loan.as_ref().is_some_and(|l| l.payload().len() != bytes) {
+            tx.loan = None;
+        }
+        if tx.loan.is_none() {
+            let uninit = tx
+                .publisher
+                .loan_slice_uninit(bytes)
+                .map_err(ice("loan frame"))?;
+            // SAFETY: the chunk lies in a shared-memory segment that the kernel zero-filled
+            // when iceoryx2 mapped it and that has only ever held bytes written since, so
+            // every byte is initialised (a `u8` has no invalid bit patterns); iceoryx2's
+            // `MaybeUninit` is its type-level caution for payloads in general. Skipping
+            // `loan_slice`'s fill saves writing 2 MiB of zeros a camera frame, and the
+            // renderer overwrites every byte anyway (the `FrameSource` contract).
+            tx.loan = Some(unsafe { uninit.assume_init() });
+        }
+        Ok(tx
+            .loan
+            .as_mut()
+            .map(|l| l.payload_mut())
+            .unwrap_or_default())
+    }
+
+    /// Sends the frame [`EmulatorLink::frame_buffer`] handed out for `ann.device`, with
+    /// `ann` as its user header. Does not notify: the telemetry that announces it follows
+    /// and wakes the peer. No allocation.
+    pub fn publish_frame(&mut self, ann: &FrameAnnouncement) -> Result<(), LinkError> {
+        let device = ann.device;
+        let tx = self
+            .frames_tx
+            .iter_mut()
+            .find(|f| f.spec.device == device)
+            .ok_or(LinkError::NoFrameService { device })?;
+        let Some(mut sample) = tx.loan.take() else {
+            return Err(LinkError::Iceoryx {
+                what: "publish frame",
+                detail: "no frame buffer was loaned for this frame".into(),
+            });
+        };
+        *sample.user_header_mut() = *ann;
+        sample.send().map_err(ice("send frame"))?;
+        Ok(())
     }
 
     /// Waits until the stub has subscribed to telemetry and publishes commands; returns
@@ -443,7 +667,7 @@ impl EmulatorLink {
 }
 
 /// What the emulator announced on its services.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct PeerAnnouncement {
     /// The emulator's protocol version.
     pub protocol_version: u32,
@@ -451,6 +675,8 @@ pub struct PeerAnnouncement {
     pub schema_hash: u64,
     /// The emulator's wait strategy, if it announced one.
     pub wait: Option<WaitStrategy>,
+    /// The run's frame services (protocol v4; empty when none or unreadable).
+    pub frames: Vec<FrameSpec>,
 }
 
 impl StubLink {
@@ -525,10 +751,61 @@ impl StubLink {
             .event()
             .open()
             .map_err(ice("open command event"))?;
-        let link =
+        let mut frames_rx = Vec::new();
+        for spec in &announced.frames {
+            let service = node
+                .service_builder(&frame_service_name(run_id, spec.device)?)
+                .publish_subscribe::<[u8]>()
+                .user_header::<FrameAnnouncement>()
+                .open()
+                .map_err(ice("open frame service"))?;
+            let subscriber = service
+                .subscriber_builder()
+                .create()
+                .map_err(ice("create frame subscriber"))?;
+            frames_rx.push(FrameRx {
+                device: spec.device,
+                _service: service,
+                subscriber,
+            });
+        }
+        let mut link =
             Self::from_services(run_id, wait, cmd_service, tlm_service, cmd_event, tlm_event)?;
+        link.frames_rx = frames_rx;
         link.emulator_process();
         Ok(link)
+    }
+
+    /// The frame devices whose services this link reads.
+    pub fn frame_devices(&self) -> impl Iterator<Item = u32> + '_ {
+        self.frames_rx.iter().map(|f| f.device)
+    }
+
+    /// Calls `read` with the frame `ann` announces, in place in shared memory (no copy):
+    /// its user header (the announcement as published) and its pixel bytes, held only
+    /// during the call. Older frames waiting on the device's service are dropped on the
+    /// way. `Ok(None)`: the frame is not there (lost, or the device has no service).
+    /// No allocation.
+    pub fn with_frame<R>(
+        &self,
+        ann: &FrameAnnouncement,
+        read: impl FnOnce(&FrameAnnouncement, &[u8]) -> R,
+    ) -> Result<Option<R>, LinkError> {
+        let Some(rx) = self.frames_rx.iter().find(|f| f.device == ann.device) else {
+            return Ok(None);
+        };
+        while let Some(sample) = rx.subscriber.receive().map_err(ice("receive frame"))? {
+            let header = sample.user_header();
+            if header.seq < ann.seq {
+                continue;
+            }
+            if header.seq > ann.seq {
+                // A later frame than announced: this one was lost.
+                return Ok(None);
+            }
+            return Ok(Some(read(header, sample.payload())));
+        }
+        Ok(None)
     }
 
     /// The emulator's process (the telemetry publisher's), watched through a pidfd from
@@ -571,6 +848,9 @@ fn read_announcement(attrs: &AttributeSet) -> PeerAnnouncement {
             .and_then(|v| u64::from_str_radix(v.trim_start_matches("0x"), 16).ok())
             .unwrap_or(0),
         wait: get(attribute_keys::WAIT).and_then(|v| v.parse().ok()),
+        frames: get(attribute_keys::FRAMES)
+            .and_then(|v| parse_frames_attribute(&v).ok())
+            .unwrap_or_default(),
     }
 }
 
@@ -619,6 +899,8 @@ where
             peer_process: std::sync::OnceLock::new(),
             watched_peer: std::sync::OnceLock::new(),
             next_peer_check_ns: AtomicU64::new(0),
+            frames_tx: Vec::new(),
+            frames_rx: Vec::new(),
         })
     }
 
@@ -777,5 +1059,25 @@ mod tests {
         assert!("spin".parse::<WaitStrategy>().is_err());
         assert!(!WaitStrategy::BusyPoll.notifies());
         assert!(WaitStrategy::Event.notifies());
+    }
+
+    #[test]
+    fn frames_attribute_round_trips_and_refuses_junk() {
+        let specs = [
+            FrameSpec {
+                device: crate::FRAME_DEVICE_TEST_CARD,
+                max_bytes: 2 << 20,
+            },
+            FrameSpec {
+                device: crate::FRAME_DEVICE_LIDAR,
+                max_bytes: 65536,
+            },
+        ];
+        let text = frames_attribute(&specs);
+        assert_eq!(text, "3:2097152,2:65536");
+        assert_eq!(parse_frames_attribute(&text).unwrap(), specs);
+        assert!(parse_frames_attribute("").unwrap().is_empty());
+        assert!(parse_frames_attribute("3").is_err());
+        assert!(parse_frames_attribute("x:1").is_err());
     }
 }

@@ -87,6 +87,19 @@ impl RunServices {
         )
     }
 
+    /// Publish-subscribe service carrying frame device `device_name`'s frames (protocol
+    /// v4): dynamic `[u8]` slices with a [`crate::FrameAnnouncement`] user header.
+    pub fn frame(&self, device_name: &str) -> ServiceNameBuf {
+        let mut s = ServiceNameBuf::default();
+        // Cannot overflow: 4 + 1 + 16 + "/frame/" + a device name of at most 32 bytes.
+        let _ = write!(
+            s,
+            "{SERVICE_PREFIX}/{:016x}/frame/{device_name:.32}",
+            self.run_id
+        );
+        s
+    }
+
     fn name(&self, what: &str) -> ServiceNameBuf {
         let mut s = ServiceNameBuf::default();
         // Cannot overflow: prefix (4) + '/' + 16 hex digits + '/' + longest suffix (15).
@@ -96,7 +109,7 @@ impl RunServices {
 }
 
 /// The two services' payload types as a client must declare them: the iceoryx2 type
-/// name each packet carries and its size (`oils.v3.Telemetry, 1176 bytes`), taken from
+/// name each packet carries and its size (`oils.v4.Telemetry, 1400 bytes`), taken from
 /// the types themselves.
 pub fn payload_types() -> (String, String) {
     use iceoryx2::prelude::ZeroCopySend;
@@ -178,6 +191,10 @@ mod tests {
         assert_eq!(
             s.command_event().as_str(),
             "oils/0000000000000abc/command-ready"
+        );
+        assert_eq!(
+            s.frame("test-card").as_str(),
+            "oils/0000000000000abc/frame/test-card"
         );
         assert_ne!(
             RunServices::new(1).telemetry(),

@@ -121,6 +121,7 @@ pub fn run(a: &StubArgs) -> Result<()> {
             Ok(s) => serde_json::json!({
                 "error": null, "fsw_failure": null,
                 "commands": s.commands, "last_step": s.last_step,
+                "frames": s.frames, "frames_missed": s.frames_missed,
             }),
             Err(e) => serde_json::json!({
                 "error": format!("{e}"), "fsw_failure": e.fsw_failure(),

@@ -51,6 +51,9 @@ pub struct StubEnd {
     /// What its stepping thread obtained (scheduling, memory lock, pinning), from its
     /// outcome file.
     pub realtime: Option<RealtimeStatus>,
+    /// Frames it checked and handed over, and frames it missed, from its outcome file
+    /// (both `None` for a run without frames).
+    pub frames: Option<(u64, u64)>,
 }
 
 impl StubEnd {
@@ -60,6 +63,8 @@ impl StubEnd {
             pid: self.pid,
             ended: self.ended.clone(),
             stderr_tail: self.stderr_tail.clone(),
+            frames_checked: self.frames.map(|f| f.0),
+            frames_missed: self.frames.map(|f| f.1),
         }
     }
 
@@ -203,6 +208,10 @@ impl SpawnedStub {
         let field = |name: &str| outcome.as_ref().map(|v| v[name].clone());
         let fsw_failure = field("fsw_failure").and_then(|v| serde_json::from_value(v).ok());
         let realtime = field("realtime").and_then(|v| serde_json::from_value(v).ok());
+        let count = |name: &str| field(name).and_then(|v| v.as_u64());
+        let frames = count("frames")
+            .zip(count("frames_missed"))
+            .filter(|(n, missed)| n + missed > 0);
         let _ = std::fs::remove_file(&self.outcome);
         StubEnd {
             pid,
@@ -212,6 +221,7 @@ impl SpawnedStub {
             fsw_failure,
             stderr_tail,
             realtime,
+            frames,
         }
     }
 }

@@ -1,11 +1,13 @@
 //! The devices stage of a cycle: what turns the plant's truth into the telemetry the
 //! flight software reads. The plant integrates physics and knows nothing of packets;
-//! here live the device models on board ([`SensorSuite`]), the ideal navigation source
-//! and its noise, and the ground's state-vector uplink.
+//! here live the device models on board ([`SensorSuite`]), the imaging devices
+//! ([`FrameRack`], protocol v4 frames), the ideal navigation source and its noise, and
+//! the ground's state-vector uplink.
 //!
 //! Two calls drive it, both allocation-free once built:
 //! * [`Devices::after_plant_step`] after every plant step that integrated: the sensors
-//!   take the step's truth;
+//!   take the step's truth; then [`Devices::render_frames`]: each imaging device whose
+//!   exposure ended renders into the link's frame buffer and is published;
 //! * [`Devices::telemetry_into`] at each flight-software cycle: the plant's readings
 //!   (propulsion, footpad contact), then the device samples, the state vector or the
 //!   ideal navigation, as the run's telemetry kind asks.
@@ -13,9 +15,11 @@
 pub mod nav_noise;
 
 use crate::config::ScenarioConfig;
+use crate::link::ExchangeError;
 use crate::plant::Plant;
-use crate::sensors::SensorSuite;
+use crate::sensors::{FrameRack, FrameSink, SensorSuite};
 use nav_noise::{NavNoise, StateVectorUplink};
+use oils_shared::link::FrameSpec;
 use oils_shared::{
     NavState, PacketHeader, Telemetry, TLM_FLAG_COMPUTER_RESET, TLM_FLAG_IDEAL_NAV,
     TLM_FLAG_NAV_NOISE, TLM_FLAG_SENSORS, TLM_FLAG_STATE_VECTOR,
@@ -35,6 +39,9 @@ pub struct Devices {
     state_vector_due: bool,
     /// The sensors on board, when the telemetry carries them.
     sensors: Option<Box<SensorSuite>>,
+    /// The imaging devices on board, whatever the telemetry carries: rendered after the
+    /// step that ends an exposure, announced in the next telemetry.
+    frames: Option<Box<FrameRack>>,
 }
 
 impl Devices {
@@ -50,6 +57,7 @@ impl Devices {
             state_vector: StateVectorUplink::new(&cfg.state_vector, seed),
             state_vector_due: true,
             sensors: None,
+            frames: None,
         }
     }
 
@@ -74,6 +82,38 @@ impl Devices {
     /// The sensors on board, if attached.
     pub fn sensors(&self) -> Option<&SensorSuite> {
         self.sensors.as_deref()
+    }
+
+    /// Puts imaging devices on board: from now on [`Devices::render_frames`] renders
+    /// them and every telemetry announces the frames published since the last.
+    pub fn attach_frames(&mut self, rack: FrameRack) {
+        self.frames = Some(Box::new(rack));
+    }
+
+    /// The imaging devices on board, if attached.
+    pub fn frames(&self) -> Option<&FrameRack> {
+        self.frames.as_deref()
+    }
+
+    /// The frame services the imaging devices need, for the link before tick 0 (none
+    /// without them).
+    pub fn frame_specs(&self) -> Vec<FrameSpec> {
+        self.frames.as_ref().map(|f| f.specs()).unwrap_or_default()
+    }
+
+    /// After [`Devices::after_plant_step`]: each imaging device whose exposure ended in
+    /// the step renders into `sink`'s buffer (an iceoryx2 loan across processes) and is
+    /// published, before the telemetry that announces it ([`FrameRack`]). Nothing without
+    /// imaging devices. No allocation.
+    pub fn render_frames<S: FrameSink + ?Sized>(
+        &mut self,
+        plant: &Plant,
+        sink: &mut S,
+    ) -> Result<(), ExchangeError> {
+        match self.frames.as_mut() {
+            Some(frames) => frames.after_plant_step(&plant.sensor_truth(), sink),
+            None => Ok(()),
+        }
     }
 
     /// A computer reset ended: the ground uplinks a fresh state vector on the next
@@ -102,6 +142,9 @@ impl Devices {
     /// The run's loop keeps one packet and fills it each step.
     pub fn telemetry_into(&mut self, plant: &Plant, header: PacketHeader, tlm: &mut Telemetry) {
         plant.readings_into(header, tlm);
+        if let Some(frames) = self.frames.as_mut() {
+            frames.announce_into(&mut tlm.sensors);
+        }
         if let Some(sensors) = self.sensors.as_mut() {
             sensors.fill_frame(header.t_ns, &mut tlm.sensors);
             tlm.header.flags |= TLM_FLAG_SENSORS;

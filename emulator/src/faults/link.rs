@@ -135,6 +135,12 @@ impl<'a, L: Link + ?Sized> FaultyLink<'a, L> {
         self.faults.withheld()
     }
 
+    /// The link underneath, as the frame devices' sink: frames are not subject to link
+    /// faults (yet); a withheld telemetry still loses its announcements.
+    pub fn frame_sink(&mut self) -> &mut L {
+        self.inner
+    }
+
     /// Whether the onboard computer is resetting now (a `computer-reset` fault).
     pub fn resetting(&self) -> bool {
         self.faults.resetting()

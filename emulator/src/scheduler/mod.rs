@@ -416,7 +416,14 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         }
 
         // Truth: Command(k) held over the cycle.
-        if let Some(a) = truth.advance(k, plant, devices, &exchange.applied, &mut observer) {
+        if let Some(a) = truth.advance(
+            k,
+            plant,
+            devices,
+            link.frame_sink(),
+            &exchange.applied,
+            &mut observer,
+        ) {
             abort = Some(a);
         }
         if clock.cycle_overran(k) {

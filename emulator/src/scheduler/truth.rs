@@ -5,6 +5,7 @@ use super::{Abort, StepObserver};
 use crate::devices::Devices;
 use crate::faults::{PlantFault, MAX_FAULTS};
 use crate::plant::{ActuatorCommand, Plant, PlantStatus};
+use crate::sensors::FrameSink;
 
 /// The plant's side of a cycle: its status, its steps, the faults it carries out.
 pub(super) struct TruthStage {
@@ -51,13 +52,15 @@ impl TruthStage {
     }
 
     /// Holds `applied` over the cycle: the plant steps on the base tick until the next
-    /// exchange (once, with the default periods), the devices sampling each step. Stops
+    /// exchange (once, with the default periods), the devices sampling each step and the
+    /// imaging devices rendering into `frames` (the link) when an exposure ends. Stops
     /// early at touchdown or when the physics fails (the abort, for the loop to end on).
-    pub(super) fn advance(
+    pub(super) fn advance<S: FrameSink + ?Sized>(
         &mut self,
         k: u64,
         plant: &mut Plant,
         devices: &mut Devices,
+        frames: &mut S,
         applied: &ActuatorCommand,
         observer: &mut Option<StepObserver<'_>>,
     ) -> Option<Abort> {
@@ -68,6 +71,13 @@ impl TruthStage {
             self.status = plant.step(applied, self.dt_ns);
             if moves {
                 devices.after_plant_step(plant);
+                // Once, at the end of the run: the message may allocate.
+                if let Err(e) = devices.render_frames(plant, frames) {
+                    abort = Some(Abort::Protocol(format!(
+                        "a frame could not be published at step {k}: {e}"
+                    )));
+                    break;
+                }
             }
             if let Some(what) = plant.first_non_finite() {
                 abort = Some(Abort::NotFinite { step: k, what });

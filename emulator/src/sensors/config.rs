@@ -43,6 +43,78 @@ pub struct SensorsConfig {
     pub rf_altimeter: RfAltimeterConfig,
     /// Laser Doppler velocimeter.
     pub velocimeter: VelocimeterConfig,
+    /// The test card: a frame device with a known pattern (protocol v4 frames).
+    pub test_card: TestCardConfig,
+}
+
+/// The test card (`sensors::test_card`): a deterministic `u16` pattern with the frame
+/// counter burnt in, published on `oils/<run>/frame/test-card`. Every number is assumed:
+/// it models no instrument; the defaults are the size of a navigation camera's frame
+/// (1024 x 1024 x 2 bytes = 2 MiB) at 1 Hz, so the frame path is exercised at its real
+/// load.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TestCardConfig {
+    /// Publish frames at all.
+    pub enabled: bool,
+    /// Frame period, ms (a whole multiple of the plant step, at least the
+    /// flight-software cycle).
+    pub period_ms: f64,
+    /// Exposure, ms (at most the period); the frame's time of validity is its middle.
+    pub exposure_ms: f64,
+    /// Pixels per row.
+    pub width: u32,
+    /// Rows.
+    pub height: u32,
+}
+
+impl Default for TestCardConfig {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            period_ms: 1000.0,
+            exposure_ms: 10.0,
+            width: 1024,
+            height: 1024,
+        }
+    }
+}
+
+impl TestCardConfig {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        timing(
+            "sensors.test_card.period_ms",
+            self.period_ms,
+            "sensors.test_card.exposure_ms",
+            0.0,
+        )?;
+        within(
+            "sensors.test_card.exposure_ms",
+            self.exposure_ms,
+            0.0,
+            self.period_ms,
+            "in [0, period_ms] ms",
+        )?;
+        check(
+            (self.exposure_ms * 1e6 - (self.exposure_ms * 1e6).round()).abs() < 1e-3,
+            "sensors.test_card.exposure_ms",
+            self.exposure_ms,
+            "a whole number of nanoseconds",
+        )?;
+        for (field, v) in [
+            ("sensors.test_card.width", self.width),
+            ("sensors.test_card.height", self.height),
+        ] {
+            check(
+                (1..=4096).contains(&v),
+                field,
+                f64::from(v),
+                "in [1, 4096] pixels",
+            )?;
+        }
+        Ok(())
+    }
 }
 
 /// IMU: delta-theta and delta-v increments over each period. Errors per axis: a
@@ -397,6 +469,7 @@ fn ranges(
 impl SensorsConfig {
     /// Checks every field (whether or not the device is enabled); run before tick 0.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        self.test_card.validate()?;
         let i = &self.imu;
         timing(
             "sensors.imu.period_ms",
@@ -794,6 +867,49 @@ impl SensorsConfig {
         Ok(())
     }
 
+    /// Checks the frame devices' periods against the plant step and the flight-software
+    /// cycle, before tick 0 and whatever the telemetry source (frames do not need the
+    /// sample devices): each enabled one's period is a whole multiple of the plant step,
+    /// and at least the cycle (one frame per device per telemetry).
+    pub fn check_frame_rates(
+        &self,
+        plant_step_ns: u64,
+        fsw_period_ns: u64,
+    ) -> Result<(), ConfigError> {
+        for (enabled, name, period_ms, field) in [(
+            self.test_card.enabled,
+            "test-card",
+            self.test_card.period_ms,
+            "sensors.test_card.period_ms",
+        )] {
+            if !enabled {
+                continue;
+            }
+            let period_ns = ms_to_ns(period_ms).max(1) as u64;
+            if plant_step_ns == 0 || !period_ns.is_multiple_of(plant_step_ns) {
+                return Err(ConfigError {
+                    field,
+                    value: format!(
+                        "{period_ms} ms ({name}) with a plant step of {} ms",
+                        plant_step_ns as f64 * 1e-6
+                    ),
+                    why: "a whole multiple of the plant step (dt_ms): frames fall on step ends",
+                });
+            }
+            if period_ns < fsw_period_ns {
+                return Err(ConfigError {
+                    field,
+                    value: format!(
+                        "{period_ms} ms ({name}) with a {} ms flight-software cycle",
+                        fsw_period_ns as f64 * 1e-6
+                    ),
+                    why: "at least the flight-software cycle: a telemetry announces one frame per device",
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// The sensor set and rates, one line per device, for `oils run --print-config`.
     pub fn summary(&self) -> String {
         let mut out = String::new();
@@ -806,6 +922,21 @@ impl SensorsConfig {
             } else {
                 out.push_str(&format!("{name:<16} off\n"));
             }
+        }
+        let t = &self.test_card;
+        if t.enabled {
+            out.push_str(&format!(
+                "{:<16} {:>8.3} Hz  period {} ms  exposure {} ms  {} x {} u16  {} bytes a frame\n",
+                "test-card",
+                1e3 / t.period_ms,
+                t.period_ms,
+                t.exposure_ms,
+                t.width,
+                t.height,
+                2 * t.width as u64 * t.height as u64
+            ));
+        } else {
+            out.push_str("test-card        off\n");
         }
         out
     }

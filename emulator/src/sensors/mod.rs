@@ -24,14 +24,17 @@
 pub mod camera;
 pub mod config;
 mod devices;
+pub mod frame_source;
 mod imu;
 pub mod lidar;
+pub mod test_card;
 
-pub use camera::{Camera, FrameError, FrameMeta};
+pub use camera::{Camera, FrameError};
 pub use config::{
     CameraConfig, ImuConfig, LaserAltimeterConfig, LidarConfig, RfAltimeterConfig, SensorsConfig,
-    StarTrackerConfig, VelocimeterConfig,
+    StarTrackerConfig, TestCardConfig, VelocimeterConfig,
 };
+pub use frame_source::{FrameMeta, FrameRack, FrameSink, FrameSource};
 pub use lidar::Lidar;
 
 use crate::config::ConfigError;
@@ -454,9 +457,9 @@ impl SensorSuite {
     /// Fills `frame` with every sample delivered by `t_ns` (time of validity plus
     /// latency) and not yet handed over, oldest first per device, up to each array's
     /// capacity; the rest of each array is zeroed and what did not fit is counted in
-    /// [`Self::dropped`]. A disabled device's count is 0.
+    /// [`Self::dropped`]. A disabled device's count is 0. The frame announcements
+    /// (`frame_count`, `frames`) are the [`FrameRack`]'s, untouched here.
     pub fn fill_frame(&mut self, t_ns: i64, frame: &mut SensorFrame) {
-        frame.reserved = 0;
         frame.imu_count = match self.imu.as_mut() {
             Some(d) => d.queue.drain(t_ns, &mut frame.imu),
             None => Queue::<oils_shared::ImuSample>::clear(&mut frame.imu),
