@@ -21,7 +21,7 @@ fn terrain_queries_do_not_allocate() {
         ..SyntheticSpec::default()
     });
     let terrains = [
-        build(&TerrainSpec::Smooth, &site).unwrap(),
+        build(&TerrainSpec::default(), &site).unwrap(),
         build(&rough, &site).unwrap(),
     ];
     let before = common::allocations();
