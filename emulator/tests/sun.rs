@@ -40,7 +40,10 @@ fn apollo_landing_sun_matches_the_surface_journal() {
         let (a, e) = sun_at(utc, lat, lon);
         println!("{utc}: elevation {e:.3} (ALSJ {alt}), azimuth {a:.3} (ALSJ {az})");
         assert!((e - alt).abs() < 0.05, "{utc}: elevation {e} vs {alt}");
-        assert!(angle_diff_deg(a, az).abs() < 0.05, "{utc}: azimuth {a} vs {az}");
+        assert!(
+            angle_diff_deg(a, az).abs() < 0.05,
+            "{utc}: azimuth {a} vs {az}"
+        );
     }
 }
 
@@ -75,7 +78,10 @@ fn subsolar_point_stays_near_the_equator_and_circles_in_a_synodic_month() {
         let (lat, _) = subsolar_lat_lon_deg(t);
         max_lat = max_lat.max(lat.abs());
     }
-    assert!(max_lat < 1.6 && max_lat > 1.4, "max sub-solar latitude {max_lat}");
+    assert!(
+        max_lat < 1.6 && max_lat > 1.4,
+        "max sub-solar latitude {max_lat}"
+    );
     let t = tdb_s_from_utc("2024-01-01T00:00:00Z").unwrap();
     let (_, lon0) = subsolar_lat_lon_deg(t);
     let (_, lon1) = subsolar_lat_lon_deg(t + 29.530_589 * 86_400.0);

@@ -1,10 +1,10 @@
 //! Building a terrain from its spec, once per campaign: a cache keyed by the spec's
 //! hash and the site, handing out `Arc<Terrain>` to every case that asks.
 
+use super::detail::{self, BaseLimits};
 use super::frame::SiteFrame;
 use super::spec::TerrainSpec;
 use super::surface::Terrain;
-use super::detail::{self, BaseLimits};
 use super::{geotiff, synthetic, TerrainError};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};

@@ -111,10 +111,7 @@ impl Default for DetailSpec {
 impl DetailSpec {
     /// Checks every field's range; run before tick 0.
     pub fn validate(&self) -> Result<(), TerrainError> {
-        let bad = |field: &'static str, reason: String| TerrainError::InvalidSpec {
-            field,
-            reason,
-        };
+        let bad = |field: &'static str, reason: String| TerrainError::InvalidSpec { field, reason };
         positive("detail.extent_m", self.extent_m)?;
         positive("detail.spacing_m", self.spacing_m)?;
         in_range("detail.spacing_m", self.spacing_m, 0.01, 10.0)?;
@@ -127,7 +124,12 @@ impl DetailSpec {
             });
         }
         in_range("detail.crater_density", self.crater_density, 0.0, 100.0)?;
-        in_range("detail.crater_sfd_exponent", self.crater_sfd_exponent, 0.5, 5.0)?;
+        in_range(
+            "detail.crater_sfd_exponent",
+            self.crater_sfd_exponent,
+            0.5,
+            5.0,
+        )?;
         positive("detail.crater_min_diameter_m", self.crater_min_diameter_m)?;
         positive("detail.crater_max_diameter_m", self.crater_max_diameter_m)?;
         if self.crater_max_diameter_m < self.crater_min_diameter_m {
@@ -200,7 +202,10 @@ impl BaseLimits {
     pub fn synthetic(s: &super::SyntheticSpec) -> Self {
         Self {
             crater_max_diameter_m: s.crater_min_diameter_m,
-            boulder_max_diameter_m: s.boulders.as_ref().map_or(f64::INFINITY, |b| b.min_diameter_m),
+            boulder_max_diameter_m: s
+                .boulders
+                .as_ref()
+                .map_or(f64::INFINITY, |b| b.min_diameter_m),
         }
     }
 
@@ -338,7 +343,11 @@ pub fn boulder_area_fraction_above(k: f64, d: f64) -> f64 {
 fn crater_draw_half_m(t: &TileLayout, d_max: f64) -> (f64, f64, f64) {
     let (e0, e1, n0, n1) = t.bounds_m();
     let margin = PROFILE_X_MAX * d_max;
-    (0.5 * (e0 + e1), 0.5 * (n0 + n1), 0.5 * (e1 - e0).max(n1 - n0) + margin)
+    (
+        0.5 * (e0 + e1),
+        0.5 * (n0 + n1),
+        0.5 * (e1 - e0).max(n1 - n0) + margin,
+    )
 }
 
 /// The layer's craters over tile `t` with the base's limits, in draw order.

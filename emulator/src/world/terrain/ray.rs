@@ -80,8 +80,7 @@ impl Terrain {
                 return None;
             }
             let mut step = (g0 / self.lipschitz).max(self.min_step_near(&m0, min_step));
-            if let Some(advance) = self.pyramid_advance_m(&m0, scale, &mut level, &mut tile_level)
-            {
+            if let Some(advance) = self.pyramid_advance_m(&m0, scale, &mut level, &mut tile_level) {
                 step = step.max(advance);
             }
             let t1 = (t0 + step).min(max_range_m);
