@@ -542,3 +542,20 @@ fn default_layer_over_the_default_base_builds_within_its_memory_budget() {
     assert!(e1 - e0 >= 1000.0 && e1 - e0 < 1004.0);
     assert!(t.max_elevation_m() >= t.grid().unwrap().elevation_range_m().1);
 }
+
+/// The committed `pinpoint` scenario: the default descent over a synthetic base with the
+/// detail layer about the site, and the Chandrayaan-3 landing sun.
+#[test]
+fn pinpoint_scenario_carries_the_detail_layer() {
+    let s = oils_emulator::run_config::load_scenario("pinpoint").unwrap();
+    s.validate().unwrap();
+    assert!(matches!(s.terrain, TerrainSpec::Synthetic(_)));
+    let d = s.terrain.detail().expect("a detail layer");
+    assert_eq!((d.extent_m, d.spacing_m), (1000.0, 0.5));
+    assert_eq!(
+        s.sun.epoch_utc.as_deref(),
+        Some(oils_emulator::world::sun::DEFAULT_EPOCH_UTC)
+    );
+    let default = oils_emulator::run_config::load_scenario("default").unwrap();
+    assert!(default.terrain.is_bare_sphere() && default.sun.is_default());
+}
