@@ -559,3 +559,95 @@ fn pinpoint_scenario_carries_the_detail_layer() {
     let default = oils_emulator::run_config::load_scenario("default").unwrap();
     assert!(default.terrain.is_bare_sphere() && default.sun.is_default());
 }
+
+/// A detail tile on a GeoTIFF DTM (a polar stereographic file this test writes, 10 m
+/// pixels about the south pole): the file's grid is untouched, the tile's spacing is a
+/// whole fraction of it, the surface outside the tile is the file's, and the build caps
+/// features at `base_resolution_pixels` pixels: asking for craters up to 100 m or up to
+/// 3 pixels (30 m) gives the same tile, bit for bit, where over the bare sphere it does
+/// not.
+#[test]
+fn over_a_geotiff_dtm_the_detail_stays_below_its_resolution() {
+    use oils_emulator::world::terrain::GeoTiffSpec;
+    use tiff::encoder::{colortype, TiffEncoder};
+    use tiff::tags::Tag;
+    let dir = std::env::temp_dir().join(format!("oils-detail-dtm-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("pole.tif");
+    let (w, h) = (600u32, 600u32);
+    let data: Vec<f32> = (0..h)
+        .flat_map(|r| {
+            (0..w).map(move |c| {
+                let (x, y) = (c as f32 * 10.0 - 3000.0, 3000.0 - r as f32 * 10.0);
+                0.01 * x + 5.0 * (x / 300.0).sin() * (y / 200.0).cos()
+            })
+        })
+        .collect();
+    {
+        let file = std::fs::File::create(&path).unwrap();
+        let mut enc = TiffEncoder::new(file).unwrap();
+        let mut img = enc.new_image::<colortype::Gray32Float>(w, h).unwrap();
+        let d = img.encoder();
+        d.write_tag(Tag::ModelPixelScaleTag, &[10.0f64, 10.0, 0.0][..])
+            .unwrap();
+        d.write_tag(
+            Tag::ModelTiepointTag,
+            &[0.0f64, 0.0, 0.0, -3005.0, 3005.0, 0.0][..],
+        )
+        .unwrap();
+        // Projected, PixelIsArea, sphere R, polar stereographic (15) about -90, scale 1.
+        let keys: [u16; 36] = [
+            1, 1, 0, 8, 1024, 0, 1, 1, 1025, 0, 1, 1, 2057, 34736, 1, 0, 2058, 34736, 1, 1, 3075,
+            0, 1, 15, 3081, 34736, 1, 2, 3095, 34736, 1, 3, 3092, 34736, 1, 4,
+        ];
+        d.write_tag(Tag::GeoKeyDirectoryTag, &keys[..]).unwrap();
+        d.write_tag(Tag::GeoDoubleParamsTag, &[R_M, R_M, -90.0, 0.0, 1.0][..])
+            .unwrap();
+        img.write_data(&data).unwrap();
+    }
+    let site = SiteFrame::from_deg(-89.97, 0.0, R_M);
+    let geo = |detail: Option<DetailSpec>| {
+        TerrainSpec::Geotiff(GeoTiffSpec {
+            path: path.clone(),
+            extent_m: 1500.0,
+            spacing_m: None,
+            height_scale: None,
+            height_offset_m: None,
+            detail,
+        })
+    };
+    let tile_spec = |max: f64| DetailSpec {
+        extent_m: 400.0,
+        crater_max_diameter_m: max,
+        boulder_max_diameter_m: max,
+        rock_abundance: 0.2,
+        ..small_detail(12)
+    };
+    let plain = build(&geo(None), &site).unwrap_or_else(|e| panic!("{e}"));
+    let a = build(&geo(Some(tile_spec(100.0))), &site).unwrap();
+    assert_eq!(a.grid(), plain.grid());
+    let base_spacing = plain.grid().unwrap().spacing_m();
+    let tile = a.detail_grid().unwrap();
+    let ratio = base_spacing / tile.spacing_m();
+    println!(
+        "DTM spacing {base_spacing} m, tile spacing {} m",
+        tile.spacing_m()
+    );
+    assert!((ratio - ratio.round()).abs() < 1e-9 && tile.spacing_m() <= 0.5);
+    assert!(
+        (3.0 * base_spacing - 30.0).abs() < 0.5,
+        "pixel {base_spacing}"
+    );
+    let (e0, e1, n0, _) = tile.bounds_m();
+    for (e, n) in [(e0 - 0.5, n0 - 0.5), (e1 + 3.0, 0.0), (0.0, n0 - 7.0)] {
+        assert_eq!(a.elevation_m(e, n), plain.elevation_m(e, n));
+    }
+    // Asking for 100 m or for exactly the DTM's 3 pixels draws the same features.
+    let cap = 3.0 * base_spacing;
+    let c = build(&geo(Some(tile_spec(cap))), &site).unwrap();
+    assert_eq!(a.detail_grid(), c.detail_grid());
+    let sa = build(&smooth_with(tile_spec(100.0)), &site).unwrap();
+    let sb = build(&smooth_with(tile_spec(cap)), &site).unwrap();
+    assert_ne!(sa.detail_grid(), sb.detail_grid());
+    std::fs::remove_dir_all(&dir).ok();
+}
