@@ -83,6 +83,10 @@ pub struct DetailSpec {
     pub boulder_max_diameter_m: f64,
     /// Over a GeoTIFF base: features are drawn up to this many of its pixels across.
     pub base_resolution_pixels: f64,
+    /// Refine the base inside the tile with Catmull-Rom bicubic interpolation of its nodes
+    /// (through every node, continuous slopes) instead of its bilinear facets, faded in
+    /// across the taper band like the detail.
+    pub smooth_base: bool,
 }
 
 impl Default for DetailSpec {
@@ -104,6 +108,7 @@ impl Default for DetailSpec {
             boulder_min_diameter_m: 1.0,
             boulder_max_diameter_m: 4.0,
             base_resolution_pixels: 3.0,
+            smooth_base: true,
         }
     }
 }
@@ -607,7 +612,47 @@ pub fn detail_only_grid(
     Ok(g)
 }
 
-/// The tile's total heights: the base at each node plus the tapered detail.
+/// Catmull-Rom weights of the four nodes about a point at fraction `t` of its cell.
+fn catmull_rom_weights(t: f64) -> [f64; 4] {
+    let (t2, t3) = (t * t, t * t * t);
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+}
+
+/// The base's Catmull-Rom bicubic surface at map `(e, n)` (nodes beyond the grid's edge
+/// repeat the edge's): equal to the bilinear one on every node, with continuous slopes
+/// between (Catmull & Rom 1974; Keys 1981, `a = -1/2`).
+pub fn catmull_rom_m(g: &Grid, e_m: f64, n_m: f64) -> f64 {
+    let (e0, n0) = g.origin_m();
+    let s = g.spacing_m();
+    let cell = |x: f64, x0: f64, n: usize| {
+        let u = ((x - x0) / s).clamp(0.0, (n - 1) as f64);
+        let i = (u.floor() as usize).min(n - 2);
+        (i, u - i as f64)
+    };
+    let (i, fx) = cell(e_m, e0, g.nx());
+    let (j, fy) = cell(n_m, n0, g.ny());
+    let (wx, wy) = (catmull_rom_weights(fx), catmull_rom_weights(fy));
+    let clamp = |k: usize, d: usize, n: usize| (k + d).saturating_sub(1).min(n - 1);
+    let mut acc = 0.0;
+    for (dy, wyv) in wy.iter().enumerate() {
+        let jj = clamp(j, dy, g.ny());
+        let mut row = 0.0;
+        for (dx, wxv) in wx.iter().enumerate() {
+            row += wxv * g.at(clamp(i, dx, g.nx()), jj);
+        }
+        acc += wyv * row;
+    }
+    acc
+}
+
+/// The tile's total heights: the base at each node plus the tapered detail (and, with
+/// `smooth_base`, the tapered difference between the base's bicubic and bilinear
+/// surfaces), so the tile is exactly the base at its edge.
 pub fn build_tile(
     s: &DetailSpec,
     base: Option<&Grid>,
@@ -622,9 +667,21 @@ pub fn build_tile(
         let n = t.n0_m + t.spacing_m * j as f64;
         for i in 0..t.nx {
             let e = t.e0_m + t.spacing_m * i as f64;
-            let base_m = base.map_or(0.0, |g| g.sample(e, n).h_m);
             let k = j * t.nx + i;
-            h[k] = base_m + taper_weight(b, s.taper_m, e, n) * h[k];
+            let w = taper_weight(b, s.taper_m, e, n);
+            let (linear, refined) = match base {
+                None => (0.0, 0.0),
+                Some(g) => {
+                    let lin = g.sample(e, n).h_m;
+                    let cubic = if s.smooth_base && w > 0.0 {
+                        catmull_rom_m(g, e, n)
+                    } else {
+                        lin
+                    };
+                    (lin, cubic)
+                }
+            };
+            h[k] = linear + w * (h[k] + refined - linear);
         }
     }
     Grid::new(t.nx, t.ny, t.e0_m, t.n0_m, t.spacing_m, h).ok_or(TerrainError::NonFinite)
