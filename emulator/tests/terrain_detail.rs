@@ -656,7 +656,8 @@ fn over_a_geotiff_dtm_the_detail_stays_below_its_resolution() {
 /// and reproduces quadratic surfaces exactly away from the edge (third-order accurate).
 #[test]
 fn catmull_rom_refinement_interpolates_nodes_and_reproduces_quadratics() {
-    let q = |e: f64, n: f64| 3.0 + 0.2 * e - 0.1 * n + 0.003 * e * e - 0.002 * e * n + 0.001 * n * n;
+    let q =
+        |e: f64, n: f64| 3.0 + 0.2 * e - 0.1 * n + 0.003 * e * e - 0.002 * e * n + 0.001 * n * n;
     let (side, s) = (41usize, 2.5);
     let h: Vec<f64> = (0..side * side)
         .map(|k| q(-50.0 + s * (k % side) as f64, -50.0 + s * (k / side) as f64))
@@ -666,7 +667,11 @@ fn catmull_rom_refinement_interpolates_nodes_and_reproduces_quadratics() {
         let x = k as f64;
         let (e, n) = (40.0 * (0.37 * x).sin(), 40.0 * (0.61 * x).cos());
         let got = detail::catmull_rom_m(&g, e, n);
-        assert!((got - q(e, n)).abs() < 1e-9, "({e}, {n}): {got} vs {}", q(e, n));
+        assert!(
+            (got - q(e, n)).abs() < 1e-9,
+            "({e}, {n}): {got} vs {}",
+            q(e, n)
+        );
     }
     for (i, j) in [(0, 0), (3, 7), (40, 40), (40, 0), (17, 23)] {
         let (e, n) = (-50.0 + s * i as f64, -50.0 + s * j as f64);
