@@ -678,3 +678,43 @@ fn catmull_rom_refinement_interpolates_nodes_and_reproduces_quadratics() {
         assert_eq!(detail::catmull_rom_m(&g, e, n), g.at(i, j));
     }
 }
+
+/// Over a base whose spacing is just above the one asked for, the whole fraction is much
+/// finer (0.51 m base, 0.5 m asked: 0.255 m): the node limit is checked on what is built.
+#[test]
+fn a_finer_aligned_spacing_still_respects_the_node_limit() {
+    let base = SyntheticSpec {
+        extent_m: 1500.0,
+        spacing_m: 0.51,
+        crater_min_diameter_m: 20.0,
+        ..SyntheticSpec::default()
+    };
+    let fits = DetailSpec {
+        extent_m: 600.0,
+        ..small_detail(1)
+    };
+    let t = build(
+        &TerrainSpec::Synthetic(SyntheticSpec {
+            detail: Some(fits),
+            ..base.clone()
+        }),
+        &site(),
+    )
+    .unwrap();
+    assert!((t.detail_grid().unwrap().spacing_m() - 0.255).abs() < 1e-12);
+    // 1400 m asked at 0.5 m passes validation (2801^2 < 8.4 M nodes) but 0.255 m is not.
+    let too_fine = DetailSpec {
+        extent_m: 1400.0,
+        ..small_detail(1)
+    };
+    too_fine.validate().unwrap();
+    let err = build(
+        &TerrainSpec::Synthetic(SyntheticSpec {
+            detail: Some(too_fine),
+            ..base
+        }),
+        &site(),
+    )
+    .expect_err("too many nodes");
+    assert!(matches!(err, TerrainError::GridTooLarge { .. }), "{err:?}");
+}

@@ -298,12 +298,22 @@ pub fn layout(s: &DetailSpec, base: Option<&Grid>) -> Result<TileLayout, Terrain
     if i1 < i0 + 2 || j1 < j0 + 2 {
         return Err(too_small());
     }
+    let (nx, ny) = ((i1 - i0) * k + 1, (j1 - j0) * k + 1);
+    // The whole fraction of the base's spacing may be finer than asked (a 0.51 m base
+    // and 0.5 m asked give 0.255 m): the node count is checked again here.
+    let nodes = (nx as u64).saturating_mul(ny as u64);
+    if nodes > MAX_DETAIL_NODES {
+        return Err(TerrainError::GridTooLarge {
+            nodes,
+            limit: MAX_DETAIL_NODES,
+        });
+    }
     Ok(TileLayout {
         e0_m: e0 + sb * i0 as f64,
         n0_m: n0 + sb * j0 as f64,
         spacing_m,
-        nx: (i1 - i0) * k + 1,
-        ny: (j1 - j0) * k + 1,
+        nx,
+        ny,
     })
 }
 
