@@ -5,11 +5,16 @@
 //! 0.7 GB of pyramid; a gigapixel DEM would take 20 GB of this 24 GB machine, which its
 //! other work shares).
 //!
+//! The detail layer (`terrain_detail/*`): building the default base with the default
+//! 1 km tile at 0.5 m, and ray throughput inside the tile and for a 128 x 128 flash lidar.
+//!
 //! `cargo bench --bench terrain -- --warm-up-time 1 --measurement-time 3`
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::Vector3;
-use oils_emulator::world::terrain::{build, Grid, SiteFrame, SyntheticSpec, Terrain, TerrainSpec};
+use oils_emulator::world::terrain::{
+    build, DetailSpec, Grid, SiteFrame, SyntheticSpec, Terrain, TerrainSpec,
+};
 use std::hint::black_box;
 
 fn site() -> SiteFrame {
@@ -138,5 +143,60 @@ fn throughput(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, queries, build_cost, throughput);
+/// The default synthetic base with the default detail layer (1 km at 0.5 m about the
+/// site): what `pinpoint` flies over.
+fn detailed_synthetic() -> TerrainSpec {
+    TerrainSpec::Synthetic(SyntheticSpec {
+        detail: Some(DetailSpec::default()),
+        ..SyntheticSpec::default()
+    })
+}
+
+/// A flash lidar's rays from `alt_m` above the site: 128 x 128 over a 20 deg field about
+/// nadir.
+fn lidar_rays(t: &Terrain, alt_m: f64) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+    let o = t
+        .map()
+        .site_of_map(0.0, 0.0, t.elevation_m(0.0, 0.0) + alt_m);
+    let half = 10f64.to_radians().tan();
+    (0..128 * 128)
+        .map(|k| {
+            let (i, j) = ((k % 128) as f64, (k / 128) as f64);
+            let (x, y) = (
+                half * (2.0 * i / 127.0 - 1.0),
+                half * (2.0 * j / 127.0 - 1.0),
+            );
+            (o, Vector3::new(x, y, -1.0))
+        })
+        .collect()
+}
+
+fn detail(c: &mut Criterion) {
+    let mut g = c.benchmark_group("terrain_detail");
+    g.sample_size(10);
+    g.bench_function("build_default_synthetic_with_detail", |b| {
+        b.iter(|| black_box(build(black_box(&detailed_synthetic()), &site())))
+    });
+    let t = build(&detailed_synthetic(), &site()).expect("detailed synthetic builds");
+    let batches = [
+        ("rays_in_tile", ray_batch(&t, 450.0)),
+        ("lidar_128x128_from_100m", lidar_rays(&t, 100.0)),
+        ("lidar_128x128_from_1km", lidar_rays(&t, 1000.0)),
+    ];
+    for (name, rays) in &batches {
+        g.throughput(Throughput::Elements(rays.len() as u64));
+        g.bench_function(*name, |b| {
+            b.iter(|| {
+                let mut hits = 0usize;
+                for (o, d) in rays {
+                    hits += t.ray_cast(black_box(o), black_box(d), 20_000.0).is_some() as usize;
+                }
+                black_box(hits)
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, queries, build_cost, detail, throughput);
 criterion_main!(benches);

@@ -907,6 +907,10 @@ pub struct ScenarioConfig {
     pub site: SiteConfig,
     /// Terrain about the site (default: the bare sphere).
     pub terrain: crate::world::terrain::TerrainSpec,
+    /// The sun at the site: an epoch or a direction (`docs/world.md`; default: the
+    /// Chandrayaan-3 landing epoch).
+    #[serde(skip_serializing_if = "crate::world::sun::SunSpec::is_default")]
+    pub sun: crate::world::sun::SunSpec,
     /// Vehicle.
     pub lander: LanderConfig,
     /// Main propulsion.
@@ -1022,6 +1026,13 @@ impl ScenarioConfig {
                 field: "terrain",
                 value: e.to_string(),
                 why: "see docs/terrain.md",
+            });
+        }
+        if let Err(e) = self.sun.validate() {
+            return Err(ConfigError {
+                field: "sun",
+                value: e.to_string(),
+                why: "see docs/world.md",
             });
         }
         self.lander.validate()?;

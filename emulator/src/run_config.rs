@@ -719,6 +719,10 @@ pub const NAMED_SCENARIOS: &[(&str, &str)] = &[
         "terminal-descent",
         include_str!("../config/scenarios/terminal-descent.toml"),
     ),
+    (
+        "pinpoint",
+        include_str!("../config/scenarios/pinpoint.toml"),
+    ),
 ];
 
 /// A scenario by name (see [`NAMED_SCENARIOS`]) or from a TOML file.

@@ -537,7 +537,7 @@ fn spec_parses_from_toml_validates_and_hashes() {
         a.spec_hash(),
         TerrainSpec::Synthetic(small_synthetic(2)).spec_hash()
     );
-    assert_ne!(a.spec_hash(), TerrainSpec::Smooth.spec_hash());
+    assert_ne!(a.spec_hash(), TerrainSpec::default().spec_hash());
 }
 
 #[test]
@@ -562,7 +562,10 @@ fn cache_builds_once_per_spec_and_site_and_shares_the_terrain() {
     assert!(cache.get_or_build(&bad, &site).is_err());
     assert_eq!(cache.len(), 2);
     assert!(matches!(
-        build(&TerrainSpec::Smooth, &SiteFrame::from_deg(95.0, 0.0, R_M)),
+        build(
+            &TerrainSpec::default(),
+            &SiteFrame::from_deg(95.0, 0.0, R_M)
+        ),
         Err(TerrainError::InvalidSite(_))
     ));
 }

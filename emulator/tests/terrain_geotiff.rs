@@ -7,7 +7,9 @@
 
 use nalgebra::Vector3;
 use oils_emulator::world::terrain::geotiff::{FileProjection, GeoDem};
-use oils_emulator::world::terrain::{build, GeoTiffSpec, SiteFrame, TerrainError, TerrainSpec};
+use oils_emulator::world::terrain::{
+    build, DetailSpec, GeoTiffSpec, SiteFrame, TerrainError, TerrainSpec,
+};
 use std::path::PathBuf;
 
 const R_M: f64 = 1_737_400.0;
@@ -106,9 +108,37 @@ fn gdal_dems_match_the_analytic_surface_and_proj() {
             spacing_m: None,
             height_scale: None,
             height_offset_m: None,
+            detail: None,
         });
         let terrain = build(&spec, &frame).unwrap_or_else(|e| panic!("{e}"));
         let grid = terrain.grid().expect("a grid");
+
+        // A detail tile on the DTM: the file's grid is untouched, the tile's nodes include
+        // its nodes (a whole fraction of its spacing), and outside the tile the surface is
+        // the file's.
+        let TerrainSpec::Geotiff(base_spec) = &spec else {
+            unreachable!()
+        };
+        let with_detail = TerrainSpec::Geotiff(GeoTiffSpec {
+            detail: Some(DetailSpec {
+                extent_m: 400.0,
+                ..DetailSpec::default()
+            }),
+            ..base_spec.clone()
+        });
+        let detailed = build(&with_detail, &frame).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(detailed.grid(), terrain.grid());
+        let tile = detailed.detail_grid().expect("a tile");
+        let ratio = grid.spacing_m() / tile.spacing_m();
+        assert!((ratio - ratio.round()).abs() < 1e-9 && tile.spacing_m() <= 0.5);
+        let (e0, e1, n0, _) = tile.bounds_m();
+        for (e, n) in [(e0 - 0.5, n0 - 0.5), (e1 + 3.0, 0.0), (0.0, n0 - 7.0)] {
+            assert_eq!(detailed.elevation_m(e, n), terrain.elevation_m(e, n));
+        }
+        assert_ne!(
+            detailed.elevation_m(10.0, 10.0),
+            terrain.elevation_m(10.0, 10.0)
+        );
         println!(
             "{}: {} x {} nodes at {:.3} m, range {:?} m",
             c.file,
@@ -197,6 +227,7 @@ fn gdal_dems_match_the_analytic_surface_and_proj() {
         spacing_m: None,
         height_scale: None,
         height_offset_m: None,
+        detail: None,
     });
     let err = build(&spec, &far).expect_err("outside");
     assert!(

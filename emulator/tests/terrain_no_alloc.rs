@@ -3,7 +3,7 @@
 //! allocator in its own test binary proves it.
 
 use nalgebra::Vector3;
-use oils_emulator::world::terrain::{build, SiteFrame, SyntheticSpec, TerrainSpec};
+use oils_emulator::world::terrain::{build, DetailSpec, SiteFrame, SyntheticSpec, TerrainSpec};
 
 mod common;
 
@@ -20,9 +20,20 @@ fn terrain_queries_do_not_allocate() {
         regional_slope_deg: 3.0,
         ..SyntheticSpec::default()
     });
+    let detailed = TerrainSpec::Synthetic(SyntheticSpec {
+        extent_m: 1000.0,
+        spacing_m: 2.0,
+        crater_min_diameter_m: 8.0,
+        detail: Some(DetailSpec {
+            extent_m: 400.0,
+            ..DetailSpec::default()
+        }),
+        ..SyntheticSpec::default()
+    });
     let terrains = [
-        build(&TerrainSpec::Smooth, &site).unwrap(),
+        build(&TerrainSpec::default(), &site).unwrap(),
         build(&rough, &site).unwrap(),
+        build(&detailed, &site).unwrap(),
     ];
     let before = common::allocations();
     let mut acc = 0.0;

@@ -44,14 +44,12 @@ impl Ground {
         longitude_deg: f64,
         radius_m: f64,
     ) -> Result<Self, TerrainError> {
-        if *spec == TerrainSpec::Smooth {
+        if spec.is_bare_sphere() {
             return Ok(Ground::Sphere { radius_m });
         }
         let site = SiteFrame::from_deg(latitude_deg, longitude_deg, radius_m);
         let terrain = cache().get_or_build(spec, &site)?;
-        let max_elevation_m = terrain
-            .grid()
-            .map_or(0.0, |g| g.elevation_range_m().1.max(0.0));
+        let max_elevation_m = terrain.max_elevation_m().max(0.0);
         Ok(Ground::Terrain {
             terrain,
             site,
@@ -62,9 +60,7 @@ impl Ground {
     /// The ground of an already built `terrain` about `site` (tests and tools that
     /// shape their own surface; the plant builds through [`Ground::new`]).
     pub fn from_terrain(terrain: Arc<Terrain>, site: SiteFrame) -> Self {
-        let max_elevation_m = terrain
-            .grid()
-            .map_or(0.0, |g| g.elevation_range_m().1.max(0.0));
+        let max_elevation_m = terrain.max_elevation_m().max(0.0);
         Ground::Terrain {
             terrain,
             site,

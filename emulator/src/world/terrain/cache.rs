@@ -1,6 +1,7 @@
 //! Building a terrain from its spec, once per campaign: a cache keyed by the spec's
 //! hash and the site, handing out `Arc<Terrain>` to every case that asks.
 
+use super::detail::{self, BaseLimits};
 use super::frame::SiteFrame;
 use super::spec::TerrainSpec;
 use super::surface::Terrain;
@@ -25,11 +26,24 @@ pub fn build(spec: &TerrainSpec, site: &SiteFrame) -> Result<Terrain, TerrainErr
         )));
     }
     let grid = match spec {
-        TerrainSpec::Smooth => None,
+        TerrainSpec::Smooth(_) => None,
         TerrainSpec::Synthetic(s) => Some(synthetic::build_grid(s)?),
         TerrainSpec::Geotiff(g) => Some(geotiff::build_grid(g, site)?),
     };
-    Terrain::new(grid, site.radius_m).ok_or(TerrainError::NonFinite)
+    let tile = match spec.detail() {
+        None => None,
+        Some(d) => {
+            let limits = match (spec, &grid) {
+                (TerrainSpec::Synthetic(s), _) => BaseLimits::synthetic(s),
+                (TerrainSpec::Geotiff(_), Some(g)) => {
+                    BaseLimits::dem(g.spacing_m(), d.base_resolution_pixels)
+                }
+                _ => BaseLimits::NONE,
+            };
+            Some(detail::build_tile(d, grid.as_ref(), &limits)?)
+        }
+    };
+    Terrain::with_detail(grid, tile, site.radius_m).ok_or(TerrainError::NonFinite)
 }
 
 /// Key of a built terrain: the spec's hash and the site's numbers, bit for bit.

@@ -8,9 +8,10 @@
 //!
 //! Modules: [`frame`] (site <-> `mcmf`), [`map`] (projection), [`grid`] (bilinear DEM),
 //! [`surface`] (point queries), [`ray`] (beam casts), [`pyramid`] (height bounds for them), [`spec`] (configuration),
-//! [`synthetic`] (seeded craters), [`geotiff`] (DEM files) and [`cache`] (build once).
+//! [`synthetic`] (seeded craters), [`detail`] (the sub-metre layer about the site), [`geotiff`] (DEM files) and [`cache`] (build once).
 
 pub mod cache;
+pub mod detail;
 pub mod error;
 pub mod frame;
 pub mod geotiff;
@@ -28,5 +29,5 @@ pub use frame::SiteFrame;
 pub use grid::Grid;
 pub use map::MapProjection;
 pub use ray::Hit;
-pub use spec::{BoulderSpec, GeoTiffSpec, SyntheticSpec, TerrainSpec};
+pub use spec::{BoulderSpec, DetailSpec, GeoTiffSpec, SmoothSpec, SyntheticSpec, TerrainSpec};
 pub use surface::Terrain;

@@ -74,16 +74,14 @@ impl Terrain {
         }
         let scale = map_scale(&self.map);
         let mut level = usize::MAX;
+        let mut tile_level = usize::MAX;
         for _ in 0..MAX_MARCH {
             if t0 >= max_range_m {
                 return None;
             }
-            let mut step = (g0 / self.lipschitz).max(min_step);
-            if let Some(pyramid) = &self.pyramid {
-                let (advance, best) =
-                    pyramid.safe_advance_m(m0.e_m, m0.n_m, m0.height_m, scale, level);
+            let mut step = (g0 / self.lipschitz).max(self.min_step_near(&m0, min_step));
+            if let Some(advance) = self.pyramid_advance_m(&m0, scale, &mut level, &mut tile_level) {
                 step = step.max(advance);
-                level = best;
             }
             let t1 = (t0 + step).min(max_range_m);
             let m1 = at(t1);
@@ -97,6 +95,59 @@ impl Terrain {
             g0 = g1;
         }
         None
+    }
+
+    /// The march's smallest step at `m`: within a base step of the detail tile, the
+    /// tile's (if finer); the base's elsewhere.
+    #[inline]
+    fn min_step_near(&self, m: &MapPoint, base_min_step: f64) -> f64 {
+        match &self.detail {
+            Some(d) if d.distance_m(m.e_m, m.n_m) <= base_min_step => {
+                base_min_step.min(d.grid.spacing_m() * MIN_STEP_FRACTION)
+            }
+            _ => base_min_step,
+        }
+    }
+
+    /// The longest safe advance the pyramids give at `m` (`None` without pyramids).
+    /// Without a tile, the base pyramid's. With one: the base's bound (or, on the bare
+    /// sphere, the height itself) covers the base; an advance that reaches no closer than
+    /// the tile's Chebyshev distance cannot meet it, and beyond that the tile's own
+    /// pyramid bounds it, so the advance is `min(base, max(free, tile))`.
+    #[inline]
+    fn pyramid_advance_m(
+        &self,
+        m: &MapPoint,
+        scale: f64,
+        level: &mut usize,
+        tile_level: &mut usize,
+    ) -> Option<f64> {
+        let base = match &self.pyramid {
+            Some(p) => {
+                let (advance, best) = p.safe_advance_m(m.e_m, m.n_m, m.height_m, scale, *level);
+                *level = best;
+                Some(advance)
+            }
+            None => None,
+        };
+        let Some(tile) = &self.detail else {
+            return base;
+        };
+        let tile_pyramid = tile.pyramid.as_ref()?;
+        let base = match base {
+            Some(b) => b,
+            // The bare sphere under the tile: h = 0 outside it.
+            None if self.grid.is_none() => m.height_m.max(0.0),
+            None => return None,
+        };
+        let free = tile.distance_m(m.e_m, m.n_m) / scale;
+        if base <= free {
+            return Some(base);
+        }
+        let (inside, best) =
+            tile_pyramid.safe_advance_m(m.e_m, m.n_m, m.height_m, scale, *tile_level);
+        *tile_level = best;
+        Some(base.min(free.max(inside)))
     }
 
     fn hit(&self, origin: &Vector3<f64>, d: &Vector3<f64>, t: f64) -> Hit {

@@ -1,21 +1,38 @@
 //! The terrain configuration (TOML `[terrain]`, `kind = "smooth" | "synthetic" |
 //! "geotiff"`), its validation and its hash (the cache key of built terrains).
 
+pub use super::detail::DetailSpec;
 use super::error::TerrainError;
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
 
 /// Where the terrain comes from. The default, `smooth`, is the bare sphere (`h = 0`).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+/// Any kind may carry a `[terrain.detail]` table: a seeded sub-metre layer about the
+/// site ([`DetailSpec`], `docs/terrain.md`), off unless given.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "lowercase")]
 pub enum TerrainSpec {
     /// The reference sphere, `h = 0`.
-    #[default]
-    Smooth,
+    Smooth(SmoothSpec),
     /// A seeded synthetic cratered surface.
     Synthetic(SyntheticSpec),
     /// A GeoTIFF DEM file, resampled about the site.
     Geotiff(GeoTiffSpec),
+}
+
+impl Default for TerrainSpec {
+    fn default() -> Self {
+        TerrainSpec::Smooth(SmoothSpec::default())
+    }
+}
+
+/// The bare sphere; only a detail layer, if any, to configure.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+pub struct SmoothSpec {
+    /// The seeded detail layer about the site, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub detail: Option<DetailSpec>,
 }
 
 /// A seeded synthetic surface: craters from a power-law size-frequency distribution
@@ -48,6 +65,9 @@ pub struct SyntheticSpec {
     pub slope_azimuth_deg: f64,
     /// Boulders on the surface, if any.
     pub boulders: Option<BoulderSpec>,
+    /// The seeded detail layer about the site, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub detail: Option<DetailSpec>,
 }
 
 impl Default for SyntheticSpec {
@@ -65,6 +85,7 @@ impl Default for SyntheticSpec {
             regional_slope_deg: 0.0,
             slope_azimuth_deg: 0.0,
             boulders: None,
+            detail: None,
         }
     }
 }
@@ -113,6 +134,9 @@ pub struct GeoTiffSpec {
     /// Metres added after scaling, overriding the file's GDAL offset.
     #[serde(default)]
     pub height_offset_m: Option<f64>,
+    /// The seeded detail layer about the site, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detail: Option<DetailSpec>,
 }
 
 fn default_geotiff_extent_m() -> f64 {
@@ -122,7 +146,7 @@ fn default_geotiff_extent_m() -> f64 {
 /// Largest grid a build accepts (64 M nodes, 512 MB of f64).
 pub const MAX_GRID_NODES: u64 = 1 << 26;
 
-fn positive(field: &'static str, v: f64) -> Result<(), TerrainError> {
+pub(super) fn positive(field: &'static str, v: f64) -> Result<(), TerrainError> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
@@ -133,7 +157,7 @@ fn positive(field: &'static str, v: f64) -> Result<(), TerrainError> {
     }
 }
 
-fn in_range(field: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), TerrainError> {
+pub(super) fn in_range(field: &'static str, v: f64, lo: f64, hi: f64) -> Result<(), TerrainError> {
     if v.is_finite() && v >= lo && v <= hi {
         Ok(())
     } else {
@@ -223,12 +247,32 @@ impl SyntheticSpec {
 }
 
 impl TerrainSpec {
+    /// The bare sphere without detail: what the plant meets as an exact sphere.
+    pub fn is_bare_sphere(&self) -> bool {
+        matches!(self, TerrainSpec::Smooth(SmoothSpec { detail: None }))
+    }
+
+    /// The detail layer this spec asks for, if any.
+    pub fn detail(&self) -> Option<&DetailSpec> {
+        match self {
+            TerrainSpec::Smooth(s) => s.detail.as_ref(),
+            TerrainSpec::Synthetic(s) => s.detail.as_ref(),
+            TerrainSpec::Geotiff(g) => g.detail.as_ref(),
+        }
+    }
+
     /// Checks the spec's numbers (a GeoTIFF file itself is checked when it is read).
     pub fn validate(&self) -> Result<(), TerrainError> {
         match self {
-            TerrainSpec::Smooth => Ok(()),
-            TerrainSpec::Synthetic(s) => s.validate(),
+            TerrainSpec::Smooth(s) => s.detail.as_ref().map_or(Ok(()), DetailSpec::validate),
+            TerrainSpec::Synthetic(s) => {
+                s.validate()?;
+                s.detail.as_ref().map_or(Ok(()), DetailSpec::validate)
+            }
             TerrainSpec::Geotiff(g) => {
+                if let Some(d) = &g.detail {
+                    d.validate()?;
+                }
                 if g.path.as_os_str().is_empty() {
                     return Err(TerrainError::InvalidSpec {
                         field: "path",

@@ -7,12 +7,16 @@ use super::pyramid::MaxPyramid;
 use nalgebra::Vector3;
 
 /// The Moon's surface about a site: a sphere of `radius_m` (or a flat world) plus
-/// elevations `h(e, n)` from a grid (none: `h = 0`). Immutable once built; share it
+/// elevations `h(e, n)` from a grid (none: `h = 0`), and optionally a finer detail tile
+/// about the site that replaces the grid inside its bounds ([`super::detail`]: it holds
+/// base plus detail and meets the base at its edge). Immutable once built; share it
 /// across runs with `Arc<Terrain>`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Terrain {
     pub(super) map: MapProjection,
     pub(super) grid: Option<Grid>,
+    /// The detail tile, if any: inside its bounds the surface is its grid.
+    pub(super) detail: Option<DetailTile>,
     /// Bound on |d(height above ground)/d(range)| along any unit ray: the ray-march
     /// step `height / lipschitz` cannot cross the surface.
     pub(super) lipschitz: f64,
@@ -31,24 +35,93 @@ pub(super) fn map_scale(map: &MapProjection) -> f64 {
     }
 }
 
+/// The detail tile: its grid (total heights), the grid's pyramid and its map bounds.
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct DetailTile {
+    pub(super) grid: Grid,
+    pub(super) pyramid: Option<MaxPyramid>,
+    /// `(e_min, e_max, n_min, n_max)`, m.
+    pub(super) bounds: (f64, f64, f64, f64),
+}
+
+impl DetailTile {
+    #[inline]
+    pub(super) fn contains(&self, e_m: f64, n_m: f64) -> bool {
+        let b = self.bounds;
+        e_m >= b.0 && e_m <= b.1 && n_m >= b.2 && n_m <= b.3
+    }
+
+    /// Chebyshev map distance from `(e, n)` to the tile (0 inside).
+    #[inline]
+    pub(super) fn distance_m(&self, e_m: f64, n_m: f64) -> f64 {
+        let b = self.bounds;
+        let de = (b.0 - e_m).max(e_m - b.1).max(0.0);
+        let dn = (b.2 - n_m).max(n_m - b.3).max(0.0);
+        de.max(dn)
+    }
+}
+
 impl Terrain {
     /// A terrain from an optional grid on a sphere of `radius_m` (`f64::INFINITY`: flat).
     /// `None` if the radius is not positive (or NaN).
     pub fn new(grid: Option<Grid>, radius_m: f64) -> Option<Self> {
+        Self::with_detail(grid, None, radius_m)
+    }
+
+    /// A terrain from an optional base grid and an optional detail tile (a grid of total
+    /// heights that replaces the base inside its bounds, as [`super::detail::build_tile`]
+    /// makes it). `None` if the radius is not positive (or NaN).
+    pub fn with_detail(grid: Option<Grid>, detail: Option<Grid>, radius_m: f64) -> Option<Self> {
         if radius_m.is_nan() || radius_m <= 0.0 {
             return None;
         }
         let map = MapProjection { radius_m };
-        let slope = grid.as_ref().map_or(0.0, Grid::max_gradient);
+        // The surface is piecewise the base or the tile, continuous at the seam: the
+        // larger gradient bound holds for both.
+        let slope = grid
+            .as_ref()
+            .map_or(0.0, Grid::max_gradient)
+            .max(detail.as_ref().map_or(0.0, Grid::max_gradient));
         let curvature = map_scale(&map);
         let lipschitz = (1.0 + slope * slope).sqrt() * curvature;
         let pyramid = grid.as_ref().map(MaxPyramid::new);
+        let detail = detail.map(|g| DetailTile {
+            pyramid: Some(MaxPyramid::new(&g)),
+            bounds: g.bounds_m(),
+            grid: g,
+        });
         Some(Self {
             map,
             grid,
+            detail,
             lipschitz,
             pyramid,
         })
+    }
+
+    /// The detail tile's grid of total heights, if any.
+    pub fn detail_grid(&self) -> Option<&Grid> {
+        self.detail.as_ref().map(|d| &d.grid)
+    }
+
+    /// Highest elevation anywhere on the surface, m (0 for the bare sphere).
+    pub fn max_elevation_m(&self) -> f64 {
+        let base = self.grid.as_ref().map_or(0.0, |g| g.elevation_range_m().1);
+        let tile = self
+            .detail
+            .as_ref()
+            .map_or(f64::NEG_INFINITY, |d| d.grid.elevation_range_m().1);
+        base.max(tile)
+    }
+
+    /// Drops the ray-march pyramids (tests compare against the plain march).
+    #[doc(hidden)]
+    pub fn without_pyramids(mut self) -> Self {
+        self.pyramid = None;
+        if let Some(d) = &mut self.detail {
+            d.pyramid = None;
+        }
+        self
     }
 
     /// The smooth sphere (`h = 0`) of `radius_m`.
@@ -68,11 +141,19 @@ impl Terrain {
 
     /// Bound on the surface's map gradient magnitude (m/m).
     pub fn max_gradient(&self) -> f64 {
-        self.grid.as_ref().map_or(0.0, Grid::max_gradient)
+        self.grid
+            .as_ref()
+            .map_or(0.0, Grid::max_gradient)
+            .max(self.detail.as_ref().map_or(0.0, |d| d.grid.max_gradient()))
     }
 
     #[inline]
     pub(super) fn sample(&self, e_m: f64, n_m: f64) -> Sample {
+        if let Some(d) = &self.detail {
+            if d.contains(e_m, n_m) {
+                return d.grid.sample(e_m, n_m);
+            }
+        }
         match &self.grid {
             Some(g) => g.sample(e_m, n_m),
             None => Sample {

@@ -76,7 +76,7 @@ pub fn craters(s: &SyntheticSpec) -> Vec<Feature> {
 }
 
 /// Boulder number density per m^2 per m of diameter at `d` (Golombek & Rapp 1997).
-fn boulder_density(k: f64, d: f64) -> f64 {
+pub(super) fn boulder_density(k: f64, d: f64) -> f64 {
     let q = 1.79 + 0.152 / k;
     k * q * (-q * d).exp() / (std::f64::consts::PI * 0.25 * d * d)
 }
