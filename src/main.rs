@@ -55,8 +55,13 @@ struct ExportArgs {
     /// The log file (`.oilslog`, or `.mcap` from `oils run --log-format mcap`).
     log: PathBuf,
     /// Write every step as CSV here.
-    #[arg(long, required_unless_present_any = ["profile", "mcap", "layout"])]
+    #[arg(long, required_unless_present_any = ["profile", "mcap", "layout", "frames"])]
     csv: Option<PathBuf>,
+    /// Write every camera, lidar and test-card frame as a 16-bit grey PNG into this
+    /// directory (`camera-000123.png`, ...): the log keeps the frames' hashes, so the run
+    /// is replayed and each frame rendered again and checked against its hash.
+    #[arg(long, value_name = "DIR")]
+    frames: Option<PathBuf>,
     /// Write the run as MCAP here (opens in Foxglove; docs/foxglove-layout.json).
     #[arg(long, value_name = "OUT.mcap")]
     mcap: Option<PathBuf>,
@@ -136,6 +141,43 @@ fn real_main() -> anyhow::Result<()> {
     }
 }
 
+/// `oils export LOG --frames DIR`: replays the run, writing each frame rendered again.
+fn export_frames(
+    log_path: &std::path::Path,
+    log: oils_emulator::recorder::Log,
+    dir: &std::path::Path,
+) -> anyhow::Result<()> {
+    let header = oils_emulator::exact_json::value_from_str(&log.header_json)
+        .context("log header is not JSON")?;
+    let camera_bits = header["config"]["scenario"]["sensors"]["camera"]["bits"]
+        .as_u64()
+        .unwrap_or(12) as u32;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let written = std::rc::Rc::new(std::cell::Cell::new(0u64));
+    let count = written.clone();
+    let out = dir.to_path_buf();
+    let tap: oils_emulator::link::FrameTap = Box::new(move |ann, pixels| {
+        let name = oils_shared::frame_device_name(ann.device).unwrap_or("frame");
+        let path = out.join(format!("{name}-{:06}.png", ann.seq));
+        let file = std::io::BufWriter::new(std::fs::File::create(&path)?);
+        oils_emulator::frame_png::write_png(ann, pixels, camera_bits, file)
+            .map_err(|e| std::io::Error::other(format!("{}: {e}", path.display())))?;
+        count.set(count.get() + 1);
+        Ok(())
+    });
+    let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
+    let started = std::time::Instant::now();
+    oils_emulator::session::replay_tapping_frames(log_path, log, &stop, Some(tap))
+        .with_context(|| format!("replaying {} for its frames", log_path.display()))?;
+    eprintln!(
+        "oils export: {} frames to {} in {:.1} s (rendered again by a replay, each checked against the log's hash)",
+        written.get(),
+        dir.display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
 fn export(a: &ExportArgs) -> anyhow::Result<()> {
     if a.every == 0 {
         bail!("--every 0: keep one step in N needs N >= 1");
@@ -146,6 +188,7 @@ fn export(a: &ExportArgs) -> anyhow::Result<()> {
         ("--mcap", &a.mcap),
         ("--profile", &a.profile),
         ("--layout", &a.layout),
+        ("--frames", &a.frames),
     ] {
         if let Some(p) = p {
             paths.push((name, p.as_path()));
@@ -232,6 +275,9 @@ fn export(a: &ExportArgs) -> anyhow::Result<()> {
             "oils export: record layout from {whose} to {}",
             path.display()
         );
+    }
+    if let Some(dir) = &a.frames {
+        export_frames(&a.log, log.clone(), dir)?;
     }
     if let Some(path) = &a.profile {
         // The engine rating the run used is in the log's header.

@@ -86,7 +86,13 @@ fn test_card() -> FrameRack {
         },
         ..Default::default()
     };
-    FrameRack::from_config(&cfg, 1).unwrap().unwrap()
+    // No camera: the ground and the sun light nothing here.
+    let ground = oils_emulator::plant::ground::Ground::Sphere {
+        radius_m: 1_737_400.0,
+    };
+    FrameRack::from_config(&cfg, 1, &ground, nalgebra::Vector3::x(), 1_737_400.0)
+        .unwrap()
+        .unwrap()
 }
 
 /// Frames the test card has published by simulated time `t_ns` (one at each whole

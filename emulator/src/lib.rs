@@ -27,6 +27,7 @@ pub mod exact_json;
 pub mod failure_scenarios;
 pub mod faults;
 pub mod fixed_len;
+pub mod frame_png;
 pub mod fsw_monitor;
 pub mod link;
 pub mod log_fields;

@@ -50,6 +50,9 @@ pub enum ExchangeError {
         /// Who the run is bound to.
         bound: PeerPort,
     },
+    /// What a replay's frames were handed to failed (an export's file write).
+    #[error("the frames' export failed: {0}")]
+    FrameTap(String),
     /// A replayed run produced telemetry other than the recorded one.
     #[error("replay diverged at step {step}: the emulator's telemetry differs from the log's")]
     ReplayDiverged {
@@ -391,6 +394,8 @@ pub struct ReplayLink {
     log: Log,
     /// The replay's frames: rendered again, checked through the telemetry's hashes.
     frames: FrameSlots,
+    /// Who sees each frame published again (`oils export --frames`), if anyone.
+    frame_tap: Option<FrameTap>,
     next: usize,
     pending: Option<Command>,
     /// The recorded run was aborted at this step after its telemetry had gone out: the
@@ -406,12 +411,19 @@ impl ReplayLink {
         Self {
             log,
             frames: FrameSlots::default(),
+            frame_tap: None,
             next: 0,
             pending: None,
             abort_at: None,
             abort_now: false,
             diverged: None,
         }
+    }
+
+    /// `tap` sees every frame rendered again, in order ([`FrameTap`]).
+    pub fn tapping_frames(mut self, tap: FrameTap) -> Self {
+        self.frame_tap = Some(tap);
+        self
     }
 
     /// With a frame buffer for each of `specs` (the run's frame devices): the replay
@@ -454,9 +466,18 @@ impl FrameSink for ReplayLink {
     }
 
     fn publish_frame(&mut self, ann: &FrameAnnouncement) -> Result<(), ExchangeError> {
-        self.frames.publish_frame(ann)
+        self.frames.publish_frame(ann)?;
+        if let Some(tap) = self.frame_tap.as_mut() {
+            let pixels = self.frames.pixels(ann).unwrap_or(&[]);
+            tap(ann, pixels).map_err(|e| ExchangeError::FrameTap(e.to_string()))?;
+        }
+        Ok(())
     }
 }
+
+/// What sees every frame a replay renders again, with its announcement and its bytes
+/// (an export: it may allocate and write files; a replay is not timed).
+pub type FrameTap = Box<dyn FnMut(&FrameAnnouncement, &[u8]) -> std::io::Result<()>>;
 
 impl Link for ReplayLink {
     fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {

@@ -152,8 +152,11 @@ pub fn build_plant(cfg: &RunConfig) -> Result<Plant, SessionError> {
 }
 
 /// The devices a configuration puts on board: the ideal navigation source if its
-/// telemetry carries it, the sensors if it carries them, seeded from the run's seed.
-pub fn build_devices(cfg: &RunConfig) -> Result<Devices, SessionError> {
+/// telemetry carries it, the sensors if it carries them, the frame devices that are
+/// enabled (looking at `plant`'s ground under the scenario's sun, held at its direction
+/// at the run's start: it moves about 0.5 deg an hour as seen from the Moon), seeded
+/// from the run's seed.
+pub fn build_devices(cfg: &RunConfig, plant: &Plant) -> Result<Devices, SessionError> {
     let mut devices = Devices::new(&cfg.scenario, cfg.seed);
     devices.set_ideal_nav(cfg.telemetry.ideal_nav());
     if cfg.telemetry.sensors() {
@@ -162,7 +165,25 @@ pub fn build_devices(cfg: &RunConfig) -> Result<Devices, SessionError> {
             cfg.seed,
         )?);
     }
-    if let Some(rack) = crate::sensors::FrameRack::from_config(&cfg.scenario.sensors, cfg.seed)? {
+    let sc = &cfg.scenario;
+    let site = crate::world::terrain::SiteFrame::from_deg(
+        sc.site.latitude_deg,
+        sc.site.longitude_deg,
+        sc.moon.radius_m,
+    );
+    let sun =
+        crate::world::sun::Sun::new(&sc.sun, &site).map_err(|e| crate::config::ConfigError {
+            field: "sun",
+            value: e.to_string(),
+            why: "a sun the frame devices can be lit by",
+        })?;
+    if let Some(rack) = crate::sensors::FrameRack::from_config(
+        &cfg.scenario.sensors,
+        cfg.seed,
+        plant.ground(),
+        sun.sun_dir_mcmf(0),
+        sc.moon.radius_m,
+    )? {
         devices.attach_frames(rack);
     }
     Ok(devices)
@@ -316,7 +337,7 @@ pub fn run(
         (propulsion::PropulsionKind::Fmu, Some(build)) => Plant::new(&cfg.scenario, build(cfg)?)?,
         _ => build_plant(cfg)?,
     };
-    let mut devices = build_devices(cfg)?;
+    let mut devices = build_devices(cfg, &plant)?;
     let mut faults = fault_plan(cfg, &plant)?;
     let mut sched = scheduler_config(cfg, run_id);
     if extras.untimed {
@@ -542,6 +563,18 @@ pub struct Replay {
 /// says which), or, for a log without its end (kill -9, a full disk), after its last
 /// record. `stop` interrupts the replay itself.
 pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, SessionError> {
+    replay_tapping_frames(log_path, log, stop, None)
+}
+
+/// [`replay`], handing every frame rendered again to `tap` (`oils export --frames`): the
+/// log keeps the frames' hashes, not their pixels, and a frame is a pure function of the
+/// run, so the replay renders each again and checks it against the recorded hash.
+pub fn replay_tapping_frames(
+    log_path: &Path,
+    log: Log,
+    stop: &AtomicBool,
+    tap: Option<crate::link::FrameTap>,
+) -> Result<Replay, SessionError> {
     let bad = |why: String| SessionError::Replay {
         path: log_path.to_path_buf(),
         why,
@@ -559,7 +592,7 @@ pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, Se
         return Err(bad("the log holds no records".into()));
     };
     let mut plant = build_plant(&config)?;
-    let mut devices = build_devices(&config)?;
+    let mut devices = build_devices(&config, &plant)?;
     let mut faults = fault_plan(&config, &plant)?;
     let mut sched = scheduler_config(&config, run_id);
     let recorded = log.records.len();
@@ -584,6 +617,9 @@ pub fn replay(log_path: &Path, log: Log, stop: &AtomicBool) -> Result<Replay, Se
     let mut link = ReplayLink::new(log)
         .with_frames(&devices.frame_specs())
         .aborting_at(after_publish.then_some(last_step));
+    if let Some(tap) = tap {
+        link = link.tapping_frames(tap);
+    }
     let mut clock = ReplayClock::default();
     let mut summary = scheduler::run(
         &sched,

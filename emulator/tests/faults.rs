@@ -313,7 +313,7 @@ fn the_reference_gnc_detects_the_failed_engine_from_telemetry() {
     use oils_onboard_stub::gnc::{GncConfig, ReferenceGnc};
     let cfg = config(PropulsionKind::Ideal, &["engine-off:1@t=300"], 320.0);
     let mut plant = session::build_plant(&cfg).unwrap();
-    let mut devices = session::build_devices(&cfg).unwrap();
+    let mut devices = session::build_devices(&cfg, &plant).unwrap();
     let mut faults = session::fault_plan(&cfg, &plant).unwrap();
     let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()));
     let sched = SchedulerConfig {

@@ -45,6 +45,10 @@ pub struct SensorsConfig {
     pub velocimeter: VelocimeterConfig,
     /// The test card: a frame device with a known pattern (protocol v4 frames).
     pub test_card: TestCardConfig,
+    /// The navigation camera (a frame device, off by default).
+    pub camera: CameraConfig,
+    /// The flash lidar (a frame device, off by default).
+    pub lidar: LidarConfig,
 }
 
 /// The test card (`sensors::test_card`): a deterministic `u16` pattern with the frame
@@ -470,6 +474,8 @@ impl SensorsConfig {
     /// Checks every field (whether or not the device is enabled); run before tick 0.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.test_card.validate()?;
+        self.camera.validate()?;
+        self.lidar.validate()?;
         let i = &self.imu;
         timing(
             "sensors.imu.period_ms",
@@ -876,12 +882,26 @@ impl SensorsConfig {
         plant_step_ns: u64,
         fsw_period_ns: u64,
     ) -> Result<(), ConfigError> {
-        for (enabled, name, period_ms, field) in [(
-            self.test_card.enabled,
-            "test-card",
-            self.test_card.period_ms,
-            "sensors.test_card.period_ms",
-        )] {
+        for (enabled, name, period_ms, field) in [
+            (
+                self.test_card.enabled,
+                "test-card",
+                self.test_card.period_ms,
+                "sensors.test_card.period_ms",
+            ),
+            (
+                self.camera.enabled,
+                "camera",
+                self.camera.period_ms,
+                "sensors.camera.period_ms",
+            ),
+            (
+                self.lidar.enabled,
+                "lidar",
+                self.lidar.period_ms,
+                "sensors.lidar.period_ms",
+            ),
+        ] {
             if !enabled {
                 continue;
             }
@@ -1001,6 +1021,10 @@ pub struct CameraConfig {
     /// Largest angle between the frame's sun and the shadow map's for the map to be
     /// used, degrees (beyond it every lit point casts an exact shadow ray).
     pub shadow_map_tolerance_deg: f64,
+    /// Powered below this height above the reference sphere, m: above it the device
+    /// publishes blank frames flagged `FRAME_FLAG_OUTAGE` (switched off for the coast
+    /// and the braking burn, as a descent camera is; the default, 1e9, never).
+    pub on_below_altitude_m: f64,
 }
 
 impl Default for CameraConfig {
@@ -1030,6 +1054,7 @@ impl Default for CameraConfig {
             noise: true,
             blur_samples: 1,
             shadow_map_tolerance_deg: 0.25,
+            on_below_altitude_m: 1e9,
         }
     }
 }
@@ -1069,6 +1094,10 @@ pub struct LidarConfig {
     pub max_incidence_deg: f64,
     /// Range noise on.
     pub noise: bool,
+    /// Powered below this height above the reference sphere, m: above it the device
+    /// publishes blank frames flagged `FRAME_FLAG_OUTAGE` (switched off for the coast
+    /// and the braking burn, as a descent camera is; the default, 1e9, never).
+    pub on_below_altitude_m: f64,
 }
 
 impl Default for LidarConfig {
@@ -1087,6 +1116,7 @@ impl Default for LidarConfig {
             max_range_m: 1000.0,
             max_incidence_deg: 85.0,
             noise: true,
+            on_below_altitude_m: 1e9,
         }
     }
 }

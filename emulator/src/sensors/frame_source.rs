@@ -16,11 +16,16 @@
 //! A frame's time of validity is mid-exposure: a device whose exposure ends at the end of
 //! step `k` (its period's end, [`super::due`]) is stamped `end - exposure / 2`.
 
+use super::camera::{ShadowMap, ShadowMapConfig};
+use super::imaging::{CameraDevice, LidarDevice};
 use super::SensorTruth;
 use crate::config::ConfigError;
 use crate::link::ExchangeError;
+use crate::plant::ground::Ground;
+use nalgebra::Vector3;
 use oils_shared::link::FrameSpec;
 use oils_shared::{frame_device_name, frame_hash, FrameAnnouncement, SensorFrame, FRAMES_MAX};
+use std::sync::Arc;
 
 /// What a source says of the frame it rendered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -122,15 +127,39 @@ impl FrameRack {
         }
     }
 
-    /// The enabled frame devices of `cfg` for a run with `seed`; `None` when there are
-    /// none (the telemetry's `frame_count` then stays 0).
+    /// The enabled frame devices of `cfg` for a run with `seed`, looking at `ground`
+    /// under the sun in unit direction `sun_dir_mcmf` (Moon-fixed); `None` when there
+    /// are none (the telemetry's `frame_count` then stays 0); `moon_radius_m` for the
+    /// devices' power-on height. With the camera on, its
+    /// shadow map for that ground and sun is built here, before tick 0 (about 0.5 s).
     pub fn from_config(
         cfg: &super::SensorsConfig,
-        _seed: u64,
+        seed: u64,
+        ground: &Ground,
+        sun_dir_mcmf: Vector3<f64>,
+        moon_radius_m: f64,
     ) -> Result<Option<Self>, ConfigError> {
         let mut rack = Self::new();
         if cfg.test_card.enabled {
             rack.push(Box::new(super::test_card::TestCard::new(&cfg.test_card)?))?;
+        }
+        if cfg.camera.enabled {
+            let shadow = ShadowMap::build(ground, &sun_dir_mcmf, &ShadowMapConfig::default())
+                .map_err(|e| ConfigError {
+                    field: "sensors.camera",
+                    value: e.to_string(),
+                    why: "a shadow map for the scenario's terrain and sun",
+                })?;
+            rack.push(Box::new(CameraDevice::new(
+                &cfg.camera,
+                seed,
+                sun_dir_mcmf,
+                Some(Arc::new(shadow)),
+                moon_radius_m,
+            )?))?;
+        }
+        if cfg.lidar.enabled {
+            rack.push(Box::new(LidarDevice::new(&cfg.lidar, seed, moon_radius_m)?))?;
         }
         Ok((!rack.sources.is_empty()).then_some(rack))
     }

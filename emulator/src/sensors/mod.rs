@@ -25,6 +25,7 @@ pub mod camera;
 pub mod config;
 mod devices;
 pub mod frame_source;
+pub mod imaging;
 mod imu;
 pub mod lidar;
 pub mod test_card;
