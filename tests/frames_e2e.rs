@@ -20,66 +20,15 @@ fn config(height: u32) -> String {
     )
 }
 
-fn column(header: &[String], name: &str) -> usize {
-    header
-        .iter()
-        .position(|h| h == name)
-        .unwrap_or_else(|| panic!("no column {name}"))
-}
-
-/// Flies `config_toml` in process with a log; returns the report and the CSV export.
-fn fly_logged(
-    name: &str,
-    config_toml: &str,
-) -> (
-    serde_json::Value,
-    std::path::PathBuf,
-    Vec<String>,
-    Vec<Vec<String>>,
-) {
-    let dir = scratch(name);
-    let file = dir.join("run.toml");
-    std::fs::write(&file, config_toml).unwrap();
-    let (log, rep, csv) = (
-        dir.join("run.oilslog"),
-        dir.join("report.json"),
-        dir.join("run.csv"),
-    );
-    let out = run_oils(&[
-        "run",
-        "--config",
-        file.to_str().unwrap(),
-        "--log",
-        log.to_str().unwrap(),
-        "--report",
-        rep.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", text(&out));
-    let out = run_oils(&[
-        "export",
-        log.to_str().unwrap(),
-        "--csv",
-        csv.to_str().unwrap(),
-    ]);
-    assert!(out.status.success(), "{}", text(&out));
-    let body = std::fs::read_to_string(&csv).unwrap();
-    let mut lines = body.lines();
-    let header: Vec<String> = lines
-        .next()
-        .unwrap()
-        .split(',')
-        .map(str::to_string)
-        .collect();
-    let rows = lines
-        .map(|l| l.split(',').map(str::to_string).collect())
-        .collect();
-    (report(&rep), log, header, rows)
-}
-
 #[test]
 fn test_card_frames_across_processes_checked_on_arrival_and_replayed() {
     let cfg = config(1024);
-    let (inproc, log, header, rows) = fly_logged("frames-inproc", &cfg);
+    let LoggedRun {
+        report: inproc,
+        log,
+        header,
+        rows,
+    } = fly_logged("frames-inproc", &cfg, &[]);
     assert_eq!(inproc["outcome"], "landed", "{inproc}");
     let digest = inproc["digest"].as_str().unwrap().to_string();
 
@@ -140,8 +89,10 @@ fn test_card_frames_across_processes_checked_on_arrival_and_replayed() {
 
 #[test]
 fn the_digest_covers_the_frames_and_nothing_else_moves() {
-    let (a, _, header, rows_a) = fly_logged("frames-1024", &config(1024));
-    let (b, _, _, rows_b) = fly_logged("frames-1023", &config(1023));
+    let a = fly_logged("frames-1024", &config(1024), &[]);
+    let b = fly_logged("frames-1023", &config(1023), &[]);
+    let (header, rows_a, rows_b) = (&a.header, &a.rows, &b.rows);
+    let (a, b) = (&a.report, &b.report);
     assert_ne!(a["digest"], b["digest"], "another frame, another digest");
     // The physics and the flight software are the same: only the announcements differ.
     let frame_cols: Vec<usize> = header
@@ -159,7 +110,7 @@ fn the_digest_covers_the_frames_and_nothing_else_moves() {
     };
     assert_eq!(rows_a.len(), rows_b.len());
     let mut differing = 0;
-    for (ra, rb) in rows_a.iter().zip(&rows_b) {
+    for (ra, rb) in rows_a.iter().zip(rows_b.iter()) {
         for (i, h) in header.iter().enumerate() {
             if frame_cols.contains(&i) {
                 differing += usize::from(ra[i] != rb[i]);

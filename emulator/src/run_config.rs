@@ -563,6 +563,24 @@ impl RunConfig {
                     ),
                 ));
             }
+            if let Some(device) = f.frame_target() {
+                let sensors = &self.scenario.sensors;
+                let (on, section) = match device {
+                    oils_shared::FRAME_DEVICE_CAMERA => (sensors.camera.enabled, "camera"),
+                    oils_shared::FRAME_DEVICE_LIDAR => (sensors.lidar.enabled, "lidar"),
+                    _ => (sensors.test_card.enabled, "test_card"),
+                };
+                if !on {
+                    return Err(invalid(
+                        "faults",
+                        f.to_string(),
+                        format!(
+                            "the scenario has no {} on board ([sensors.{section}] enabled = true; the pinpoint scenario flies the camera and the lidar)",
+                            oils_shared::frame_device_name(device).unwrap_or("frame device")
+                        ),
+                    ));
+                }
+            }
             f.validate()
                 .and_then(|()| f.check_can_fire(self.duration_s, self.dt_ns()))
                 .map_err(|why| invalid("faults", f.to_string(), why))?;
@@ -830,6 +848,18 @@ mod tests {
             &|c| c.scenario.initial.altitude_m = f64::INFINITY,
             "altitude_m",
         );
+        bad(
+            &|c| c.faults = vec!["sensor-frozen:camera@t=1".parse().unwrap()],
+            "no camera on board",
+        );
+    }
+
+    #[test]
+    fn a_fault_on_a_frame_device_on_board_is_taken() {
+        let mut c = RunConfig::default();
+        c.scenario.sensors.lidar.enabled = true;
+        c.faults = vec!["sensor-dead-quadrant:lidar,quadrant=3@t=1".parse().unwrap()];
+        c.validate().unwrap();
     }
 
     #[test]

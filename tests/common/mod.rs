@@ -190,3 +190,72 @@ impl StderrWatch {
 
 /// What `oils run --no-stub` prints once the flight software it waits for has joined.
 pub const JOINED: &str = "flight software joined";
+
+/// The index of CSV column `name` in `header`.
+pub fn column(header: &[String], name: &str) -> usize {
+    header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no column {name}"))
+}
+
+/// A run flown in process with a log, and its CSV export.
+pub struct LoggedRun {
+    /// The run's report.
+    pub report: serde_json::Value,
+    /// The run's log.
+    pub log: PathBuf,
+    /// The CSV export's column names.
+    pub header: Vec<String>,
+    /// The CSV export's rows.
+    pub rows: Vec<Vec<String>>,
+}
+
+/// Flies `config_toml` in process with a log (and `extra` `oils run` arguments, such as
+/// `--fault SPEC`); returns the report and the CSV export.
+pub fn fly_logged(name: &str, config_toml: &str, extra: &[&str]) -> LoggedRun {
+    let dir = scratch(name);
+    let file = dir.join("run.toml");
+    std::fs::write(&file, config_toml).unwrap();
+    let (log, rep, csv) = (
+        dir.join("run.oilslog"),
+        dir.join("report.json"),
+        dir.join("run.csv"),
+    );
+    let mut args = vec![
+        "run",
+        "--config",
+        file.to_str().unwrap(),
+        "--log",
+        log.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let out = run_oils(&args);
+    assert!(out.status.success(), "{}", text(&out));
+    let out = run_oils(&[
+        "export",
+        log.to_str().unwrap(),
+        "--csv",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let body = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = body.lines();
+    let header: Vec<String> = lines
+        .next()
+        .unwrap()
+        .split(',')
+        .map(str::to_string)
+        .collect();
+    let rows = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    LoggedRun {
+        report: report(&rep),
+        log,
+        header,
+        rows,
+    }
+}

@@ -95,6 +95,11 @@ impl Devices {
         self.frames.as_deref()
     }
 
+    /// The imaging devices on board, if attached (for their faults).
+    pub fn frames_mut(&mut self) -> Option<&mut FrameRack> {
+        self.frames.as_deref_mut()
+    }
+
     /// The frame services the imaging devices need, for the link before tick 0 (none
     /// without them).
     pub fn frame_specs(&self) -> Vec<FrameSpec> {

@@ -5,6 +5,7 @@
 use super::spec::{FaultKind, FaultSpec};
 use super::PlantFault;
 use crate::propulsion::PropulsionFault;
+use crate::sensors::frame_faults::FrameFault;
 use crate::sensors::{DeviceFault, SensorTarget};
 use oils_shared::Telemetry;
 
@@ -147,6 +148,8 @@ pub enum FaultAction {
     Link(LinkAction),
     /// Inside a device of the sensor suite ([`crate::sensors::SensorSuite::set_fault`]).
     Device(SensorTarget, DeviceFault),
+    /// Inside an imaging device (`FRAME_DEVICE_*`, [`crate::sensors::FrameRack::set_fault`]).
+    Frame(u32, FrameFault),
 }
 
 impl FaultAction {
@@ -156,6 +159,22 @@ impl FaultAction {
         let p = |key: &str| spec.params.get(key).copied();
         let e = spec.engine();
         let field = || spec.target.as_deref().and_then(TlmField::from_name);
+        if let Some(device) = spec.frame_target() {
+            let fault = match spec.kind {
+                FaultKind::SensorDropout => FrameFault::Dropout,
+                FaultKind::SensorFrozen => FrameFault::Frozen,
+                FaultKind::SensorInhibit => FrameFault::Inhibited,
+                FaultKind::SensorBlinding => FrameFault::Blinding { level: p("level")? },
+                FaultKind::SensorDeadQuadrant => FrameFault::DeadQuadrant {
+                    quadrant: p("quadrant")? as u8,
+                },
+                _ => return None,
+            };
+            if spec.validate().is_err() {
+                return None;
+            }
+            return Some(FaultAction::Frame(device, fault));
+        }
         if let Some(device) = spec.device_target() {
             let fault = match spec.kind {
                 FaultKind::SensorBias => DeviceFault::Bias { value: p("value")? },
@@ -228,7 +247,10 @@ impl FaultAction {
             FaultKind::SensorDropout => FaultAction::Sensor(SensorAction::Dropout, field()?),
             FaultKind::SensorFrozen => FaultAction::Sensor(SensorAction::Frozen, field()?),
             // Device-only kinds (handled above).
-            FaultKind::SensorSpike | FaultKind::SensorInhibit => return None,
+            FaultKind::SensorSpike
+            | FaultKind::SensorInhibit
+            | FaultKind::SensorBlinding
+            | FaultKind::SensorDeadQuadrant => return None,
             FaultKind::CommandDrop => FaultAction::Link(LinkAction::CommandDrop),
             FaultKind::CommandDelay => FaultAction::Link(LinkAction::CommandDelay {
                 steps: p("steps")? as usize,

@@ -189,7 +189,7 @@ impl FaultPlan {
                 FaultAction::Plant(_) => {}
                 FaultAction::Sensor(a, field) => plan.sensors.add(i, a, field, rng),
                 FaultAction::Link(a) => plan.link.add(i, a, rng),
-                FaultAction::Device(..) => {}
+                FaultAction::Device(..) | FaultAction::Frame(..) => {}
             }
             plan.actions.push(action);
             plan.specs.push(spec.clone());
@@ -277,6 +277,27 @@ impl FaultPlan {
                 }
                 if cleared & bit != 0 {
                     suite.set_fault(target, fault, false);
+                }
+            }
+        }
+    }
+
+    /// Hands the imaging-device faults that fired and cleared this step to the frame
+    /// rack. No allocation.
+    pub fn apply_frame_faults(
+        &self,
+        fired: u64,
+        cleared: u64,
+        rack: &mut crate::sensors::FrameRack,
+    ) {
+        for (i, action) in self.actions.iter().enumerate() {
+            if let FaultAction::Frame(device, fault) = *action {
+                let bit = 1u64 << i;
+                if fired & bit != 0 {
+                    rack.set_fault(device, fault, true);
+                }
+                if cleared & bit != 0 {
+                    rack.set_fault(device, fault, false);
                 }
             }
         }

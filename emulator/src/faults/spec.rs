@@ -9,6 +9,8 @@
 //! command-drop@random,p=0.2,window=100..800,for=2
 //! sensor-inhibit:laser-altimeter@t=0      a device (docs/sensors.md) rather than a field
 //! sensor-spike:laser-altimeter,value=-300@alt=2000
+//! sensor-dead-quadrant:lidar,quadrant=2@alt=1500   a frame device's quadrant reads 0
+//! sensor-blinding:camera,level=2@t=900,for=5        the sun's glare across the image
 //! thrust-scaled:3,factor=1.1@t=700       engine 3 delivers 10 % more than it should
 //! computer-reset@alt=14000,for=2          the onboard computer down for 2 s below 14 km
 //! ```
@@ -18,6 +20,9 @@
 //! fault's position in the list only).
 
 use crate::sensors::SensorTarget;
+use oils_shared::{
+    frame_device_name, FRAME_DEVICE_CAMERA, FRAME_DEVICE_LIDAR, FRAME_DEVICE_TEST_CARD,
+};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt;
@@ -63,6 +68,12 @@ pub enum FaultKind {
     SensorSpike,
     /// A device inhibited: its samples arrive invalid, flagged (target: a device).
     SensorInhibit,
+    /// Stray light over a camera's image, the sun in or near its view (target: a
+    /// 16-bit frame device, `camera`; `level`, the glare's peak in full scales).
+    SensorBlinding,
+    /// One quadrant of a frame device reads zero (target: `lidar` or `camera`;
+    /// `quadrant` 1-4: top left, top right, bottom left, bottom right).
+    SensorDeadQuadrant,
     /// Commands lost on the link: the last applied command holds.
     CommandDrop,
     /// Commands arrive `steps` steps late.
@@ -168,6 +179,18 @@ const KINDS: &[(FaultKind, &str, &[&str], Target)] = &[
         &[],
         Target::Field,
     ),
+    (
+        FaultKind::SensorBlinding,
+        "sensor-blinding",
+        &["level"],
+        Target::Field,
+    ),
+    (
+        FaultKind::SensorDeadQuadrant,
+        "sensor-dead-quadrant",
+        &["quadrant"],
+        Target::Field,
+    ),
     (FaultKind::CommandDrop, "command-drop", &[], Target::None),
     (
         FaultKind::CommandDelay,
@@ -252,6 +275,9 @@ impl FromStr for FaultKind {
     }
 }
 
+/// The frame devices a sensor fault can target (`FRAME_DEVICE_*` names).
+pub const FRAME_TARGETS: &[&str] = &["camera", "lidar", "test-card"];
+
 /// Largest magnitude of a sensor fault's `value` or `sigma`: ten times the largest
 /// quantity in the telemetry (the helium bottle's 3.1e7 Pa).
 pub const MAX_SENSOR_FAULT_VALUE: f64 = 3.1e8;
@@ -293,6 +319,24 @@ fn device_params(
         FaultKind::SensorBias | FaultKind::SensorSpike => Ok(&["value"]),
         FaultKind::SensorNoise => Ok(&["factor"]),
         _ => Ok(&[]),
+    }
+}
+
+/// The parameters a sensor kind takes on a frame device (`FRAME_DEVICE_*`), or why the
+/// pair makes no sense.
+fn frame_device_params(kind: FaultKind, device: u32) -> Result<&'static [&'static str], String> {
+    let name = frame_device_name(device).unwrap_or("frame device");
+    match kind {
+        FaultKind::SensorDropout | FaultKind::SensorFrozen | FaultKind::SensorInhibit => Ok(&[]),
+        FaultKind::SensorDeadQuadrant => Ok(&["quadrant"]),
+        FaultKind::SensorBlinding if device != FRAME_DEVICE_LIDAR => Ok(&["level"]),
+        FaultKind::SensorBlinding => Err(format!(
+            "sensor-blinding acts on an image's pixel values: target camera, not {name}"
+        )),
+        _ => Err(format!(
+            "the {name} takes sensor-dropout, sensor-frozen, sensor-inhibit, sensor-blinding \
+             (camera) or sensor-dead-quadrant"
+        )),
     }
 }
 
@@ -445,12 +489,24 @@ impl FaultSpec {
         let (_, name, mut params, target) = *self.kind.entry();
         let ctx = |m: String| format!("fault `{self}`: {m}");
         let device = self.device_target();
+        let frame = self.frame_target();
         if let Some(d) = device {
             params = device_params(self.kind, d).map_err(|m| ctx(m.into()))?;
+        } else if let Some(d) = frame {
+            params = frame_device_params(self.kind, d).map_err(ctx)?;
         } else if matches!(self.kind, FaultKind::SensorSpike | FaultKind::SensorInhibit) {
             return Err(ctx(format!(
-                "{name} acts on a device: target one of {}",
-                SensorTarget::NAMES.join(", ")
+                "{name} acts on a device: target one of {}, {}",
+                SensorTarget::NAMES.join(", "),
+                FRAME_TARGETS.join(", ")
+            )));
+        } else if matches!(
+            self.kind,
+            FaultKind::SensorBlinding | FaultKind::SensorDeadQuadrant
+        ) {
+            return Err(ctx(format!(
+                "{name} acts on a frame device: target one of {}",
+                FRAME_TARGETS.join(", ")
             )));
         }
         match (target, &self.target) {
@@ -470,10 +526,11 @@ impl FaultSpec {
                 }
             }
             (Target::Field, Some(t)) => {
-                if device.is_none() && !SENSOR_FIELDS.contains(&t.as_str()) {
+                if device.is_none() && frame.is_none() && !SENSOR_FIELDS.contains(&t.as_str()) {
                     return Err(ctx(format!(
-                        "target `{t}`: a device ({}) or a telemetry field ({})",
+                        "target `{t}`: a device ({}, {}) or a telemetry field ({})",
                         SensorTarget::NAMES.join(", "),
+                        FRAME_TARGETS.join(", "),
                         SENSOR_FIELDS.join(", ")
                     )));
                 }
@@ -513,6 +570,9 @@ impl FaultSpec {
                     "sigma" => (0.0..=MAX_SENSOR_FAULT_VALUE).contains(&v),
                     "steps" => (1.0..=1000.0).contains(&v) && v.fract() == 0.0,
                     "bits" => (1.0..=64.0).contains(&v) && v.fract() == 0.0,
+                    // A glare a thousand times the full scale saturates the whole image.
+                    "level" => v > 0.0 && v <= 1000.0,
+                    "quadrant" => (1.0..=4.0).contains(&v) && v.fract() == 0.0,
                     _ => true,
                 };
             if !ok {
@@ -559,6 +619,31 @@ impl FaultSpec {
                 "trigger window opens at {from_s} s, at or beyond the run's duration of {duration_s} s: it can never fire"
             ))),
             _ => Ok(()),
+        }
+    }
+
+    /// The frame device (`FRAME_DEVICE_*`) a sensor fault targets (`camera`, `lidar`,
+    /// `test-card`), if it targets one.
+    pub fn frame_target(&self) -> Option<u32> {
+        let sensor_kind = matches!(
+            self.kind,
+            FaultKind::SensorBias
+                | FaultKind::SensorNoise
+                | FaultKind::SensorDropout
+                | FaultKind::SensorFrozen
+                | FaultKind::SensorSpike
+                | FaultKind::SensorInhibit
+                | FaultKind::SensorBlinding
+                | FaultKind::SensorDeadQuadrant
+        );
+        if !sensor_kind {
+            return None;
+        }
+        match self.target.as_deref()? {
+            "camera" => Some(FRAME_DEVICE_CAMERA),
+            "lidar" => Some(FRAME_DEVICE_LIDAR),
+            "test-card" => Some(FRAME_DEVICE_TEST_CARD),
+            _ => None,
         }
     }
 
@@ -687,6 +772,53 @@ mod tests {
         assert_eq!(f.kind, FaultKind::EngineOff);
         assert_eq!(f.engine(), 1);
         assert_eq!(f.trigger, Trigger::Time(400.0));
+    }
+
+    #[test]
+    fn frame_device_faults_parse_compile_and_refuse_what_makes_no_sense() {
+        use crate::faults::FaultAction;
+        use crate::sensors::FrameFault;
+        for (s, want) in [
+            (
+                "sensor-dead-quadrant:lidar,quadrant=2@alt=1500",
+                FaultAction::Frame(FRAME_DEVICE_LIDAR, FrameFault::DeadQuadrant { quadrant: 2 }),
+            ),
+            (
+                "sensor-blinding:camera,level=2@t=900,for=5",
+                FaultAction::Frame(FRAME_DEVICE_CAMERA, FrameFault::Blinding { level: 2.0 }),
+            ),
+            (
+                "sensor-frozen:camera@t=1",
+                FaultAction::Frame(FRAME_DEVICE_CAMERA, FrameFault::Frozen),
+            ),
+            (
+                "sensor-dropout:lidar@t=1,for=3",
+                FaultAction::Frame(FRAME_DEVICE_LIDAR, FrameFault::Dropout),
+            ),
+            (
+                "sensor-inhibit:test-card@t=1",
+                FaultAction::Frame(FRAME_DEVICE_TEST_CARD, FrameFault::Inhibited),
+            ),
+        ] {
+            let f: FaultSpec = s.parse().unwrap_or_else(|e| panic!("{s}: {e}"));
+            assert_eq!(f.to_string(), s);
+            assert_eq!(FaultAction::of(&f), Some(want), "{s}");
+        }
+        for (s, needle) in [
+            ("sensor-bias:camera,value=3@t=1", "takes sensor-dropout"),
+            ("sensor-spike:lidar,value=3@t=1", "takes sensor-dropout"),
+            ("sensor-blinding:lidar,level=1@t=1", "target camera, not lidar"),
+            ("sensor-blinding:altitude_m,level=1@t=1", "acts on a frame device"),
+            ("sensor-dead-quadrant:imu,quadrant=1@t=1", "acts on a frame device"),
+            ("sensor-dead-quadrant:lidar,quadrant=5@t=1", "out of its range"),
+            ("sensor-dead-quadrant:lidar,quadrant=1.5@t=1", "out of its range"),
+            ("sensor-dead-quadrant:lidar@t=1", "needs quadrant"),
+            ("sensor-blinding:camera,level=0@t=1", "out of its range"),
+            ("sensor-frozen:camera,level=1@t=1", "unknown parameter"),
+        ] {
+            let e = s.parse::<FaultSpec>().unwrap_err();
+            assert!(e.contains(needle), "{s}: {e}");
+        }
     }
 
     #[test]

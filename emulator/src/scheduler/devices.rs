@@ -30,8 +30,14 @@ impl DeviceStage {
         fired: u64,
         cleared: u64,
     ) {
+        if fired | cleared == 0 {
+            return;
+        }
         if let Some(sensors) = devices.sensors_mut() {
             faults.apply_device_faults(fired, cleared, sensors);
+        }
+        if let Some(frames) = devices.frames_mut() {
+            faults.apply_frame_faults(fired, cleared, frames);
         }
     }
 

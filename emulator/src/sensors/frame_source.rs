@@ -17,6 +17,7 @@
 //! step `k` (its period's end, [`super::due`]) is stamped `end - exposure / 2`.
 
 use super::camera::{ShadowMap, ShadowMapConfig};
+use super::frame_faults::{FrameFault, FrameFaultState, FrameMode};
 use super::imaging::{CameraDevice, LidarDevice};
 use super::SensorTruth;
 use crate::config::ConfigError;
@@ -56,6 +57,11 @@ pub trait FrameSource: Send {
     fn period_ns(&self) -> i64;
     /// Exposure (integration) time, ns (at most the period).
     fn exposure_ns(&self) -> u64;
+    /// The largest value a 16-bit pixel reaches (a 12-bit camera's 4095), where a
+    /// blinding fault's glare clips.
+    fn full_scale_dn(&self) -> u16 {
+        u16::MAX
+    }
     /// The end of the exposure that falls in the step `(t - dt, t]`, if one does.
     fn due(&self, t_ns: i64, dt_ns: u64) -> Option<i64> {
         super::due(t_ns, dt_ns, self.period_ns())
@@ -93,6 +99,11 @@ pub struct FrameRack {
     sources: Vec<Box<dyn FrameSource>>,
     /// Next frame counter per source.
     seq: Vec<u64>,
+    /// The faults active on each source.
+    faults: Vec<FrameFaultState>,
+    /// Each source's last good frame and its flags (what a frozen readout repeats),
+    /// allocated when the source is added; blank until its first frame.
+    last: Vec<(Vec<u8>, u32)>,
     pending: [FrameAnnouncement; FRAMES_MAX],
     pending_count: usize,
     /// Announcements that did not fit a telemetry (never with periods at least a cycle).
@@ -121,6 +132,8 @@ impl FrameRack {
         Self {
             sources: Vec::with_capacity(FRAMES_MAX),
             seq: Vec::with_capacity(FRAMES_MAX),
+            faults: Vec::with_capacity(FRAMES_MAX),
+            last: Vec::with_capacity(FRAMES_MAX),
             pending: [FrameAnnouncement::default(); FRAMES_MAX],
             pending_count: 0,
             dropped: 0,
@@ -190,9 +203,24 @@ impl FrameRack {
             .iter()
             .position(|s| s.device() > device)
             .unwrap_or(self.sources.len());
+        self.last.insert(at, (vec![0; source.frame_bytes()], 0));
         self.sources.insert(at, source);
         self.seq.insert(at, 0);
+        self.faults.insert(at, FrameFaultState::default());
         Ok(())
+    }
+
+    /// Whether a device `device` (`FRAME_DEVICE_*`) is on board.
+    pub fn has_device(&self, device: u32) -> bool {
+        self.sources.iter().any(|s| s.device() == device)
+    }
+
+    /// A fault on `device` fired (`active`) or cleared; nothing for a device not on
+    /// board (a run configuration refuses such a fault before tick 0). No allocation.
+    pub fn set_fault(&mut self, device: u32, fault: FrameFault, active: bool) {
+        if let Some(i) = self.sources.iter().position(|s| s.device() == device) {
+            self.faults[i].set(fault, active);
+        }
     }
 
     /// The frame services the devices need (for the link, before tick 0).
@@ -218,14 +246,42 @@ impl FrameRack {
         if truth.dt_ns == 0 {
             return Ok(());
         }
-        for (source, seq) in self.sources.iter_mut().zip(self.seq.iter_mut()) {
+        for (i, source) in self.sources.iter_mut().enumerate() {
             let Some(end_ns) = source.due(truth.t_ns, truth.dt_ns) else {
                 continue;
             };
+            let faults = self.faults[i];
+            let mode = faults.mode();
+            if mode == FrameMode::Skip {
+                continue;
+            }
+            let seq = &mut self.seq[i];
             let device = source.device();
             let bytes = source.frame_bytes();
             let buf = sink.frame_buffer(device, bytes)?;
-            let meta = source.render(truth, *seq, buf);
+            let (last, last_flags) = &mut self.last[i];
+            let meta = match mode {
+                FrameMode::Repeat => {
+                    buf.copy_from_slice(last);
+                    FrameMeta { flags: *last_flags }
+                }
+                FrameMode::Blank => {
+                    buf.fill(0);
+                    FrameMeta {
+                        flags: oils_shared::FRAME_FLAG_OUTAGE,
+                    }
+                }
+                _ => {
+                    let mut meta = source.render(truth, *seq, buf);
+                    let (format, w, h) = (source.format(), source.width(), source.height());
+                    if faults.degrade(format, w, h, source.full_scale_dn(), buf) {
+                        meta.flags |= oils_shared::FRAME_FLAG_SATURATED;
+                    }
+                    last.copy_from_slice(buf);
+                    *last_flags = meta.flags;
+                    meta
+                }
+            };
             let hash = frame_hash(buf);
             let exposure_ns = source.exposure_ns();
             let ann = FrameAnnouncement {

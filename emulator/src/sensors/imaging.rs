@@ -74,6 +74,7 @@ pub struct CameraDevice {
     width: u32,
     height: u32,
     exposure_ns: u64,
+    full_scale_dn: u16,
 }
 
 impl CameraDevice {
@@ -98,6 +99,7 @@ impl CameraDevice {
             width: cfg.width_px,
             height: cfg.height_px,
             exposure_ns: super::config::ms_to_ns(cfg.exposure_ms).max(1) as u64,
+            full_scale_dn: ((1u32 << cfg.bits.clamp(1, 16)) - 1) as u16,
         })
     }
 }
@@ -120,6 +122,9 @@ impl FrameSource for CameraDevice {
     }
     fn exposure_ns(&self) -> u64 {
         self.exposure_ns
+    }
+    fn full_scale_dn(&self) -> u16 {
+        self.full_scale_dn
     }
     fn render(&mut self, truth: &SensorTruth<'_>, _seq: u64, out: &mut [u8]) -> FrameMeta {
         if !powered(truth, self.radius_m, self.on_below_m) {

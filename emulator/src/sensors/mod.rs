@@ -24,6 +24,7 @@
 pub mod camera;
 pub mod config;
 mod devices;
+pub mod frame_faults;
 pub mod frame_source;
 pub mod imaging;
 mod imu;
@@ -35,6 +36,7 @@ pub use config::{
     CameraConfig, ImuConfig, LaserAltimeterConfig, LidarConfig, RfAltimeterConfig, SensorsConfig,
     StarTrackerConfig, TestCardConfig, VelocimeterConfig,
 };
+pub use frame_faults::FrameFault;
 pub use frame_source::{FrameMeta, FrameRack, FrameSink, FrameSource};
 pub use lidar::Lidar;
 
