@@ -62,7 +62,9 @@ struct ExportArgs {
     /// is replayed and each frame rendered again and checked against its hash.
     #[arg(long, value_name = "DIR")]
     frames: Option<PathBuf>,
-    /// Write the run as MCAP here (opens in Foxglove; docs/foxglove-layout.json).
+    /// Write the run as MCAP here (opens in Foxglove; docs/foxglove-layout.json). A run
+    /// with a camera, a lidar or the test card gets its frames as Foxglove RawImage
+    /// messages too, rendered again by a replay (the log keeps their hashes).
     #[arg(long, value_name = "OUT.mcap")]
     mcap: Option<PathBuf>,
     /// Write the applied commands as a thrust-command profile CSV here (replayable with
@@ -147,11 +149,7 @@ fn export_frames(
     log: oils_emulator::recorder::Log,
     dir: &std::path::Path,
 ) -> anyhow::Result<()> {
-    let header = oils_emulator::exact_json::value_from_str(&log.header_json)
-        .context("log header is not JSON")?;
-    let camera_bits = header["config"]["scenario"]["sensors"]["camera"]["bits"]
-        .as_u64()
-        .unwrap_or(12) as u32;
+    let camera_bits = camera_bits_of(&log)?;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let written = std::rc::Rc::new(std::cell::Cell::new(0u64));
     let count = written.clone();
@@ -173,6 +171,69 @@ fn export_frames(
         "oils export: {} frames to {} in {:.1} s (rendered again by a replay, each checked against the log's hash)",
         written.get(),
         dir.display(),
+        started.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// The camera's ADC bits in a log's header (12 unless it says otherwise).
+fn camera_bits_of(log: &oils_emulator::recorder::Log) -> anyhow::Result<u32> {
+    let header = oils_emulator::exact_json::value_from_str(&log.header_json)
+        .context("log header is not JSON")?;
+    Ok(header["config"]["scenario"]["sensors"]["camera"]["bits"]
+        .as_u64()
+        .unwrap_or(12) as u32)
+}
+
+/// `oils export LOG --mcap OUT` of a run with frame devices: the records and, rendered
+/// again by a replay (the log keeps only their hashes), every frame as a Foxglove
+/// `RawImage`, each written after the records up to its time of validity.
+fn export_mcap_with_frames(
+    log_path: &std::path::Path,
+    log: oils_emulator::recorder::Log,
+    path: &std::path::Path,
+) -> anyhow::Result<()> {
+    use std::cell::RefCell;
+    use std::rc::Rc;
+    let camera_bits = camera_bits_of(&log)?;
+    let sink = Rc::new(RefCell::new(oils_lab::mcap_log::McapSink::create(
+        path,
+        &log.header_json,
+    )?));
+    let records = Rc::new(log.records.clone());
+    let next = Rc::new(std::cell::Cell::new(0usize));
+    let (tap_sink, tap_records, tap_next) = (sink.clone(), records.clone(), next.clone());
+    let tap: oils_emulator::link::FrameTap = Box::new(move |ann, pixels| {
+        let mut sink = tap_sink.borrow_mut();
+        let mut i = tap_next.get();
+        while i < tap_records.len() && tap_records[i].telemetry.header.t_ns <= ann.t_ns {
+            sink.write_record(&tap_records[i])
+                .map_err(|e| std::io::Error::other(e.to_string()))?;
+            i += 1;
+        }
+        tap_next.set(i);
+        sink.write_frame(ann, pixels, camera_bits)
+            .map_err(|e| std::io::Error::other(e.to_string()))
+    });
+    let stop = oils_shared::signals::termination_flag().context("installing signal handlers")?;
+    let started = std::time::Instant::now();
+    eprintln!(
+        "oils export: the log announces frames: replaying the run to render them again for {}",
+        path.display()
+    );
+    oils_emulator::session::replay_tapping_frames(log_path, log, &stop, Some(tap))
+        .with_context(|| format!("replaying {} for its frames", log_path.display()))?;
+    let mut sink = sink.borrow_mut();
+    for r in &records[next.get()..] {
+        sink.write_record(r)?;
+    }
+    sink.close()?;
+    let (written, frames) = sink.written();
+    let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    eprintln!(
+        "oils export: {written} records and {frames} frames to {} ({:.1} MB) in {:.1} s",
+        path.display(),
+        bytes as f64 / 1e6,
         started.elapsed().as_secs_f64()
     );
     Ok(())
@@ -239,7 +300,13 @@ fn export(a: &ExportArgs) -> anyhow::Result<()> {
             csv.display()
         );
     }
-    if let Some(path) = &a.mcap {
+    let has_frames = log
+        .records
+        .iter()
+        .any(|r| r.telemetry.sensors.frame_count > 0);
+    if let (Some(path), true) = (&a.mcap, has_frames) {
+        export_mcap_with_frames(&a.log, log.clone(), path)?;
+    } else if let Some(path) = &a.mcap {
         let started = std::time::Instant::now();
         let stats = oils_lab::mcap_log::export_mcap(&log, path)?;
         eprintln!(

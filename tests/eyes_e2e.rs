@@ -147,8 +147,7 @@ fn faults_on_the_camera_and_the_lidar_act_on_their_frames() {
             .collect();
         let before = frames
             .iter()
-            .filter(|f| f.1 == device && f.0 <= a)
-            .last()
+            .rfind(|f| f.1 == device && f.0 <= a)
             .copied()
             .unwrap();
         (inside, before)

@@ -17,7 +17,7 @@
 
 use oils_emulator::clock::LockstepClock;
 use oils_emulator::config::{NavNoiseConfig, ScenarioConfig};
-use oils_emulator::faults::FaultPlan;
+use oils_emulator::faults::{FaultPlan, FaultSpec};
 use oils_emulator::link::{BoundLink, InProcLink, Link};
 use oils_emulator::plant::Plant;
 use oils_emulator::propulsion::{build, PropulsionKind, PropulsionSpec};
@@ -377,6 +377,19 @@ fn step_paths_do_not_allocate() {
     // In process there is no iceoryx2 loan: not a single allocation on the stepping
     // thread, which runs the emulator and the flight software (frames included, into
     // buffers allocated before tick 0).
+    // With the frame faults that still publish (frozen, outage, glare, dead quadrant)
+    // firing and clearing after step FROM: the frozen frame is repeated from the copy
+    // kept since the rack was built.
+    let frame_faults: Vec<FaultSpec> = [
+        "sensor-blinding:test-card,level=0.5@t=100,for=3",
+        "sensor-dead-quadrant:test-card,quadrant=4@t=110,for=3",
+        "sensor-frozen:test-card@t=120,for=3",
+        "sensor-inhibit:test-card@t=130,for=3",
+    ]
+    .iter()
+    .map(|s| s.parse().unwrap())
+    .collect();
+    let mut frame_faults = FaultPlan::compile(&frame_faults, 1).unwrap();
     let mut link = InProcLink::new(Box::new(ReferenceGnc::new(GncConfig::default()).unwrap()))
         .with_frames(&test_card().specs());
     STEPPING.with(|s| s.set(true));
@@ -385,7 +398,7 @@ fn step_paths_do_not_allocate() {
         base + 6,
         FROM,
         &STEPPING_ALLOCATIONS,
-        &mut FaultPlan::none(),
+        &mut frame_faults,
         (10_000_000, 10_000_000),
         true,
     );

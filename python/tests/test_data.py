@@ -198,5 +198,73 @@ class CampaignAsDataFrame(unittest.TestCase):
             self.assertEqual(list(df.columns), header)
 
 
+EYES = """link = "inproc"
+propulsion = "ideal"
+
+[scenario.sensors.camera]
+enabled = true
+period_ms = 1000.0
+width_px = 64
+height_px = 48
+on_below_altitude_m = 3000.0
+
+[scenario.sensors.lidar]
+enabled = true
+period_ms = 1000.0
+width_px = 32
+height_px = 32
+on_below_altitude_m = 3000.0
+"""
+
+
+@unittest.skipIf(NO_DATA or not OILS, NO_DATA or NEEDS)
+class FramesInMcap(unittest.TestCase):
+    def test_frames_decode_as_foxglove_raw_images_with_foxgloves_reader(self):
+        # Foxglove's own MCAP reader and its protobuf decoder, with the schema the file
+        # carries: one RawImage per announced frame, its pixels the announced bytes
+        # (the camera's 12-bit DN shifted to 16 bits), at its time of validity.
+        from mcap.reader import make_reader
+        from mcap_protobuf.decoder import DecoderFactory
+
+        from oils_fsw.frames import xxh3_64
+
+        with tempfile.TemporaryDirectory(prefix="oils-data-frames-") as tmp:
+            tmp = Path(tmp)
+            (tmp / "eyes.toml").write_text(EYES)
+            log, out = tmp / "eyes.oilslog", tmp / "eyes.mcap"
+            oils("run", "--config", tmp / "eyes.toml", "--log", log, cwd=tmp)
+            oils("export", log, "--mcap", out, cwd=tmp)
+            df = oils_fsw.read_log(log)
+            announced = {}
+            for k in range(4):
+                has = df[f"frame_device[{k}]"] > 0
+                for dev, seq, t, h in zip(
+                    df[f"frame_device[{k}]"][has], df[f"frame_seq[{k}]"][has],
+                    df[f"frame_t_ns[{k}]"][has], df[f"frame_hash[{k}]"][has]
+                ):
+                    announced[(int(dev), int(seq))] = (int(t), int(h))
+            self.assertGreater(len(announced), 100)
+            seen = {}
+            with open(out, "rb") as f:
+                reader = make_reader(f, decoder_factories=[DecoderFactory()])
+                topics = ["/camera/image", "/lidar/range"]
+                for schema, channel, message, image in reader.iter_decoded_messages(topics=topics):
+                    self.assertEqual(schema.name, "foxglove.RawImage")
+                    self.assertEqual(schema.encoding, "protobuf")
+                    dev = 1 if channel.topic == "/camera/image" else 2
+                    channel_seq = message.sequence  # the frame's seq
+                    self.assertEqual(image.frame_id, ["camera", "lidar"][dev - 1])
+                    if dev == 1:
+                        self.assertEqual((image.encoding, image.width, image.height, image.step), ("16UC1", 64, 48, 128))
+                        raw = (np.frombuffer(image.data, dtype="<u2") >> 4).astype("<u2").tobytes()
+                    else:
+                        self.assertEqual((image.encoding, image.width, image.height, image.step), ("32FC1", 32, 32, 128))
+                        raw = bytes(image.data)
+                    t_ns = image.timestamp.seconds * 1_000_000_000 + image.timestamp.nanos
+                    self.assertEqual(message.log_time, t_ns)
+                    seen[(dev, channel_seq)] = (t_ns, xxh3_64(raw))
+            self.assertEqual(seen, announced)
+
+
 if __name__ == "__main__":
     unittest.main()

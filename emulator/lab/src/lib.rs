@@ -19,6 +19,7 @@ pub mod fmu;
 pub mod hifi_figures;
 pub mod json_schema;
 pub mod log_json;
+pub mod mcap_frames;
 pub mod mcap_log;
 pub mod onboard;
 pub mod plot;

@@ -486,6 +486,12 @@ struct Encoder {
     contact: bool,
     buf: Vec<u8>,
     written: u64,
+    /// The image schema's id, once a frame was written.
+    image_schema: Option<u16>,
+    /// Per frame device: its channel id.
+    image_channels: Vec<(u32, u16)>,
+    /// Frames written.
+    frames: u64,
 }
 
 const CH_TF: usize = 6;
@@ -520,7 +526,58 @@ impl Encoder {
             contact: false,
             buf: Vec::with_capacity(4096),
             written: 0,
+            image_schema: None,
+            image_channels: Vec::new(),
+            frames: 0,
         })
+    }
+
+    /// Writes frame `ann` as a `foxglove.RawImage` on its device's image channel (added
+    /// with the schema at the device's first frame).
+    fn frame<W: Write + Seek>(
+        &mut self,
+        w: &mut Writer<W>,
+        ann: &oils_shared::FrameAnnouncement,
+        pixels: &[u8],
+        camera_bits: u32,
+    ) -> Result<(), FrameWriteError> {
+        let schema = match self.image_schema {
+            Some(id) => id,
+            None => {
+                let id = w.add_schema(
+                    crate::mcap_frames::SCHEMA_NAME,
+                    "protobuf",
+                    &crate::mcap_frames::schema(),
+                )?;
+                self.image_schema = Some(id);
+                id
+            }
+        };
+        let slot = match self.image_channels.iter().position(|c| c.0 == ann.device) {
+            Some(i) => i,
+            None => {
+                let id = w.add_channel(
+                    schema,
+                    &crate::mcap_frames::topic(ann.device),
+                    "protobuf",
+                    &BTreeMap::new(),
+                )?;
+                self.image_channels.push((ann.device, id));
+                self.image_channels.len() - 1
+            }
+        };
+        crate::mcap_frames::encode(ann, pixels, camera_bits, &mut self.buf)?;
+        let t_ns = ann.t_ns.max(0) as u64;
+        // The message's sequence is the frame's counter (a dropout shows as a gap).
+        let header = MessageHeader {
+            channel_id: self.image_channels[slot].1,
+            sequence: ann.seq as u32,
+            log_time: t_ns,
+            publish_time: t_ns,
+        };
+        w.write_to_known_channel(&header, &self.buf)?;
+        self.frames += 1;
+        Ok(())
     }
 
     fn put<W: Write + Seek, T: Serialize>(
@@ -791,6 +848,15 @@ pub struct McapStats {
     pub bytes: u64,
 }
 
+/// Why a frame was not written.
+#[derive(Debug, thiserror::Error)]
+enum FrameWriteError {
+    #[error(transparent)]
+    Mcap(#[from] mcap::McapError),
+    #[error(transparent)]
+    Image(#[from] crate::mcap_frames::FrameImageError),
+}
+
 /// Writes a log (read from an OILSLOG3 file) as MCAP.
 pub fn export_mcap(log: &Log, path: &Path) -> Result<McapStats, McapLogError> {
     let mut sink = McapSink::create(path, &log.header_json)?;
@@ -854,6 +920,39 @@ impl McapSink {
             });
         };
         self.enc.write(w, r).map_err(|e| self.mcap_err(e))
+    }
+
+    /// Writes one frame as a `foxglove.RawImage` ([`crate::mcap_frames`]); a camera's
+    /// DN of `camera_bits` shifted to 16 bits.
+    pub fn write_frame(
+        &mut self,
+        ann: &oils_shared::FrameAnnouncement,
+        pixels: &[u8],
+        camera_bits: u32,
+    ) -> Result<(), McapLogError> {
+        let Some(w) = self.writer.as_mut() else {
+            return Err(McapLogError::NotOils {
+                path: self.path.clone(),
+                why: "written after it was closed".into(),
+            });
+        };
+        self.enc
+            .frame(w, ann, pixels, camera_bits)
+            .map_err(|e| match e {
+                FrameWriteError::Mcap(source) => McapLogError::Mcap {
+                    path: self.path.clone(),
+                    source,
+                },
+                FrameWriteError::Image(e) => McapLogError::NotOils {
+                    path: self.path.clone(),
+                    why: e.to_string(),
+                },
+            })
+    }
+
+    /// Records and frames written so far.
+    pub fn written(&self) -> (u64, u64) {
+        (self.enc.written, self.enc.frames)
     }
 
     /// Writes the summary (index, statistics), flushes and syncs.

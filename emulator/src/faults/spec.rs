@@ -807,11 +807,26 @@ mod tests {
         for (s, needle) in [
             ("sensor-bias:camera,value=3@t=1", "takes sensor-dropout"),
             ("sensor-spike:lidar,value=3@t=1", "takes sensor-dropout"),
-            ("sensor-blinding:lidar,level=1@t=1", "target camera, not lidar"),
-            ("sensor-blinding:altitude_m,level=1@t=1", "acts on a frame device"),
-            ("sensor-dead-quadrant:imu,quadrant=1@t=1", "acts on a frame device"),
-            ("sensor-dead-quadrant:lidar,quadrant=5@t=1", "out of its range"),
-            ("sensor-dead-quadrant:lidar,quadrant=1.5@t=1", "out of its range"),
+            (
+                "sensor-blinding:lidar,level=1@t=1",
+                "target camera, not lidar",
+            ),
+            (
+                "sensor-blinding:altitude_m,level=1@t=1",
+                "acts on a frame device",
+            ),
+            (
+                "sensor-dead-quadrant:imu,quadrant=1@t=1",
+                "acts on a frame device",
+            ),
+            (
+                "sensor-dead-quadrant:lidar,quadrant=5@t=1",
+                "out of its range",
+            ),
+            (
+                "sensor-dead-quadrant:lidar,quadrant=1.5@t=1",
+                "out of its range",
+            ),
             ("sensor-dead-quadrant:lidar@t=1", "needs quadrant"),
             ("sensor-blinding:camera,level=0@t=1", "out of its range"),
             ("sensor-frozen:camera,level=1@t=1", "unknown parameter"),
