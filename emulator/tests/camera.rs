@@ -335,3 +335,29 @@ fn the_fast_renderer_matches_the_exact_one() {
     assert!((over_10pc as f64) < 0.02 * n as f64);
     assert!((shadow_disagree as f64) < 0.02 * n as f64);
 }
+
+#[test]
+fn cases_on_the_same_terrain_and_sun_share_one_shadow_map() {
+    // Two grounds of one spec hold the one terrain the cache built: one map for both,
+    // equal to one built on its own; another sun gets its own map.
+    let (a, b) = (rough(), rough());
+    let cfg = ShadowMapConfig {
+        spacings_m: vec![2.0, 8.0],
+        nodes: 64,
+    };
+    let sun = sun_mcmf(20.0, 100.0);
+    let first = ShadowMap::shared(&a, &sun, &cfg).unwrap();
+    let again = ShadowMap::shared(&b, &sun, &cfg).unwrap();
+    assert!(Arc::ptr_eq(&first, &again));
+    let alone = ShadowMap::build(&a, &sun, &cfg).unwrap();
+    for (e, n, u) in [(0.0, 0.0, 3.0), (37.0, -81.0, -2.0), (-120.0, 44.0, 0.5)] {
+        let p = Vector3::new(e, n, u);
+        assert_eq!(
+            first.margin_m(e, n, &p),
+            alone.margin_m(e, n, &p),
+            "({e}, {n}, {u})"
+        );
+    }
+    let other = ShadowMap::shared(&a, &sun_mcmf(30.0, 100.0), &cfg).unwrap();
+    assert!(!Arc::ptr_eq(&first, &other));
+}

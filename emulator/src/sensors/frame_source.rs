@@ -26,7 +26,6 @@ use crate::plant::ground::Ground;
 use nalgebra::Vector3;
 use oils_shared::link::FrameSpec;
 use oils_shared::{frame_device_name, frame_hash, FrameAnnouncement, SensorFrame, FRAMES_MAX};
-use std::sync::Arc;
 
 /// What a source says of the frame it rendered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -144,7 +143,9 @@ impl FrameRack {
     /// under the sun in unit direction `sun_dir_mcmf` (Moon-fixed); `None` when there
     /// are none (the telemetry's `frame_count` then stays 0); `moon_radius_m` for the
     /// devices' power-on height. With the camera on, its
-    /// shadow map for that ground and sun is built here, before tick 0 (about 0.5 s).
+    /// shadow map for that ground and sun is built here, before tick 0 (about 0.5 s),
+    /// or taken from an earlier run of this process on the same terrain and sun (a
+    /// campaign's cases share one: [`ShadowMap::shared`]).
     pub fn from_config(
         cfg: &super::SensorsConfig,
         seed: u64,
@@ -157,7 +158,7 @@ impl FrameRack {
             rack.push(Box::new(super::test_card::TestCard::new(&cfg.test_card)?))?;
         }
         if cfg.camera.enabled {
-            let shadow = ShadowMap::build(ground, &sun_dir_mcmf, &ShadowMapConfig::default())
+            let shadow = ShadowMap::shared(ground, &sun_dir_mcmf, &ShadowMapConfig::default())
                 .map_err(|e| ConfigError {
                     field: "sensors.camera",
                     value: e.to_string(),
@@ -167,7 +168,7 @@ impl FrameRack {
                 &cfg.camera,
                 seed,
                 sun_dir_mcmf,
-                Some(Arc::new(shadow)),
+                Some(shadow),
                 moon_radius_m,
             )?))?;
         }

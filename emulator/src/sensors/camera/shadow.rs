@@ -82,7 +82,79 @@ pub struct ShadowMap {
 /// "No horizon": below any surface.
 const NO_HORIZON: f32 = -1.0e30;
 
+/// Shadow maps at most kept by [`ShadowMap::shared`] (20 MB each at the default size).
+const SHARED_MAPS: usize = 4;
+
+/// What a shared map was built for: the terrain (by identity), the site, the sun and the
+/// lattice, bit for bit.
+struct SharedKey {
+    terrain: Option<Arc<Terrain>>,
+    site_bits: [u64; 3],
+    sun_bits: [u64; 3],
+    cfg: ShadowMapConfig,
+}
+
+impl SharedKey {
+    fn new(ground: &Ground, sun_dir_mcmf: &Vector3<f64>, cfg: &ShadowMapConfig) -> Self {
+        let (terrain, site_bits) = match ground {
+            Ground::Sphere { radius_m } => (None, [radius_m.to_bits(), 0, 0]),
+            Ground::Terrain { terrain, site, .. } => (
+                Some(terrain.clone()),
+                [
+                    site.lat_rad.to_bits(),
+                    site.lon_rad.to_bits(),
+                    site.radius_m.to_bits(),
+                ],
+            ),
+        };
+        Self {
+            terrain,
+            site_bits,
+            sun_bits: [sun_dir_mcmf.x, sun_dir_mcmf.y, sun_dir_mcmf.z].map(f64::to_bits),
+            cfg: cfg.clone(),
+        }
+    }
+
+    fn same(&self, other: &Self) -> bool {
+        let terrain = match (&self.terrain, &other.terrain) {
+            (None, None) => true,
+            (Some(a), Some(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        };
+        terrain
+            && self.site_bits == other.site_bits
+            && self.sun_bits == other.sun_bits
+            && self.cfg == other.cfg
+    }
+}
+
 impl ShadowMap {
+    /// [`ShadowMap::build`], once per process for the same terrain (the one instance the
+    /// terrain cache hands every case), site, sun and lattice: a campaign's cases share
+    /// one map (0.5 s and 20 MB at the default size) instead of building their own.
+    /// Keeps the last few maps built; locked only here, before tick 0.
+    pub fn shared(
+        ground: &Ground,
+        sun_dir_mcmf: &Vector3<f64>,
+        cfg: &ShadowMapConfig,
+    ) -> Result<Arc<Self>, ShadowMapError> {
+        static MAPS: std::sync::Mutex<Vec<(SharedKey, Arc<ShadowMap>)>> =
+            std::sync::Mutex::new(Vec::new());
+        let key = SharedKey::new(ground, sun_dir_mcmf, cfg);
+        // A poisoned lock only means another case panicked while building: the list
+        // itself is always whole.
+        let mut maps = MAPS.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, map)) = maps.iter().find(|(k, _)| k.same(&key)) {
+            return Ok(map.clone());
+        }
+        let map = Arc::new(Self::build(ground, sun_dir_mcmf, cfg)?);
+        if maps.len() >= SHARED_MAPS {
+            maps.remove(0);
+        }
+        maps.push((key, map.clone()));
+        Ok(map)
+    }
+
     /// The horizons of `ground` under the sun in unit direction `sun_dir_mcmf`. On the
     /// bare sphere there are no cast shadows (a point facing the sun sees it) and the map
     /// is empty. Allocates its levels; run it before tick 0.
