@@ -545,7 +545,11 @@ window_s = [900.0, 940.0]
             &index.to_string(),
         ]);
         assert!(o.status.success(), "{}", text(&o));
-        assert!(text(&o).contains(digest.as_str()), "case {index}: {}", text(&o));
+        assert!(
+            text(&o).contains(digest.as_str()),
+            "case {index}: {}",
+            text(&o)
+        );
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

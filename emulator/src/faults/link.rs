@@ -10,8 +10,9 @@
 
 use super::action::LinkAction;
 use crate::link::{ExchangeError, Link};
+use crate::sensors::FrameSink;
 use core::mem::{offset_of, size_of};
-use oils_shared::{AsBytes, Command, Telemetry};
+use oils_shared::{AsBytes, Command, FrameAnnouncement, Telemetry};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use std::collections::VecDeque;
@@ -117,16 +118,31 @@ impl LinkFaults {
     }
 }
 
-/// A [`Link`] with the run's link faults in front of it.
+/// A [`Link`] with the run's link faults in front of it, built once per run: it is a
+/// `Link` itself (a withheld telemetry is not published and nothing is received for
+/// it), and it adds what only a faulty link does: whether telemetry is withheld or the
+/// computer resets, the commands it drops, delays, duplicates or corrupts on their way
+/// to the sanitiser ([`FaultyLink::deliver`]). Frames pass through untouched.
 pub struct FaultyLink<'a, L: Link + ?Sized> {
     inner: &'a mut L,
-    faults: &'a mut LinkFaults,
+    faults: LinkFaults,
 }
 
 impl<'a, L: Link + ?Sized> FaultyLink<'a, L> {
-    /// Wraps `inner` for one run.
-    pub fn new(inner: &'a mut L, faults: &'a mut LinkFaults) -> Self {
+    /// Wraps `inner` for one run with the run's link faults.
+    pub fn new(inner: &'a mut L, faults: LinkFaults) -> Self {
         Self { inner, faults }
+    }
+
+    /// The link faults, for the plan to take back at the end of the run.
+    pub fn into_faults(self) -> LinkFaults {
+        self.faults
+    }
+
+    /// The faults active now (`active`, the plan's mask) and those that fired this
+    /// step (their delay lines start empty).
+    pub fn set_active(&mut self, active: u64, fired: u64) {
+        self.faults.set_active(active, fired);
     }
 
     /// Whether Telemetry(k) is withheld now: nothing is published, nothing can answer,
@@ -135,43 +151,15 @@ impl<'a, L: Link + ?Sized> FaultyLink<'a, L> {
         self.faults.withheld()
     }
 
-    /// The link underneath, as the frame devices' sink: frames are not subject to link
-    /// faults (yet); a withheld telemetry still loses its announcements.
-    pub fn frame_sink(&mut self) -> &mut L {
-        self.inner
-    }
-
     /// Whether the onboard computer is resetting now (a `computer-reset` fault).
     pub fn resetting(&self) -> bool {
         self.faults.resetting()
-    }
-
-    /// Publishes Telemetry(k) unless a fault withholds it; `Ok(true)`: it went out.
-    pub fn publish(&mut self, tlm: &Telemetry) -> Result<bool, ExchangeError> {
-        if self.faults.withheld() {
-            return Ok(false);
-        }
-        self.inner.publish(tlm)?;
-        Ok(true)
     }
 
     /// Publishes the end-of-run telemetry whatever the faults: the flight software must
     /// learn that the run ended.
     pub fn publish_end_of_run(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {
         self.inner.publish(tlm)
-    }
-
-    /// The next command on the wire, as [`Link::receive_until`]; at once `None` while
-    /// telemetry is withheld (the flight software had nothing to answer).
-    pub fn receive_until(
-        &mut self,
-        deadline_ns: u64,
-        stop: &AtomicBool,
-    ) -> Result<Option<Command>, ExchangeError> {
-        if self.faults.withheld() {
-            return Ok(None);
-        }
-        self.inner.receive_until(deadline_ns, stop)
     }
 
     /// Whether a stale duplicate of the previous command arrives now (it is discarded
@@ -185,9 +173,42 @@ impl<'a, L: Link + ?Sized> FaultyLink<'a, L> {
     pub fn deliver(&mut self, cmd: &mut Option<Command>) {
         self.faults.deliver(cmd)
     }
+}
 
-    /// The wrapped link's [`Link::has_transport`].
-    pub fn has_transport(&self) -> bool {
+impl<L: Link + ?Sized> FrameSink for FaultyLink<'_, L> {
+    fn frame_buffer(&mut self, device: u32, bytes: usize) -> Result<&mut [u8], ExchangeError> {
+        self.inner.frame_buffer(device, bytes)
+    }
+
+    fn publish_frame(&mut self, ann: &FrameAnnouncement) -> Result<(), ExchangeError> {
+        self.inner.publish_frame(ann)
+    }
+}
+
+impl<L: Link + ?Sized> Link for FaultyLink<'_, L> {
+    /// Publishes Telemetry(k) unless a fault withholds it ([`FaultyLink::withheld`]
+    /// says which).
+    fn publish(&mut self, tlm: &Telemetry) -> Result<(), ExchangeError> {
+        if self.faults.withheld() {
+            return Ok(());
+        }
+        self.inner.publish(tlm)
+    }
+
+    /// The next command on the wire; at once `None` while telemetry is withheld (the
+    /// flight software had nothing to answer).
+    fn receive_until(
+        &mut self,
+        deadline_ns: u64,
+        stop: &AtomicBool,
+    ) -> Result<Option<Command>, ExchangeError> {
+        if self.faults.withheld() {
+            return Ok(None);
+        }
+        self.inner.receive_until(deadline_ns, stop)
+    }
+
+    fn has_transport(&self) -> bool {
         self.inner.has_transport()
     }
 }

@@ -233,6 +233,7 @@ impl FaultPlan {
         }
         self.active = (self.active | fired) & !cleared;
         self.sensors.set_active(self.active);
+        // The link faults while a run holds them: its FaultyLink is told instead.
         self.link.set_active(self.active, fired);
         (fired, cleared)
     }
@@ -318,10 +319,21 @@ impl FaultPlan {
         self.actions.len()
     }
 
-    /// The sensor stage and the link stage, borrowed apart (the scheduler wraps its link
-    /// in the second while it applies the first).
-    pub fn stages(&mut self) -> (&mut SensorFaults, &mut LinkFaults) {
-        (&mut self.sensors, &mut self.link)
+    /// The telemetry faults' stage.
+    pub fn telemetry_faults(&mut self) -> &mut SensorFaults {
+        &mut self.sensors
+    }
+
+    /// Moves the link faults out, for the [`FaultyLink`] a run wraps its link in (it
+    /// follows [`FaultPlan::active_mask`] from then on, through
+    /// [`FaultyLink::set_active`]); [`FaultPlan::put_back_link_faults`] returns them.
+    pub fn take_link_faults(&mut self) -> LinkFaults {
+        std::mem::take(&mut self.link)
+    }
+
+    /// Returns the link faults [`FaultPlan::take_link_faults`] moved out.
+    pub fn put_back_link_faults(&mut self, link: LinkFaults) {
+        self.link = link;
     }
 
     /// What fired and cleared, for the report.

@@ -110,7 +110,8 @@ impl ExchangeStage {
         // published, nothing can answer, and the step is a miss.
         let withheld = link.withheld();
         let published_ns = now_ns();
-        if link.publish(tlm).map_err(|e| Stop::Failed(e.into()))? {
+        link.publish(tlm).map_err(|e| Stop::Failed(e.into()))?;
+        if !withheld {
             self.digest.add_telemetry(tlm);
             self.published = Some(k);
         } else {

@@ -321,6 +321,9 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
     clock.start();
     let mut exchange =
         ExchangeStage::new(link.has_transport(), monotonic_ns_if(cfg.time_exchanges));
+    // The link with the run's link faults in front, for the whole run (the faults go
+    // back to the plan at the end).
+    let mut link = FaultyLink::new(&mut *link, faults.take_link_faults());
     let mut k: u64 = 0;
 
     loop {
@@ -348,8 +351,8 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             }
         }
         let faults_active = faults.active_mask();
-        let (telemetry_faults, link_faults) = faults.stages();
-        let mut link = FaultyLink::new(&mut *link, link_faults);
+        link.set_active(faults_active, fired);
+        let telemetry_faults = faults.telemetry_faults();
 
         // Devices: Telemetry(k) from the truth.
         let resetting = link.resetting();
@@ -420,7 +423,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
             k,
             plant,
             devices,
-            link.frame_sink(),
+            &mut link,
             &exchange.applied,
             &mut observer,
         ) {
@@ -433,6 +436,7 @@ pub fn run_observed<L: Link + ?Sized, C: StepClock + ?Sized>(
         k += 1;
     }
 
+    faults.put_back_link_faults(link.into_faults());
     let wall_s = monotonic_ns().saturating_sub(clock.started_ns()) as f64 * 1e-9;
     let sim_time_s = plant.time_ns() as f64 * 1e-9;
     let timing = exchange.timing.summary(wall_s, sim_time_s);
