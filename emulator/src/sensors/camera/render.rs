@@ -324,7 +324,9 @@ fn render_fast(
             let n = n_lo + spacing * j as f64;
             for (i, vert) in cur.iter_mut().take(nx).enumerate() {
                 let e = e_lo + spacing * i as f64;
-                let p = site_point(map, e, n, terrain.elevation_m(e, n));
+                // One sample for the node's height and, on the image, its normal.
+                let sample = terrain.sample(e, n);
+                let p = site_point(map, e, n, sample.h_m);
                 let rel = p - o;
                 let pc = cam_from_site * rel;
                 *vert = match cam.project(&pc) {
@@ -343,7 +345,7 @@ fn render_fast(
                     }
                     Some((u, v)) => {
                         // The terrain's own normal, as the oracle's hit has it.
-                        let nrm = terrain.normal_site(e, n);
+                        let nrm = terrain.normal_from_sample(e, n, &sample);
                         let view = rel / rel.norm();
                         let iof = shade_site(terrain, shading, &sun_site, e, n, &p, &nrm, &view);
                         Vertex {

@@ -96,10 +96,33 @@ impl MapProjection {
         (du_de, du_dn)
     }
 
+    /// [`Self::up`] and [`Self::up_derivatives`] together, bit for bit the same, with
+    /// one `hypot` where the two calls take three (a camera shades a million nodes).
+    pub fn up_with_derivatives(
+        &self,
+        e_m: f64,
+        n_m: f64,
+    ) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+        if self.is_flat() {
+            return (Vector3::z(), Vector3::zeros(), Vector3::zeros());
+        }
+        let s = e_m.hypot(n_m);
+        let (f, g) = self.f_and_g_at(s);
+        let u = Vector3::new(f * e_m, f * n_m, (s / self.radius_m).cos());
+        let k = -f / self.radius_m;
+        let du_de = Vector3::new(f + g * e_m * e_m, g * e_m * n_m, k * e_m);
+        let du_dn = Vector3::new(g * e_m * n_m, f + g * n_m * n_m, k * n_m);
+        (u, du_de, du_dn)
+    }
+
     /// `f = sin(theta)/s` and `g = f'(s)/s` at map distance `s = hypot(e, n)`.
     fn f_and_g(&self, e_m: f64, n_m: f64) -> (f64, f64) {
+        self.f_and_g_at(e_m.hypot(n_m))
+    }
+
+    /// [`Self::f_and_g`] at map distance `s`.
+    fn f_and_g_at(&self, s: f64) -> (f64, f64) {
         let r0 = self.radius_m;
-        let s = e_m.hypot(n_m);
         let th = s / r0;
         if th < SERIES_THETA {
             let t2 = th * th;

@@ -148,7 +148,7 @@ impl Terrain {
     }
 
     #[inline]
-    pub(super) fn sample(&self, e_m: f64, n_m: f64) -> Sample {
+    pub(crate) fn sample(&self, e_m: f64, n_m: f64) -> Sample {
         if let Some(d) = &self.detail {
             if d.contains(e_m, n_m) {
                 return d.grid.sample(e_m, n_m);
@@ -177,13 +177,13 @@ impl Terrain {
         self.normal_from_sample(e_m, n_m, &s)
     }
 
-    pub(super) fn normal_from_sample(&self, e_m: f64, n_m: f64, s: &Sample) -> Vector3<f64> {
+    /// [`Self::normal_site`] from the sample already taken at map `(e, n)`.
+    pub(crate) fn normal_from_sample(&self, e_m: f64, n_m: f64, s: &Sample) -> Vector3<f64> {
         if self.map.is_flat() {
             return Vector3::new(-s.dh_de, -s.dh_dn, 1.0).normalize();
         }
         // Surface S(e, n) = (R + h) u(e, n); its normal is dS/de x dS/dn.
-        let u = self.map.up(e_m, n_m);
-        let (du_de, du_dn) = self.map.up_derivatives(e_m, n_m);
+        let (u, du_de, du_dn) = self.map.up_with_derivatives(e_m, n_m);
         let rho = self.map.radius_m + s.h_m;
         let ds_de = u * s.dh_de + du_de * rho;
         let ds_dn = u * s.dh_dn + du_dn * rho;
