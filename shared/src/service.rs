@@ -15,8 +15,8 @@ pub const ICEORYX2_VERSION: &str = "0.10.0";
 /// Longest service name this module builds.
 pub const MAX_SERVICE_NAME_LEN: usize = 64;
 
-/// A service name built without heap allocation.
-pub type ServiceNameBuf = heapless_string::Buf;
+/// A service name built without heap allocation (the design card's `heapless`).
+pub type ServiceNameBuf = heapless::String<MAX_SERVICE_NAME_LEN>;
 
 /// The four services of run `run_id`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -125,54 +125,6 @@ pub fn payload_types() -> (String, String) {
         format!("{tlm}, {} bytes", core::mem::size_of::<crate::Telemetry>()),
         format!("{cmd}, {} bytes", core::mem::size_of::<crate::Command>()),
     )
-}
-
-/// A tiny fixed-capacity string, so naming services needs no allocator (and no extra
-/// dependency in the one crate flight-software authors must build).
-pub mod heapless_string {
-    use super::MAX_SERVICE_NAME_LEN;
-
-    /// Fixed-capacity UTF-8 buffer.
-    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-    pub struct Buf {
-        bytes: [u8; MAX_SERVICE_NAME_LEN],
-        len: usize,
-    }
-
-    impl Default for Buf {
-        fn default() -> Self {
-            Self {
-                bytes: [0; MAX_SERVICE_NAME_LEN],
-                len: 0,
-            }
-        }
-    }
-
-    impl Buf {
-        /// The text.
-        pub fn as_str(&self) -> &str {
-            // Only whole `&str`s are ever appended, so the bytes are valid UTF-8.
-            core::str::from_utf8(&self.bytes[..self.len]).unwrap_or("")
-        }
-    }
-
-    impl core::fmt::Write for Buf {
-        fn write_str(&mut self, s: &str) -> core::fmt::Result {
-            let end = self.len + s.len();
-            if end > self.bytes.len() {
-                return Err(core::fmt::Error);
-            }
-            self.bytes[self.len..end].copy_from_slice(s.as_bytes());
-            self.len = end;
-            Ok(())
-        }
-    }
-
-    impl core::fmt::Display for Buf {
-        fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-            f.write_str(self.as_str())
-        }
-    }
 }
 
 #[cfg(test)]
