@@ -41,6 +41,9 @@ enum Cmd {
     Train(cmd::train::TrainArgs),
     /// Validate the surrogate against the hifi model (paper's cases, bounds, plots, uncertainty).
     Validate(cmd::validate::ValidateArgs),
+    /// Render the onboard terrain map (with the camera's calibration) the reference GNC
+    /// navigates by with --gnc-map, from a scenario's terrain and sun.
+    Map(cmd::map::MapArgs),
     /// Monte Carlo campaigns: dispersions, model error and faults over many cases, on
     /// all local cores or a Slurm cluster.
     #[command(subcommand)]
@@ -135,6 +138,7 @@ fn real_main() -> anyhow::Result<()> {
         Cmd::Plot(a) => cmd::plot::run(&a.log, &a.out),
         Cmd::Hifi(a) => cmd::hifi::run(&a),
         Cmd::Excitation(a) => cmd::excitation::run(&a),
+        Cmd::Map(a) => cmd::map::run(&a),
         Cmd::ExportFmu(a) => cmd::export_fmu::run(&a),
         Cmd::Train(a) => cmd::train::run(&a),
         Cmd::Validate(a) => cmd::validate::run(&a),

@@ -514,6 +514,22 @@ impl RunConfig {
                 }
                 _ => {}
             }
+            if let Some(map) = &self.gnc.map {
+                if self.gnc.navigation != GncNavigation::Sensors {
+                    return Err(invalid(
+                        "gnc.map",
+                        map.display().to_string(),
+                        "terrain navigation is part of the sensor navigation: gnc.navigation = \"sensors\" (--gnc-nav sensors)",
+                    ));
+                }
+                if !self.scenario.sensors.camera.enabled {
+                    return Err(invalid(
+                        "gnc.map",
+                        map.display().to_string(),
+                        "terrain navigation looks through the camera: [scenario.sensors.camera] enabled = true (the pinpoint scenario flies it)",
+                    ));
+                }
+            }
         } else if !self.gnc.is_default() {
             return Err(invalid(
                 "gnc",

@@ -56,7 +56,7 @@ fn gnc(cfg: &RunConfig, guidance_period_s: f64) -> GncConfig {
     };
     GncConfig {
         guidance_period_s,
-        ..gnc_config(Some(site), cfg.gnc)
+        ..gnc_config(Some(site), &cfg.gnc).unwrap()
     }
 }
 

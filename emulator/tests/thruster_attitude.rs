@@ -90,7 +90,7 @@ fn fly(attitude: GncAttitude) -> Flight {
     };
     let seen = Arc::new(Mutex::new(Seen::default()));
     let probe = Probe {
-        gnc: ReferenceGnc::new(gnc_config(Some(site), cfg.gnc)).unwrap(),
+        gnc: ReferenceGnc::new(gnc_config(Some(site), &cfg.gnc).unwrap()).unwrap(),
         seen: seen.clone(),
     };
     let mut rates: Vec<(f64, f64)> = Vec::new();

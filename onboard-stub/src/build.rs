@@ -24,6 +24,9 @@ pub enum FswBuildError {
     /// C flight software could not be loaded.
     #[error(transparent)]
     CLibrary(#[from] CLibraryError),
+    /// The terrain navigation data could not be read.
+    #[error(transparent)]
+    Map(#[from] crate::gnc::terrain_map::MapError),
 }
 
 /// Largest `--fsw-params` file, bytes.
@@ -48,15 +51,30 @@ pub fn build_fsw(
 }
 
 /// The reference GNC's configuration for a run whose scenario names `site`, with the
-/// run's `options`.
-pub fn gnc_config(site: Option<SiteTarget>, options: GncOptions) -> GncConfig {
+/// run's `options`: the terrain navigation data `options.map` names is read here
+/// (refused: a damaged file, or a map without sensor navigation to use it).
+pub fn gnc_config(
+    site: Option<SiteTarget>,
+    options: &GncOptions,
+) -> Result<GncConfig, FswBuildError> {
     let mut cfg = GncConfig::default();
     if let Some(site) = site {
         cfg.site = Some(site);
     }
     cfg.navigation = options.navigation;
     cfg.attitude_actuator = options.attitude;
-    cfg
+    if let Some(path) = &options.map {
+        if options.navigation != crate::fsw::GncNavigation::Sensors {
+            return Err(FswBuildError::Argument(format!(
+                "the terrain map {} is for sensor navigation: add --gnc-nav sensors (gnc.navigation = \"sensors\")",
+                path.display()
+            )));
+        }
+        let map = crate::gnc::terrain_map::TerrainMap::load(path)?;
+        cfg.sensor_nav.terrain.camera = map.camera.clone();
+        cfg.sensor_nav.terrain.map = Some(std::sync::Arc::new(map));
+    }
+    Ok(cfg)
 }
 
 /// [`build_fsw`]; a C library must also have the BLAKE3 `c_blake3` when given (see
@@ -71,7 +89,7 @@ pub fn build_fsw_expecting(
     gnc: GncOptions,
 ) -> Result<Box<dyn FlightSoftware>, FswBuildError> {
     match spec {
-        FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(gnc_config(site, gnc))?)),
+        FswSpec::Gnc => Ok(Box::new(ReferenceGnc::new(gnc_config(site, &gnc)?)?)),
         FswSpec::CLibrary(path) => {
             let params = match fsw_params {
                 Some(p) => read_params(p)?,

@@ -151,7 +151,7 @@ fn join_and_serve(
         run_id,
         args.fsw_blake3.as_deref(),
         args.site,
-        args.gnc,
+        args.gnc.clone(),
     )?;
     // Before the link opens, so the emulator's first telemetry finds the stub ready:
     // memory locked (MCL_FUTURE: the link's shared memory comes locked), the stack

@@ -58,6 +58,8 @@ from .packets import (
     NAV_FLAG_VELOCIMETER_USED,
     NAV_FLAG_LASER_LOST,
     NAV_FLAG_REINIT,
+    NAV_FLAG_TERRAIN_LOST,
+    NAV_FLAG_TERRAIN_USED,
     RATE_GROUPS,
     FswReport,
 )
@@ -112,6 +114,8 @@ __all__ = [
     "NAV_FLAG_VELOCIMETER_USED",
     "NAV_FLAG_LASER_LOST",
     "NAV_FLAG_REINIT",
+    "NAV_FLAG_TERRAIN_LOST",
+    "NAV_FLAG_TERRAIN_USED",
     "RATE_GROUPS",
     "FswReport",
     "FlightError",

@@ -145,17 +145,22 @@ text_enum!(GncNavigation, "GNC navigation", GncNavigation::Bench => "bench", Gnc
 text_enum!(GncAttitude, "GNC attitude actuator", GncAttitude::Torque => "torque", GncAttitude::Thrusters => "thrusters");
 
 /// The reference GNC's choices a run makes (the rest is the GNC's own configuration).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct GncOptions {
     /// What it navigates from.
     pub navigation: GncNavigation,
     /// What turns the vehicle.
     pub attitude: GncAttitude,
+    /// The terrain navigation data (onboard map and camera model, `oils map`) the
+    /// reference GNC loads before the descent to navigate by the camera's frames (with
+    /// `navigation = sensors`); none: no terrain-relative navigation.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub map: Option<PathBuf>,
 }
 
 impl GncOptions {
-    /// Both at their defaults (`bench`, `torque`): omitted from configurations.
+    /// All at their defaults (`bench`, `torque`, no map): omitted from configurations.
     pub fn is_default(&self) -> bool {
         *self == Self::default()
     }

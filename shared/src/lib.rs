@@ -142,6 +142,13 @@ pub const NAV_FLAG_VELOCIMETER_USED: u32 = 1 << 5;
 pub const NAV_FLAG_LASER_LOST: u32 = 1 << 6;
 /// `FswReport::nav_flags`: the flight software is re-initialising after a reset.
 pub const NAV_FLAG_REINIT: u32 = 1 << 7;
+/// `FswReport::nav_flags`: a terrain-relative position fix (camera against the onboard
+/// map) updated the filter in the last 2 s.
+pub const NAV_FLAG_TERRAIN_USED: u32 = 1 << 8;
+/// `FswReport::nav_flags`: terrain-relative navigation is expected (over the map, in
+/// its height band) but no fix has been accepted for 10 s: the estimate is the inertial
+/// and altimeter one.
+pub const NAV_FLAG_TERRAIN_LOST: u32 = 1 << 9;
 
 /// Rate groups a flight software may time in [`FswReport::group_compute_ns`].
 pub const RATE_GROUPS: usize = 4;

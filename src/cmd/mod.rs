@@ -3,6 +3,7 @@
 pub mod excitation;
 pub mod export_fmu;
 pub mod hifi;
+pub mod map;
 pub mod mc;
 pub mod plot;
 pub mod run;

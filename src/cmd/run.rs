@@ -97,6 +97,11 @@ pub struct RunArgs {
     /// --telemetry sensors (the telemetry has no ideal navigation source), else bench]
     #[arg(long, value_name = "bench|sensors")]
     pub gnc_nav: Option<oils_shared::fsw::GncNavigation>,
+    /// Terrain navigation data for the reference GNC (`oils map`): it navigates by the
+    /// camera's frames against this map (implies --gnc-nav sensors, and --telemetry
+    /// sensors unless given; needs the camera on board, as in --scenario pinpoint).
+    #[arg(long, value_name = "MAP")]
+    pub gnc_map: Option<std::path::PathBuf>,
     /// What the reference GNC turns the vehicle with: torque (the ideal torque actuator)
     /// or thrusters (the eight attitude thrusters, pulse-width modulated).
     /// [default: torque]
@@ -335,6 +340,15 @@ impl RunArgs {
             // filter (an explicit --gnc-nav bench still asks for the refusal). Decided
             // last, once --fsw and --no-stub have said who flies.
             cfg.gnc.navigation = oils_shared::fsw::GncNavigation::Sensors;
+        }
+        if let Some(map) = &self.gnc_map {
+            cfg.gnc.map = Some(map.clone());
+            if self.gnc_nav.is_none() {
+                cfg.gnc.navigation = oils_shared::fsw::GncNavigation::Sensors;
+            }
+            if self.telemetry.is_none() && !cfg.telemetry.sensors() {
+                cfg.set_telemetry(TelemetrySource::Sensors, self.dt_ms.is_some());
+            }
         }
         cfg.validate()?;
         Ok(cfg)
@@ -636,7 +650,7 @@ fn fly_in_process(
         run_id,
         fsw_library.map(|l| l.blake3.as_str()),
         Some(oils_lab::onboard::site_target(&cfg.scenario)),
-        cfg.gnc,
+        cfg.gnc.clone(),
     )
     .map_err(|e| SessionError::Onboard(format!("building the flight software: {e}")))?;
     let extras = |observer| Extras {

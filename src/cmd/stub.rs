@@ -40,6 +40,10 @@ pub struct StubArgs {
     /// `sensors` (its Kalman filter on the device samples).
     #[arg(long, default_value = "bench")]
     pub gnc_nav: oils_shared::fsw::GncNavigation,
+    /// Terrain navigation data the reference GNC navigates by (`oils map`; with
+    /// `--gnc-nav sensors`).
+    #[arg(long, value_name = "MAP")]
+    pub gnc_map: Option<std::path::PathBuf>,
     /// What the reference GNC turns the vehicle with: `torque` (ideal) or `thrusters`.
     #[arg(long, default_value = "torque")]
     pub gnc_attitude: oils_shared::fsw::GncAttitude,
@@ -85,6 +89,7 @@ impl From<&StubArgs> for StubOptions {
             gnc: oils_shared::fsw::GncOptions {
                 navigation: a.gnc_nav,
                 attitude: a.gnc_attitude,
+                map: a.gnc_map.clone(),
             },
             wait: a.wait.clone(),
             timeout_ms: a.timeout_ms,

@@ -121,6 +121,9 @@ pub fn spawn(
         .arg(cfg.gnc.navigation.as_str())
         .arg("--gnc-attitude")
         .arg(cfg.gnc.attitude.as_str());
+    if let Some(map) = &cfg.gnc.map {
+        p.arg("--gnc-map").arg(map);
+    }
     if let Some(params) = &cfg.fsw_params {
         p.arg("--fsw-params").arg(params);
     }

@@ -33,7 +33,7 @@ pub fn flight_software(
         cfg.fsw_params.as_deref(),
         run_id,
         Some(site_target(&cfg.scenario)),
-        cfg.gnc,
+        cfg.gnc.clone(),
     )
 }
 

@@ -17,7 +17,11 @@
 //! navigation = "sensors"      # or "bench"; sensors needs `--telemetry sensors`
 //! attitude = "thrusters"      # or "torque"
 //! site_deg = [-69.373, 32.319] # latitude, east longitude; default: the default scenario's
+//! map = "pinpoint.oilsmap"    # terrain navigation data (`oils map`): navigates by the camera
 //! ```
+//!
+//! With a map it also exports `oils_fsw_frame`: the camera's frames reach the GNC's
+//! terrain-relative navigation in place, as they reach the native one.
 //!
 //! Anything else in the file, or a value it cannot read, fails `oils_fsw_init` with the
 //! reason on standard error.
@@ -27,7 +31,7 @@ use oils_onboard_stub::fsw::FlightSoftware;
 use oils_onboard_stub::gnc::{ReferenceGnc, SiteTarget};
 use oils_shared::c_abi::{FswConfig, FSW_ABI_VERSION, FSW_LAYOUT_HASH, FSW_STATUS_OK};
 use oils_shared::fsw::{GncAttitude, GncNavigation, GncOptions};
-use oils_shared::{Command, Telemetry};
+use oils_shared::{Command, FrameAnnouncement, Telemetry};
 use std::ffi::c_void;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
@@ -55,6 +59,8 @@ struct Params {
     navigation: Option<GncNavigation>,
     attitude: Option<GncAttitude>,
     site_deg: Option<[f64; 2]>,
+    /// Terrain navigation data (`oils map`), read when the library is initialised.
+    map: Option<std::path::PathBuf>,
 }
 
 /// The GNC the parameters text asks for.
@@ -63,13 +69,15 @@ fn build(params: &str) -> Result<ReferenceGnc, String> {
     let options = GncOptions {
         navigation: p.navigation.unwrap_or_default(),
         attitude: p.attitude.unwrap_or_default(),
+        map: p.map,
     };
     let site = p.site_deg.map(|[latitude_deg, longitude_deg]| SiteTarget {
         latitude_deg,
         longitude_deg,
     });
-    ReferenceGnc::new(oils_onboard_stub::build::gnc_config(site, options))
-        .map_err(|e| format!("--fsw-params: {e}"))
+    let cfg = oils_onboard_stub::build::gnc_config(site, &options)
+        .map_err(|e| format!("--fsw-params: {e}"))?;
+    ReferenceGnc::new(cfg).map_err(|e| format!("--fsw-params: {e}"))
 }
 
 /// A boxed [`ReferenceGnc`] configured by the parameters; NULL when `config` is NULL,
@@ -140,6 +148,34 @@ pub unsafe extern "C" fn oils_fsw_step(
             *cmd = c;
             FSW_STATUS_OK
         }
+        Err(_) => STATUS_PANIC,
+    }
+}
+
+/// A frame the coming telemetry announces, its pixels in place (valid during the call).
+///
+/// # Safety
+/// `ctx` comes from [`oils_fsw_init`]; `ann` is NULL or a valid announcement; `pixels`
+/// is NULL or points to `len` readable bytes.
+#[no_mangle]
+pub unsafe extern "C" fn oils_fsw_frame(
+    ctx: *mut c_void,
+    ann: *const FrameAnnouncement,
+    pixels: *const u8,
+    len: usize,
+) -> i32 {
+    // SAFETY: the caller's contract.
+    let (gnc, ann) = unsafe { (ctx.cast::<ReferenceGnc>().as_mut(), ann.as_ref()) };
+    let (Some(gnc), Some(ann)) = (gnc, ann) else {
+        return STATUS_NULL;
+    };
+    if pixels.is_null() {
+        return STATUS_NULL;
+    }
+    // SAFETY: `len` readable bytes at `pixels`, for the call.
+    let pixels = unsafe { std::slice::from_raw_parts(pixels, len) };
+    match catch_unwind(AssertUnwindSafe(|| gnc.frame(ann, pixels))) {
+        Ok(()) => FSW_STATUS_OK,
         Err(_) => STATUS_PANIC,
     }
 }

@@ -12,6 +12,8 @@ pub mod guidance;
 pub mod nav_filter;
 pub mod navigation;
 pub mod sensor_nav;
+pub mod terrain_map;
+pub mod terrain_nav;
 pub mod thrust_loop;
 pub mod thruster_control;
 
@@ -23,7 +25,7 @@ use nalgebra::Vector3;
 use navigation::NavFilter;
 use oils_shared::clock::monotonic_ns_if;
 use oils_shared::{
-    Command, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE, ATTITUDE_MODE_THRUSTERS,
+    Command, FrameAnnouncement, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE, ATTITUDE_MODE_THRUSTERS,
     ENGINE_COUNT, NAV_FLAG_VALID, RATE_GROUPS, TLM_FLAG_FOOTPAD_CONTACT,
 };
 use sensor_nav::{SensorNav, SensorNavConfig};
@@ -96,6 +98,9 @@ pub struct GncConfig {
     /// group runs on the first cycle of each period (when `floor(t / period)` changes)
     /// and its output is held in between. Navigation and control run every cycle.
     pub guidance_period_s: f64,
+    /// The terrain-navigation rate group's period, seconds (the camera's frame period:
+    /// a match that takes longer is a cycle slip).
+    pub vision_period_s: f64,
     /// Dry mass, kilograms (for the inertia estimate).
     pub dry_mass_kg: f64,
     /// Propellant at descent start, kilograms (for the inertia estimate).
@@ -267,6 +272,7 @@ impl Default for GncConfig {
             thrusters: ThrusterLayout::default(),
             cycle_s: 0.010,
             guidance_period_s: 0.010,
+            vision_period_s: 1.0,
             dry_mass_kg: 750.0,
             propellant_kg: 1000.0,
             inertia_wet_kg_m2: [1200.0, 1200.0, 1100.0],
@@ -369,6 +375,7 @@ impl GncConfig {
             (self.max_thrust_n, "max_thrust_n"),
             (self.cycle_s, "cycle_s"),
             (self.guidance_period_s, "guidance_period_s"),
+            (self.vision_period_s, "vision_period_s"),
             (self.thrusters.thrust_n, "thrusters.thrust_n"),
             (self.thrusters.min_on_time_s, "thrusters.min_on_time_s"),
             (self.dry_mass_kg, "dry_mass_kg"),
@@ -590,6 +597,16 @@ impl EngineMonitor {
 impl ReferenceGnc {
     /// Builds the GNC; allocation happens here, never in `step`.
     pub fn new(cfg: GncConfig) -> Result<Self, GncConfigError> {
+        let terrain = terrain_nav::TerrainNav::new(cfg.sensor_nav.terrain.clone());
+        Self::with_terrain(cfg, terrain)
+    }
+
+    /// [`ReferenceGnc::new`] around terrain navigation buffers already allocated (a
+    /// computer reset hands its own back: nothing is allocated).
+    fn with_terrain(
+        cfg: GncConfig,
+        terrain: terrain_nav::TerrainNav,
+    ) -> Result<Self, GncConfigError> {
         cfg.validate()?;
         let allocator = ThrustAllocator::new(&cfg).ok_or(GncConfigError {
             field: "engine_positions_body_m",
@@ -601,7 +618,7 @@ impl ReferenceGnc {
         })?;
         Ok(Self {
             nav: NavFilter::new(&cfg),
-            sensor_nav: SensorNav::new(cfg.sensor_nav.clone()),
+            sensor_nav: SensorNav::with_terrain(cfg.sensor_nav.clone(), terrain),
             boot_count: 1,
             down: false,
             guidance: Guidance::new(&cfg),
@@ -742,13 +759,20 @@ impl FlightSoftware for ReferenceGnc {
         let boots = self.boot_count;
         let slips = self.cycle_slips;
         let timing = self.compute_timing;
-        if let Ok(fresh) = Self::new(self.cfg.clone()) {
+        let terrain = self.sensor_nav.take_terrain();
+        if let Ok(fresh) = Self::with_terrain(self.cfg.clone(), terrain) {
             *self = fresh;
         }
         self.boot_count = boots;
         self.cycle_slips = slips;
         self.compute_timing = timing;
         self.down = true;
+    }
+
+    fn frame(&mut self, ann: &FrameAnnouncement, pixels: &[u8]) {
+        if self.cfg.navigation == GncNavigation::Sensors {
+            self.sensor_nav.frame(ann, pixels);
+        }
     }
 
     fn step(&mut self, tlm: &Telemetry) -> Command {
@@ -761,6 +785,19 @@ impl FlightSoftware for ReferenceGnc {
             boot_count: self.boot_count,
             ..Default::default()
         };
+        // Rate group 3, terrain navigation: at the camera's rate, on the cycle a frame
+        // arrives, before the filter takes this cycle's samples (the fix is for the
+        // frame's time of validity, a few ms back).
+        if self.cfg.navigation == GncNavigation::Sensors {
+            let vision_ns = self.clock_ns();
+            if self
+                .sensor_nav
+                .terrain_group(self.cfg.moon_rotation_rad_s, tlm.header.t_ns)
+            {
+                let period_ns = (self.cfg.vision_period_s * 1e9).round() as i64;
+                self.time_group(&mut report, 3, vision_ns, period_ns);
+            }
+        }
         // Rate group 0, navigation: every cycle, all of its samples.
         let start_ns = self.clock_ns();
         let nav = match self.cfg.navigation {

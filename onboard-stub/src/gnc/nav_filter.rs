@@ -85,6 +85,10 @@ pub struct NavFilterConfig {
     pub gate_chi2_1dof: f64,
     /// Chi-square gate for the star tracker (3 dof).
     pub gate_chi2_3dof: f64,
+    /// Chi-square gate for a horizontal position fix (2 dof; terrain-relative
+    /// navigation). A fix beyond it is never re-accepted: a wrong fix (a repeated
+    /// pattern, a shifted map) can be self-consistent.
+    pub gate_chi2_2dof: f64,
     /// Consecutive rejections after which a self-consistent offset is re-accepted.
     pub reaccept_after: u32,
     /// The rejected innovations are consistent when their spread (max - min) is at most
@@ -151,6 +155,8 @@ impl Default for NavFilterConfig {
             ground_model_sigma_m: 1.0,
             gate_chi2_1dof: 16.0,
             gate_chi2_3dof: 21.1,
+            // 99.9 % of a chi-square with 2 dof.
+            gate_chi2_2dof: 13.8,
             reaccept_after: 5,
             reaccept_spread_sigmas: 6.0,
             init_sigma_pos_m: 200.0,
@@ -179,10 +185,12 @@ pub enum Channel {
     Velo1 = 4,
     /// See `Velo0`.
     Velo2 = 5,
+    /// Terrain-relative position fix (2 dof, from the camera and the onboard map).
+    Terrain = 6,
 }
 
 /// Number of gated channels.
-pub const CHANNELS: usize = 6;
+pub const CHANNELS: usize = 7;
 
 /// Per-channel counters.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -542,6 +550,67 @@ impl NavFilter {
             }
         }
         self.hist[self.hist_head]
+    }
+
+    /// The nominal position (`mci`) and attitude at `t_ns`: the kept state just before
+    /// it moved on by its velocity (a camera frame's time of validity falls between IMU
+    /// samples; 5 ms at 100 m/s is half a metre).
+    pub fn pose_at(&self, t_ns: i64) -> (Vector3<f64>, UnitQuaternion<f64>) {
+        let h = self.at(t_ns);
+        let dt_s = (t_ns - h.t_ns) as f64 * 1e-9;
+        (h.r + h.v * dt_s, h.q)
+    }
+
+    /// A position fix of two components: `y_m[i]` is the measured value of
+    /// `rows[i] . (true - estimated position)` (`mci`, m) at the fix's time of validity,
+    /// each with 1-sigma `sigma_m` (terrain-relative navigation: the shift of the ground
+    /// under the camera, which an oblique view ties to the height error too). Gated as a
+    /// whole (2 dof, `gate_chi2_2dof`), then applied as two scalar updates to the
+    /// current state (the delay, one frame's announcement, is a few ms: the position
+    /// error does not move in it). Returns whether it was used and its normalised
+    /// innovation squared.
+    pub fn update_position_fix(
+        &mut self,
+        rows: [Vector3<f64>; 2],
+        y_m: [f64; 2],
+        sigma_m: f64,
+    ) -> (bool, f64) {
+        let axes = rows;
+        let r_var = sigma_m * sigma_m;
+        let p_rr = self.p.fixed_view::<3, 3>(I_R, I_R).into_owned();
+        let s00 = (axes[0].transpose() * p_rr * axes[0])[(0, 0)] + r_var;
+        let s11 = (axes[1].transpose() * p_rr * axes[1])[(0, 0)] + r_var;
+        let s01 = (axes[0].transpose() * p_rr * axes[1])[(0, 0)];
+        let det = s00 * s11 - s01 * s01;
+        let g = &mut self.gates[Channel::Terrain as usize];
+        if !(det > 0.0 && y_m.iter().all(|v| v.is_finite())) {
+            g.stats.rejected += 1;
+            return (false, f64::NAN);
+        }
+        let (a, b) = (y_m[0], y_m[1]);
+        let nis = (s11 * a * a - 2.0 * s01 * a * b + s00 * b * b) / det;
+        g.stats.last_nis = nis;
+        if nis > self.cfg.gate_chi2_2dof {
+            g.stats.rejected += 1;
+            g.stats.consecutive_rejected += 1;
+            return (false, nis);
+        }
+        g.stats.accepted += 1;
+        g.stats.consecutive_rejected = 0;
+        let mut moved = Vector3::zeros();
+        for (axis, y) in axes.iter().zip(y_m) {
+            let mut h = Row::zeros();
+            for i in 0..3 {
+                h[(0, I_R + i)] = axis[i];
+            }
+            // What earlier updates of this fix moved the estimate along this axis is no
+            // longer an error.
+            let y = y - axis.dot(&moved);
+            let before = self.r;
+            self.update_scalar(&h, y, r_var);
+            moved += self.r - before;
+        }
+        (true, nis)
     }
 
     /// Applies an accepted error estimate to the current nominal state (and shifts the

@@ -10,11 +10,13 @@
 
 use super::nav_filter::{Channel, NavFilter, NavFilterConfig, CHANNELS};
 use super::navigation::NavSolution;
+use super::terrain_nav::{TerrainNav, TerrainNavConfig};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use oils_shared::{
     FswReport, Telemetry, NAV_FLAG_FROM_SENSORS, NAV_FLAG_LASER_LOST, NAV_FLAG_LASER_USED,
-    NAV_FLAG_RF_USED, NAV_FLAG_STAR_TRACKER_USED, NAV_FLAG_VALID, NAV_FLAG_VELOCIMETER_USED,
-    TLM_FLAG_IDEAL_NAV, TLM_FLAG_STATE_VECTOR,
+    FrameAnnouncement, NAV_FLAG_RF_USED, NAV_FLAG_STAR_TRACKER_USED, NAV_FLAG_TERRAIN_LOST,
+    NAV_FLAG_TERRAIN_USED, NAV_FLAG_VALID, NAV_FLAG_VELOCIMETER_USED, TLM_FLAG_IDEAL_NAV,
+    TLM_FLAG_STATE_VECTOR,
 };
 
 /// A device "is used" while it updated the filter within this long, ns.
@@ -34,6 +36,8 @@ pub struct SensorNavConfig {
     /// Height below which the laser altimeter should see the ground, m (its 8 km range
     /// with margin).
     pub laser_expected_below_m: f64,
+    /// Terrain-relative navigation (off without a map).
+    pub terrain: TerrainNavConfig,
 }
 
 impl Default for SensorNavConfig {
@@ -43,6 +47,7 @@ impl Default for SensorNavConfig {
             footpad_below_com_m: 1.2,
             laser_lost_after_ns: 10_000_000_000,
             laser_expected_below_m: 7_000.0,
+            terrain: TerrainNavConfig::default(),
         }
     }
 }
@@ -59,12 +64,23 @@ pub struct SensorNav {
     laser_seen_ns: Option<i64>,
     laser_lost: bool,
     last_imu_t_ns: Option<i64>,
+    terrain: TerrainNav,
 }
 
 impl SensorNav {
-    /// Waiting for the ground's state vector.
+    /// Waiting for the ground's state vector (allocates the terrain navigation's
+    /// buffers when it has a map).
     pub fn new(cfg: SensorNavConfig) -> Self {
+        let terrain = TerrainNav::new(cfg.terrain.clone());
+        Self::with_terrain(cfg, terrain)
+    }
+
+    /// [`SensorNav::new`] with terrain navigation state already built (a computer
+    /// reset keeps its buffers: nothing is allocated).
+    pub fn with_terrain(cfg: SensorNavConfig, mut terrain: TerrainNav) -> Self {
+        terrain.reset();
         Self {
+            terrain,
             filter: NavFilter::new(cfg.filter.clone()),
             cfg,
             started: false,
@@ -85,6 +101,34 @@ impl SensorNav {
         self.laser_seen_ns = None;
         self.laser_lost = false;
         self.last_imu_t_ns = None;
+        self.terrain.reset();
+    }
+
+    /// Hands the terrain navigation out (its buffers), leaving one without a map.
+    pub fn take_terrain(&mut self) -> TerrainNav {
+        std::mem::replace(&mut self.terrain, TerrainNav::new(TerrainNavConfig::default()))
+    }
+
+    /// The terrain-relative navigation (its counters and last fix).
+    pub fn terrain(&self) -> &TerrainNav {
+        &self.terrain
+    }
+
+    /// A frame the coming telemetry announces (the camera's goes to the terrain
+    /// navigation).
+    pub fn frame(&mut self, ann: &FrameAnnouncement, pixels: &[u8]) {
+        self.terrain.frame(ann, pixels);
+    }
+
+    /// The terrain navigation's rate group: matches the frame taken in, if any, and
+    /// fixes the filter. Returns whether a frame was matched (the group ran).
+    pub fn terrain_group(&mut self, omega_rad_s: f64, t_ns: i64) -> bool {
+        if !self.started || !self.terrain.enabled() {
+            return false;
+        }
+        let pending = self.terrain.has_pending();
+        self.terrain.process(&mut self.filter, omega_rad_s, t_ns);
+        pending
     }
 
     /// Whether the laser altimeter has been declared lost.
@@ -178,6 +222,12 @@ impl SensorNav {
         }
         if self.laser_lost {
             flags |= NAV_FLAG_LASER_LOST;
+        }
+        if self.terrain.used_within(t_ns, USED_WINDOW_NS) {
+            flags |= NAV_FLAG_TERRAIN_USED;
+        }
+        if self.terrain.enabled() && self.terrain.lost(t_ns) {
+            flags |= NAV_FLAG_TERRAIN_LOST;
         }
         report.nav_flags = flags;
         Some(solution)

@@ -13,6 +13,7 @@
 
 pub mod detector;
 pub mod optics;
+pub mod ortho;
 pub mod photometry;
 pub mod render;
 pub mod shadow;
