@@ -43,6 +43,12 @@ pub struct FswSelfReport {
     /// Navigation error at the last cycle with an estimate before the end (at touchdown
     /// for a landing).
     pub nav_error: Option<NavErrorSample>,
+    /// Navigation error when the vehicle first came down through each of
+    /// [`NAV_ERROR_GATES_M`] (true height above the ground), highest first: the error
+    /// against altitude of a campaign's figure; `nav_error_50m` is the 50 m one.
+    pub nav_error_by_altitude: Vec<(f64, NavErrorSample)>,
+    /// Navigation error at 50 m above the ground (SLIM's obstacle-avoidance height).
+    pub nav_error_50m: Option<NavErrorSample>,
     /// Largest position error over the run, metres.
     pub nav_error_max_position_m: f64,
     /// Share of the cycles with an estimate and a sigma whose position error was within
@@ -59,6 +65,11 @@ pub struct FswSelfReport {
     /// Per rate group that ran, its compute time, nanoseconds (wall clock).
     pub group_compute_ns: Vec<crate::timing::Percentiles>,
 }
+
+/// Heights above the ground at which the navigation error is kept, m, highest first.
+pub const NAV_ERROR_GATES_M: [f64; 12] = [
+    7000.0, 5000.0, 3000.0, 2000.0, 1000.0, 500.0, 200.0, 100.0, 50.0, 20.0, 10.0, 5.0,
+];
 
 /// Collects [`FswSelfReport`] during a run.
 pub struct FswMonitor {
@@ -79,7 +90,10 @@ impl FswMonitor {
             })
             .collect();
         Self {
-            report: FswSelfReport::default(),
+            report: FswSelfReport {
+                nav_error_by_altitude: Vec::with_capacity(NAV_ERROR_GATES_M.len()),
+                ..FswSelfReport::default()
+            },
             within: 0,
             with_sigma: 0,
             nees_sum: 0.0,
@@ -125,6 +139,17 @@ impl FswMonitor {
             sigma_position_m: norm(&sigma),
         };
         self.report.nav_error = Some(sample);
+        // The gates passed since the last record (kept once each: capacity allocated).
+        let kept = &mut self.report.nav_error_by_altitude;
+        while let Some(&gate) = NAV_ERROR_GATES_M.get(kept.len()) {
+            if truth.altitude_m > gate {
+                break;
+            }
+            kept.push((gate, sample));
+            if gate == 50.0 {
+                self.report.nav_error_50m = Some(sample);
+            }
+        }
         self.report.nav_error_max_position_m = self.report.nav_error_max_position_m.max(position);
         if sigma.iter().all(|s| *s > 0.0) {
             self.with_sigma += 1;

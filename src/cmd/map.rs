@@ -28,8 +28,9 @@ pub struct MapArgs {
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
     /// Cell spacings of the levels, m, finest first (each `--cells` a side about the
-    /// site: 0.5 m covers 512 m, 32 m covers 33 km).
-    #[arg(long, value_delimiter = ',', default_value = "0.5,1,2,4,8,16,32")]
+    /// site: 0.5 m covers 512 m, 128 m covers 131 km; the coarse ones are for the
+    /// first fix, searched over 1.5 km).
+    #[arg(long, value_delimiter = ',', default_value = "0.5,1,2,4,8,16,32,64,128")]
     pub spacings_m: Vec<f64>,
     /// Cells per side of every level.
     #[arg(long, default_value_t = 1024)]

@@ -473,6 +473,8 @@ fn print_summary(merged: &Merged, dir: &Path) {
         ("site_error_m", "m"),
         ("propellant_used_kg", "kg"),
         ("nav_error_m", "m"),
+        ("nav_horizontal_error_m", "m"),
+        ("nav_horizontal_error_50m_m", "m"),
         ("nav_altitude_error_m", "m"),
     ] {
         if s.figures.contains_key(name) {

@@ -561,6 +561,30 @@ impl NavFilter {
         (h.r + h.v * dt_s, h.q)
     }
 
+    /// Widens the position uncertainty along the unit `mci` direction `axis` to at
+    /// least `sigma_m` (scaling that direction's rows and columns of the covariance, so
+    /// its correlations are kept). Terrain navigation's acquisition: the first fix is an
+    /// absolute position found over a search wider than the filter's own sigma (the
+    /// orbit determination's error is not always what the ground says it is).
+    pub fn widen_position(&mut self, axis: &Vector3<f64>, sigma_m: f64) {
+        let p_rr = self.p.fixed_view::<3, 3>(I_R, I_R).into_owned();
+        let var = (axis.transpose() * p_rr * axis)[(0, 0)];
+        if !(sigma_m.is_finite() && var > 0.0 && var < sigma_m * sigma_m) {
+            return;
+        }
+        // T = I + (k - 1) a a^T on the position block: P' = T P T^T scales the variance
+        // along `a` by k^2 and leaves the orthogonal directions alone.
+        let k = sigma_m / var.sqrt();
+        let mut t = Mat::identity();
+        let a = axis.normalize();
+        for i in 0..3 {
+            for j in 0..3 {
+                t[(I_R + i, I_R + j)] += (k - 1.0) * a[i] * a[j];
+            }
+        }
+        self.p = t * self.p * t.transpose();
+    }
+
     /// A position fix of two components: `y_m[i]` is the measured value of
     /// `rows[i] . (true - estimated position)` (`mci`, m) at the fix's time of validity,
     /// each with 1-sigma `sigma_m` (terrain-relative navigation: the shift of the ground

@@ -147,6 +147,13 @@ pub struct TerrainNavConfig {
     /// 1-sigma of a fix, in cells of the level it was made on (the sub-cell peak fit
     /// and the map's own rendering error; assumed, checked by the campaign's NIS).
     pub fix_sigma_cells: f64,
+    /// Until the first fix is accepted (acquisition), the search spans at least this
+    /// far, m, whatever the filter's own sigma: the ground's orbit determination can be
+    /// off by more than it says; the first fix then widens the filter's horizontal
+    /// sigma to its own size (its uniqueness gates stand in for the filter's gate).
+    pub acquisition_radius_m: f64,
+    /// [`Self::max_second_peak_ratio`] for the first fix (no filter gate behind it).
+    pub acquisition_second_peak_ratio: f64,
     /// Terrain navigation is "lost" (`NAV_FLAG_TERRAIN_LOST`) after this long without
     /// an accepted fix while frames are expected (within the height band), ns.
     pub lost_after_ns: i64,
@@ -168,6 +175,8 @@ impl Default for TerrainNavConfig {
             max_second_peak_ratio: 0.9,
             max_saturated_frac: 0.02,
             fix_sigma_cells: 0.5,
+            acquisition_radius_m: 1500.0,
+            acquisition_second_peak_ratio: 0.8,
             lost_after_ns: 10_000_000_000,
         }
     }
@@ -238,6 +247,8 @@ pub struct TerrainNav {
     last_fix: Option<Fix>,
     last_accepted_ns: Option<i64>,
     expected_since_ns: Option<i64>,
+    /// A fix has been accepted since the start (or the last reset).
+    acquired: bool,
 }
 
 impl TerrainNav {
@@ -268,6 +279,7 @@ impl TerrainNav {
             last_fix: None,
             last_accepted_ns: None,
             expected_since_ns: None,
+            acquired: false,
             cfg,
         }
     }
@@ -280,6 +292,7 @@ impl TerrainNav {
         self.last_fix = None;
         self.last_accepted_ns = None;
         self.expected_since_ns = None;
+        self.acquired = false;
     }
 
     /// Whether a frame waits to be matched.
@@ -460,6 +473,12 @@ impl TerrainNav {
             .iter()
             .map(|a| (a.transpose() * p_rr * a)[(0, 0)].max(0.0).sqrt())
             .fold(0.0f64, f64::max);
+        // The search: 3 sigma, and the acquisition radius until the first fix.
+        let reach_m = if self.acquired {
+            3.0 * sigma_h
+        } else {
+            (3.0 * sigma_h).max(cfg.acquisition_radius_m)
+        };
 
         // The level: fine enough for the footprint, coarse enough for the search.
         let min_cell_m = cfg.cell_per_pixel * footprint_m;
@@ -468,12 +487,12 @@ impl TerrainNav {
             .levels
             .iter()
             .position(|l| {
-                l.spacing_m >= min_cell_m && (3.0 * sigma_h / l.spacing_m).ceil() <= max_w
+                l.spacing_m >= min_cell_m && (reach_m / l.spacing_m).ceil() <= max_w
             })
             .ok_or(Rejection::OutOfReach)?;
         let lv = &map.levels[level];
         let s = lv.spacing_m;
-        let search = ((3.0 * sigma_h / s).ceil() as i64).clamp(cfg.min_search_cells as i64, cfg.max_search_cells.max(cfg.min_search_cells) as i64);
+        let search = ((reach_m / s).ceil() as i64).clamp(cfg.min_search_cells as i64, cfg.max_search_cells.max(cfg.min_search_cells) as i64);
         let pc = cfg.patch_cells as i64;
         let (cc, rc) = lv.cell_of(e_c, n_c);
         let (c0, r0) = (cc.round() as i64 - pc / 2, rc.round() as i64 - pc / 2);
@@ -555,7 +574,12 @@ impl TerrainNav {
                 }
             }
         }
-        if second > cfg.max_second_peak_ratio * peak {
+        let ratio = if self.acquired {
+            cfg.max_second_peak_ratio
+        } else {
+            cfg.acquisition_second_peak_ratio
+        };
+        if second > ratio * peak {
             return Err(Rejection::Ambiguous);
         }
         let sc = |a: usize, b: usize| self.scores[a * side + b];
@@ -581,6 +605,13 @@ impl TerrainNav {
         let up_mci = mci_from_mcmf * map.frame.mcmf_of_map(e_c, n_c, 0.0).normalize();
         let ub = up_mci.dot(&bore_mci);
         let rows = axes.map(|a| a - up_mci * (a.dot(&bore_mci) / ub));
+        if !self.acquired {
+            // Acquisition: the filter is told its horizontal position is as uncertain
+            // as this first fix says it was (at least the fix's size on each axis).
+            for (a, y) in axes.iter().zip(error_en_m) {
+                filter.widen_position(a, y.abs().max(sigma_m));
+            }
+        }
         let (used, nis) = filter.update_position_fix(rows, error_en_m, sigma_m);
         let fix = Fix {
             t_ns,
@@ -591,6 +622,7 @@ impl TerrainNav {
             nis,
         };
         if used {
+            self.acquired = true;
             self.accepted += 1;
             self.last_accepted_ns = Some(t_ns);
             Ok(fix)
@@ -629,3 +661,210 @@ fn ncc(patch: &[f32], mean: f64, sd: f64, lv: &MapLevel, c0: i64, r0: i64, n: i6
     (spm / k - mean * mm) / (sd * var_m.sqrt())
 }
 
+
+#[cfg(test)]
+mod tests {
+    //! The matcher against frames synthesised from the map's own texture through an
+    //! undistorted pinhole: the geometry closes on itself, so the estimate's offset must
+    //! come back to a fraction of a cell.
+    use super::*;
+    use crate::gnc::nav_filter::NavFilterConfig;
+    use crate::gnc::terrain_map::{MapFrame, MapLevel, TerrainMap};
+    use nalgebra::{Matrix3, UnitQuaternion};
+    use oils_shared::Telemetry;
+
+    const R_M: f64 = 1_737_400.0;
+    const H_M: f64 = 300.0;
+
+    /// A random texture (value noise: hashed values on a 10 m lattice, bilinear), or one
+    /// period `p` in both axes.
+    fn texture(e: f64, n: f64, periodic: Option<f64>) -> f64 {
+        if let Some(p) = periodic {
+            let k = std::f64::consts::TAU / p;
+            return (k * e).sin() * (k * n).cos();
+        }
+        let hash = |i: i64, j: i64| {
+            let mut x = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+            x ^= x >> 29;
+            x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            x ^= x >> 32;
+            (x >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+        };
+        let (x, y) = (e / 10.0, n / 10.0);
+        let (i, j) = (x.floor(), y.floor());
+        let (fx, fy) = (x - i, y - j);
+        let (i, j) = (i as i64, j as i64);
+        let top = hash(i, j) * (1.0 - fx) + hash(i + 1, j) * fx;
+        let bot = hash(i, j + 1) * (1.0 - fx) + hash(i + 1, j + 1) * fx;
+        top * (1.0 - fy) + bot * fy
+    }
+
+    fn map(periodic: Option<f64>, shift_e_m: f64) -> TerrainMap {
+        let frame = MapFrame::new(-69.373, 32.319, R_M);
+        let levels = [4.0, 8.0]
+            .iter()
+            .map(|&s| {
+                let n = 256u32;
+                let half = 0.5 * (n as f64 - 1.0) * s;
+                let mut iof = Vec::new();
+                for i in 0..n {
+                    for j in 0..n {
+                        let (e, nn) = (-half + j as f64 * s, -half + i as f64 * s);
+                        iof.push((0.1 + 0.04 * texture(e - shift_e_m, nn, periodic)) as f32);
+                    }
+                }
+                MapLevel {
+                    spacing_m: s,
+                    e0_m: -half,
+                    n0_m: -half,
+                    width: n,
+                    height: n,
+                    iof,
+                    height_m: vec![0.0; (n * n) as usize],
+                }
+            })
+            .collect();
+        TerrainMap {
+            frame,
+            sun_azimuth_deg: 90.0,
+            sun_elevation_deg: 30.0,
+            camera: camera(),
+            levels,
+        }
+    }
+
+    fn camera() -> CameraModel {
+        CameraModel {
+            width_px: 128,
+            height_px: 128,
+            k1: 0.0,
+            k2: 0.0,
+            ..CameraModel::default()
+        }
+    }
+
+    /// Body axes east, north, up at the site (the boresight, body -Z, straight down).
+    fn attitude(f: &MapFrame) -> UnitQuaternion<f64> {
+        let [e, n, u] = f.axes_mcmf();
+        UnitQuaternion::from_matrix(&Matrix3::from_columns(&[e, n, u]))
+    }
+
+    /// The frame the camera sees from `H_M` above the site, the true pose.
+    fn frame(m: &TerrainMap, periodic: Option<f64>) -> (FrameAnnouncement, Vec<u8>) {
+        let cam = camera();
+        let f = &m.frame;
+        let q = attitude(f);
+        let r = f.mcmf_of_map(0.0, 0.0, H_M);
+        let c = r + q * Vector3::from(cam.position_body_m);
+        let mcmf_from_cam = q.to_rotation_matrix().matrix() * cam.body_from_camera();
+        let fpx = cam.f_px();
+        let mut px = Vec::new();
+        for v in 0..cam.height_px {
+            for u in 0..cam.width_px {
+                let d = Vector3::new((u as f64 + 0.5 - 64.0) / fpx, (v as f64 + 0.5 - 64.0) / fpx, 1.0);
+                let d = (mcmf_from_cam * d).normalize();
+                // The ray against the sphere of the map's (zero) heights.
+                let b = c.dot(&d);
+                let t = -b - (b * b - c.norm_squared() + R_M * R_M).sqrt();
+                let (e, n, _) = f.map_of_mcmf(&(c + d * t));
+                let dn = (1000.0 + 400.0 * texture(e, n, periodic)).round() as u16;
+                px.extend_from_slice(&dn.to_le_bytes());
+            }
+        }
+        let ann = FrameAnnouncement {
+            device: FRAME_DEVICE_CAMERA,
+            format: FRAME_FORMAT_U16_LE,
+            width: cam.width_px,
+            height: cam.height_px,
+            t_ns: 0,
+            bytes: px.len() as u32,
+            ..Default::default()
+        };
+        (ann, px)
+    }
+
+    /// A filter whose estimate is `offset` (east, north, m) from the true pose.
+    fn filter(m: &TerrainMap, offset: [f64; 2], sigma_m: f64) -> NavFilter {
+        let f = &m.frame;
+        let [e, n, _] = f.axes_mcmf();
+        let q = attitude(f);
+        let mut tlm = Telemetry::default();
+        let r = f.mcmf_of_map(0.0, 0.0, H_M) + e * offset[0] + n * offset[1];
+        tlm.nav.pos_mci_m = r.into();
+        tlm.nav.q_mci_from_body = [q.w, q.i, q.j, q.k];
+        let mut nf = NavFilter::new(NavFilterConfig {
+            init_sigma_pos_m: sigma_m,
+            ..NavFilterConfig::default()
+        });
+        nf.step(&tlm);
+        nf
+    }
+
+    fn nav(m: TerrainMap) -> TerrainNav {
+        TerrainNav::new(TerrainNavConfig {
+            camera: camera(),
+            map: Some(Arc::new(m)),
+            // The search of these tests is the filter's 3 sigma (the map's levels are
+            // 4 and 8 m: no room for the 1.5 km acquisition search).
+            acquisition_radius_m: 0.0,
+            ..TerrainNavConfig::default()
+        })
+    }
+
+    #[test]
+    fn an_offset_estimate_comes_back_to_a_fraction_of_a_cell() {
+        let m = map(None, 0.0);
+        let (ann, px) = frame(&m, None);
+        let mut nf = filter(&m, [12.0, -7.0], 30.0);
+        let mut tn = nav(m.clone());
+        tn.frame(&ann, &px);
+        tn.process(&mut nf, 0.0, 0);
+        assert_eq!(tn.accepted(), 1, "rejected: {:?}", tn.rejected());
+        let fix = tn.last_fix().unwrap();
+        // True minus estimate: (-12, +7) m, on the 4 m level.
+        assert_eq!(fix.level, 0);
+        assert!((fix.error_en_m[0] + 12.0).abs() < 0.5 && (fix.error_en_m[1] - 7.0).abs() < 0.5, "{fix:?}");
+        let (r, _) = nf.pose_at(0);
+        let (e, n, _) = m.frame.map_of_mcmf(&r);
+        assert!(e.hypot(n) < 1.0, "estimate still {e:.2}, {n:.2} m off");
+    }
+
+    #[test]
+    fn a_repeated_pattern_a_blank_frame_and_a_shifted_map_give_no_fix() {
+        // A 16 m period in both axes: peaks every 16 m within the search.
+        let m = map(Some(16.0), 0.0);
+        let (ann, px) = frame(&m, Some(16.0));
+        let mut nf = filter(&m, [12.0, -7.0], 30.0);
+        let mut tn = nav(m);
+        tn.frame(&ann, &px);
+        tn.process(&mut nf, 0.0, 0);
+        assert_eq!(tn.rejected()[Rejection::Ambiguous as usize], 1, "{:?}", tn.rejected());
+
+        // A blank frame.
+        let m = map(None, 0.0);
+        let (ann, _) = frame(&m, None);
+        let blank = vec![0x08u8; ann.bytes as usize];
+        let mut nf = filter(&m, [12.0, -7.0], 30.0);
+        let mut tn = nav(m.clone());
+        tn.frame(&ann, &blank);
+        tn.process(&mut nf, 0.0, 0);
+        assert_eq!(tn.rejected()[Rejection::NoTexture as usize], 1, "{:?}", tn.rejected());
+
+        // Acquired on the right map, confident to 2 m; then a map whose ground is drawn
+        // 16 m east of where it is: the matcher finds the 16 m shift, the filter's gate
+        // refuses it.
+        let (ann, px) = frame(&m, None);
+        let mut nf = filter(&m, [0.5, 0.5], 2.0);
+        let mut tn = nav(m.clone());
+        tn.frame(&ann, &px);
+        tn.process(&mut nf, 0.0, 0);
+        assert_eq!(tn.accepted(), 1, "{:?}", tn.rejected());
+        tn.cfg.map = Some(Arc::new(map(None, 16.0)));
+        tn.frame(&ann, &px);
+        tn.process(&mut nf, 0.0, 0);
+        assert_eq!(tn.accepted(), 1);
+        assert_eq!(tn.rejected()[Rejection::Gated as usize], 1, "{:?}", tn.rejected());
+        let fix = tn.last_fix().unwrap();
+        assert!(fix.nis > 20.0 && (fix.error_en_m[0] - 16.0).abs() < 1.0, "{fix:?}");
+    }
+}

@@ -404,6 +404,14 @@ pub struct CaseResult {
     /// it reports its navigation (the reference GNC does; absent otherwise).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nav_error: Option<NavError>,
+    /// The same at 50 m above the ground, on the way down.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nav_error_50m: Option<NavError>,
+    /// The horizontal navigation error at each height of
+    /// `oils_emulator::fsw_monitor::NAV_ERROR_GATES_M` the case came down through,
+    /// `(height_m, horizontal_m)` (the campaign's error-against-altitude figure).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub nav_horizontal_by_altitude: Vec<(f64, f64)>,
     /// Fault firings.
     pub fault_events: u64,
     /// Faults the case was given.
@@ -472,6 +480,8 @@ pub fn run_case(
         downrange_m: None,
         crossrange_m: None,
         nav_error: None,
+        nav_error_50m: None,
+        nav_horizontal_by_altitude: Vec::new(),
         fault_events: 0,
         faults: setup.faults.clone(),
         out_of_envelope: None,
@@ -527,17 +537,24 @@ pub fn run_case(
             result.sim_time_s = s.sim_time_s;
             result.propellant_used_kg = s.propellant_used_kg;
             result.fault_events = s.faults.len() as u64;
-            result.nav_error = s.fsw_report.as_ref().and_then(|f| {
-                let e = f.nav_error?;
-                Some(NavError {
-                    position_m: e.position_m,
-                    horizontal_m: e.horizontal_m,
-                    altitude_m: e.altitude_m,
-                    velocity_m_s: e.velocity_m_s,
-                    sigma_position_m: e.sigma_position_m,
-                    from_sensors: f.from_sensors,
-                })
-            });
+            let nav = |f: &oils_emulator::fsw_monitor::FswSelfReport,
+                       e: &oils_emulator::fsw_monitor::NavErrorSample| NavError {
+                position_m: e.position_m,
+                horizontal_m: e.horizontal_m,
+                altitude_m: e.altitude_m,
+                velocity_m_s: e.velocity_m_s,
+                sigma_position_m: e.sigma_position_m,
+                from_sensors: f.from_sensors,
+            };
+            if let Some(f) = s.fsw_report.as_ref() {
+                result.nav_error = f.nav_error.as_ref().map(|e| nav(f, e));
+                result.nav_error_50m = f.nav_error_50m.as_ref().map(|e| nav(f, e));
+                result.nav_horizontal_by_altitude = f
+                    .nav_error_by_altitude
+                    .iter()
+                    .map(|(h, e)| (*h, e.horizontal_m))
+                    .collect();
+            }
             result.out_of_envelope = s
                 .propulsion_diagnostics
                 .as_ref()

@@ -263,7 +263,7 @@ fn text(s: &str) -> String {
 }
 
 /// The fixed columns of `cases.csv`, before the applied dispersion values.
-pub const CSV_COLUMNS: [&str; 20] = [
+pub const CSV_COLUMNS: [&str; 21] = [
     "index",
     "seed",
     "outcome",
@@ -284,6 +284,7 @@ pub const CSV_COLUMNS: [&str; 20] = [
     "nav_error_m",
     "nav_horizontal_error_m",
     "nav_altitude_error_m",
+    "nav_horizontal_error_50m_m",
 ];
 
 /// `cases.csv` text.
@@ -303,7 +304,7 @@ pub fn cases_csv(results: &[CaseResult], nominal: &CaseResult) -> String {
         let td = r.touchdown;
         let _ = write!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.index.map_or(String::new(), |i| i.to_string()),
             r.seed,
             r.outcome,
@@ -324,6 +325,7 @@ pub fn cases_csv(results: &[CaseResult], nominal: &CaseResult) -> String {
             opt(r.nav_error.map(|e| e.position_m)),
             opt(r.nav_error.map(|e| e.horizontal_m)),
             opt(r.nav_error.map(|e| e.altitude_m)),
+            opt(r.nav_error_50m.map(|e| e.horizontal_m)),
         );
         for a in &applied {
             out.push(',');
@@ -408,6 +410,14 @@ pub fn summarise(
     put("nav_error_m", nav(|e| e.position_m));
     put("nav_horizontal_error_m", nav(|e| e.horizontal_m));
     put("nav_altitude_error_m", nav(|e| e.altitude_m.abs()));
+    put(
+        "nav_horizontal_error_50m_m",
+        FigureStats::of(
+            touched
+                .iter()
+                .filter_map(|(r, _)| r.nav_error_50m.map(|e| e.horizontal_m)),
+        ),
+    );
     put(
         "propellant_used_kg",
         FigureStats::of(
