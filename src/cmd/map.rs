@@ -30,28 +30,39 @@ pub struct MapArgs {
     /// Cell spacings of the levels, m, finest first (each `--cells` a side about the
     /// site: 0.5 m covers 512 m, 128 m covers 131 km; the coarse ones are for the
     /// first fix, searched over 1.5 km).
-    #[arg(long, value_delimiter = ',', default_value = "0.5,1,2,4,8,16,32,64,128")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "0.5,1,2,4,8,16,32,64,128"
+    )]
     pub spacings_m: Vec<f64>,
     /// Cells per side of every level.
     #[arg(long, default_value_t = 1024)]
     pub cells: u32,
     /// Render the map under another sun than the scenario's, `AZ,EL` in degrees
     /// (azimuth from north through east): a map made for another time of day.
-    #[arg(long, value_name = "AZ,EL", value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_name = "AZ,EL",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
     pub sun_az_el: Option<Vec<f64>>,
     /// A wrong map, for testing the gates: within `R` m of map `(E, N)` the map shows
     /// what lies `(DE, DN)` m away, `E,N,R,DE,DN` (the `false-fix` failure scenario).
-    #[arg(long, value_name = "E,N,R,DE,DN", value_delimiter = ',', allow_hyphen_values = true)]
+    #[arg(
+        long,
+        value_name = "E,N,R,DE,DN",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
     pub shift_feature: Option<Vec<f64>>,
 }
 
 /// Runs `oils map`.
 pub fn run(args: &MapArgs) -> Result<()> {
     if args.spacings_m.is_empty()
-        || args
-            .spacings_m
-            .iter()
-            .any(|s| !(s.is_finite() && *s > 0.0))
+        || args.spacings_m.iter().any(|s| !(s.is_finite() && *s > 0.0))
         || args.spacings_m.windows(2).any(|w| w[1] <= w[0])
     {
         bail!("--spacings-m: positive spacings, finest first, each coarser than the one before");
@@ -65,7 +76,11 @@ pub fn run(args: &MapArgs) -> Result<()> {
         }
     }
     let sc = load_scenario(&args.scenario).context("--scenario")?;
-    let (lat, lon, radius) = (sc.site.latitude_deg, sc.site.longitude_deg, sc.moon.radius_m);
+    let (lat, lon, radius) = (
+        sc.site.latitude_deg,
+        sc.site.longitude_deg,
+        sc.moon.radius_m,
+    );
     let site = SiteFrame::from_deg(lat, lon, radius);
     let ground = Ground::new(&sc.terrain, lat, lon, radius).context("the scenario's terrain")?;
     let terrain = match &ground {

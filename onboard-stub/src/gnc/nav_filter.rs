@@ -282,6 +282,9 @@ pub struct NavFilter {
     hist_head: usize,
     gates: [Gate; CHANNELS],
     st_r_body: Matrix3<f64>,
+    /// The onboard terrain map's heights, when there is one: the altimeters' ground is
+    /// then the map's under each beam instead of the sphere at `terrain_height_m`.
+    ground_map: Option<std::sync::Arc<super::terrain_map::TerrainMap>>,
 }
 
 fn v3(a: [f64; 3]) -> Vector3<f64> {
@@ -343,6 +346,7 @@ impl NavFilter {
             held_rates: (Vector3::zeros(), Vector3::zeros()),
             p: Mat::zeros(),
             hist: [Hist::default(); HISTORY],
+            ground_map: None,
             hist_len: 0,
             hist_head: 0,
             gates: [Gate::default(); CHANNELS],
@@ -552,6 +556,35 @@ impl NavFilter {
         self.hist[self.hist_head]
     }
 
+    /// Takes the altimeters' ground from `map` (terrain-relative altimetry: a crater
+    /// under the beam is no longer a height error of the vehicle). Only once the
+    /// horizontal position is known to about a map cell (terrain navigation has
+    /// acquired): the beam's hit is looked up where the estimate says it is.
+    /// The altimeters' learned ground offsets (steps of the flat-ground model) are
+    /// dropped: the map's heights replace them.
+    pub fn set_ground_map(&mut self, map: Option<std::sync::Arc<super::terrain_map::TerrainMap>>) {
+        self.ground_map = map;
+        for ch in [Channel::Laser, Channel::Rf] {
+            let g = &mut self.gates[ch as usize];
+            g.ground_offset_m = 0.0;
+            g.ground_offset_var = 0.0;
+        }
+    }
+
+    /// The ground's radius under the `mci` point `p` at `t_ns`: the map's height there
+    /// (outside it, or without one, `terrain_height_m`) above the sphere, plus `offset_m`.
+    fn ground_radius_m(&self, p: &Vector3<f64>, t_ns: i64, offset_m: f64) -> f64 {
+        let c = &self.cfg;
+        let h = self.ground_map.as_ref().and_then(|m| {
+            let turn = -c.rotation_rate_rad_s * t_ns as f64 * 1e-9;
+            let (s, co) = turn.sin_cos();
+            let q = Vector3::new(co * p.x - s * p.y, s * p.x + co * p.y, p.z);
+            let (e, n, _) = m.frame.map_of_mcmf(&q);
+            m.height_at(e, n)
+        });
+        c.moon_radius_m + h.unwrap_or(c.terrain_height_m) + offset_m
+    }
+
     /// The nominal position (`mci`) and attitude at `t_ns`: the kept state just before
     /// it moved on by its velocity (a camera frame's time of validity falls between IMU
     /// samples; 5 ms at 100 m/s is half a metre).
@@ -729,7 +762,8 @@ impl NavFilter {
         let rot = hs.q.to_rotation_matrix().into_inner();
         let pb = v3(pos);
         let o = hs.r + rot * pb;
-        let ground = c.moon_radius_m + c.terrain_height_m + self.gates[ch as usize].ground_offset_m;
+        let offset_m = self.gates[ch as usize].ground_offset_m;
+        let flat_ground = c.moon_radius_m + c.terrain_height_m + offset_m;
         // The rays: the beam, and for the RF altimeter its ring (the nearest return wins).
         let (fx, fy, fz) = frame_about(&v3(beam));
         let (ring, half) = match ch {
@@ -739,7 +773,6 @@ impl NavFilter {
         let (sh, chc) = half.sin_cos();
         // (range, ray body, normal at the hit, cos incidence)
         let mut best: Option<(f64, Vector3<f64>, Vector3<f64>, f64)> = None;
-        let oo = o.norm_squared() - ground * ground;
         for k in 0..=ring {
             let ub = if k == 0 {
                 fz
@@ -748,17 +781,29 @@ impl NavFilter {
                 fz * chc + (fx * phi.cos() + fy * phi.sin()) * sh
             };
             let d = rot * ub;
-            // Ray-sphere: |o + ρ d| = ground, nearest root.
+            // Ray-sphere: |o + ρ d| = ground, nearest root; with a map, the sphere
+            // through the map's height where the ray meets it (twice: a few metres of
+            // relief move the hit by less than a cell).
             let od = o.dot(&d);
-            let disc = od * od - oo;
-            if disc <= 0.0 || od >= 0.0 {
-                continue;
+            let mut ground = flat_ground;
+            let mut hit = None;
+            for _ in 0..if self.ground_map.is_some() { 3 } else { 1 } {
+                let disc = od * od - (o.norm_squared() - ground * ground);
+                if disc <= 0.0 || od >= 0.0 {
+                    hit = None;
+                    break;
+                }
+                let range = -od - disc.sqrt();
+                hit = Some(range);
+                ground = self.ground_radius_m(&(o + d * range), a.t_ns, offset_m);
             }
-            let range = -od - disc.sqrt();
+            let Some(range) = hit else {
+                continue;
+            };
             if range <= 0.0 {
                 continue;
             }
-            let nh = (o + d * range) / ground;
+            let nh = (o + d * range).normalize();
             let cosi = -nh.dot(&d);
             if cosi < 0.2 {
                 continue; // near grazing: the model is too sensitive to trust

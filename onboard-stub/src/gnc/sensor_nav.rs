@@ -13,8 +13,8 @@ use super::navigation::NavSolution;
 use super::terrain_nav::{TerrainNav, TerrainNavConfig};
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 use oils_shared::{
-    FswReport, Telemetry, NAV_FLAG_FROM_SENSORS, NAV_FLAG_LASER_LOST, NAV_FLAG_LASER_USED,
-    FrameAnnouncement, NAV_FLAG_RF_USED, NAV_FLAG_STAR_TRACKER_USED, NAV_FLAG_TERRAIN_LOST,
+    FrameAnnouncement, FswReport, Telemetry, NAV_FLAG_FROM_SENSORS, NAV_FLAG_LASER_LOST,
+    NAV_FLAG_LASER_USED, NAV_FLAG_RF_USED, NAV_FLAG_STAR_TRACKER_USED, NAV_FLAG_TERRAIN_LOST,
     NAV_FLAG_TERRAIN_USED, NAV_FLAG_VALID, NAV_FLAG_VELOCIMETER_USED, TLM_FLAG_IDEAL_NAV,
     TLM_FLAG_STATE_VECTOR,
 };
@@ -106,7 +106,10 @@ impl SensorNav {
 
     /// Hands the terrain navigation out (its buffers), leaving one without a map.
     pub fn take_terrain(&mut self) -> TerrainNav {
-        std::mem::replace(&mut self.terrain, TerrainNav::new(TerrainNavConfig::default()))
+        std::mem::replace(
+            &mut self.terrain,
+            TerrainNav::new(TerrainNavConfig::default()),
+        )
     }
 
     /// The terrain-relative navigation (its counters and last fix).

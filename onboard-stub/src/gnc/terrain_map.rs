@@ -167,7 +167,10 @@ impl MapLevel {
         if !(c >= 0.0 && r >= 0.0 && c <= w - 1.0 && r <= h - 1.0) {
             return None;
         }
-        let (c0, r0) = ((c.floor() as usize).min(self.width as usize - 2), (r.floor() as usize).min(self.height as usize - 2));
+        let (c0, r0) = (
+            (c.floor() as usize).min(self.width as usize - 2),
+            (r.floor() as usize).min(self.height as usize - 2),
+        );
         let (fc, fr) = (c - c0 as f64, r - r0 as f64);
         let at = |cc: usize, rr: usize| self.height_m[rr * self.width as usize + cc] as f64;
         let lo = at(c0, r0) * (1.0 - fc) + at(c0 + 1, r0) * fc;
@@ -238,7 +241,10 @@ impl TerrainMap {
             ));
         }
         if self.levels.is_empty() || self.levels.len() > MAX_LEVELS {
-            return Err(format!("1 to {MAX_LEVELS} levels, not {}", self.levels.len()));
+            return Err(format!(
+                "1 to {MAX_LEVELS} levels, not {}",
+                self.levels.len()
+            ));
         }
         for (k, l) in self.levels.iter().enumerate() {
             if !(l.spacing_m.is_finite() && l.spacing_m > 0.0) {
@@ -253,7 +259,11 @@ impl TerrainMap {
             if l.iof.len() != l.cells() || l.height_m.len() != l.cells() {
                 return Err(format!("level {k}: width * height values of each kind"));
             }
-            if l.iof.iter().chain(l.height_m.iter()).any(|v| !v.is_finite()) {
+            if l.iof
+                .iter()
+                .chain(l.height_m.iter())
+                .any(|v| !v.is_finite())
+            {
                 return Err(format!("level {k}: a value that is not finite"));
             }
         }
@@ -333,11 +343,15 @@ impl TerrainMap {
             return Err(bad(format!("larger than {MAX_MAP_BYTES} bytes")));
         }
         if bytes.len() < 8 + 8 + 40 + 112 + 32 || &bytes[..8] != MAP_MAGIC {
-            return Err(bad("not an OILSMAP1 terrain map (make one with `oils map`)".into()));
+            return Err(bad(
+                "not an OILSMAP1 terrain map (make one with `oils map`)".into(),
+            ));
         }
         let (body, hash) = bytes.split_at(bytes.len() - 32);
         if blake3::hash(body).as_bytes() != hash {
-            return Err(bad("its hash does not match its contents (damaged or cut)".into()));
+            return Err(bad(
+                "its hash does not match its contents (damaged or cut)".into()
+            ));
         }
         let mut r = Reader { b: body, at: 8 };
         let levels = r.u32().ok_or_else(|| bad("cut short".into()))? as usize;
@@ -345,7 +359,8 @@ impl TerrainMap {
         if levels == 0 || levels > MAX_LEVELS {
             return Err(bad(format!("1 to {MAX_LEVELS} levels, not {levels}")));
         }
-        let head: Option<[f64; 5]> = (|| Some([r.f64()?, r.f64()?, r.f64()?, r.f64()?, r.f64()?]))();
+        let head: Option<[f64; 5]> =
+            (|| Some([r.f64()?, r.f64()?, r.f64()?, r.f64()?, r.f64()?]))();
         let [lat, lon, radius, az, el] = head.ok_or_else(|| bad("cut short".into()))?;
         let camera: Option<CameraModel> = (|| {
             let (width_px, height_px) = (r.u32()?, r.u32()?);
@@ -476,7 +491,11 @@ mod tests {
         std::fs::write(&path, &bytes).unwrap();
         let e = TerrainMap::load(&path).unwrap_err().to_string();
         assert!(e.contains("hash does not match"), "{e}");
-        std::fs::write(&path, b"OILSLOG8 and more bytes than a header holds, but not a map at all......").unwrap();
+        std::fs::write(
+            &path,
+            b"OILSLOG8 and more bytes than a header holds, but not a map at all......",
+        )
+        .unwrap();
         let e = TerrainMap::load(&path).unwrap_err().to_string();
         assert!(e.contains("not an OILSMAP1"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
@@ -496,7 +515,11 @@ mod tests {
     #[test]
     fn the_projection_keeps_distance_and_azimuth_and_inverts() {
         let f = MapFrame::new(-69.373, 32.319, 1_737_400.0);
-        for (e, n, h) in [(0.0, 0.0, 0.0), (1000.0, -2000.0, 35.0), (-8000.0, 3000.0, -120.0)] {
+        for (e, n, h) in [
+            (0.0, 0.0, 0.0),
+            (1000.0, -2000.0, 35.0),
+            (-8000.0, 3000.0, -120.0),
+        ] {
             let p = f.mcmf_of_map(e, n, h);
             let (e2, n2, h2) = f.map_of_mcmf(&p);
             assert!((e - e2).abs() < 1e-6 && (n - n2).abs() < 1e-6 && (h - h2).abs() < 1e-6);

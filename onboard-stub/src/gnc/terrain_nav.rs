@@ -174,7 +174,7 @@ impl Default for TerrainNavConfig {
             min_peak_ncc: 0.5,
             max_second_peak_ratio: 0.9,
             max_saturated_frac: 0.02,
-            fix_sigma_cells: 0.5,
+            fix_sigma_cells: 1.0,
             acquisition_radius_m: 1500.0,
             acquisition_second_peak_ratio: 0.8,
             lost_after_ns: 10_000_000_000,
@@ -199,10 +199,12 @@ pub enum Rejection {
     Ambiguous = 5,
     /// The filter's chi-square gate (a fix inconsistent with the estimate).
     Gated = 6,
+    /// An acquisition candidate waiting for the next frame to confirm it.
+    Unconfirmed = 7,
 }
 
 /// Kinds of [`Rejection`].
-pub const REJECTIONS: usize = 7;
+pub const REJECTIONS: usize = 8;
 
 /// A fix the matcher made (accepted or not by the filter).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -249,6 +251,9 @@ pub struct TerrainNav {
     expected_since_ns: Option<i64>,
     /// A fix has been accepted since the start (or the last reset).
     acquired: bool,
+    /// Acquisition: the last frame's fix (estimate error east, north, m; its level's
+    /// spacing), to be confirmed by the next frame's before it is flown.
+    candidate: Option<([f64; 2], f64, i64)>,
 }
 
 impl TerrainNav {
@@ -280,6 +285,7 @@ impl TerrainNav {
             last_accepted_ns: None,
             expected_since_ns: None,
             acquired: false,
+            candidate: None,
             cfg,
         }
     }
@@ -293,6 +299,7 @@ impl TerrainNav {
         self.last_accepted_ns = None;
         self.expected_since_ns = None;
         self.acquired = false;
+        self.candidate = None;
     }
 
     /// Whether a frame waits to be matched.
@@ -400,7 +407,9 @@ impl TerrainNav {
     /// vehicle in the height band over the map).
     fn watch(&mut self, filter: &NavFilter, map: &TerrainMap, omega_rad_s: f64, now_ns: i64) {
         let (r_mci, _) = filter.pose_at(now_ns);
-        let r_mcmf = Rotation3::from_axis_angle(&Vector3::z_axis(), -omega_rad_s * now_ns as f64 * 1e-9) * r_mci;
+        let r_mcmf =
+            Rotation3::from_axis_angle(&Vector3::z_axis(), -omega_rad_s * now_ns as f64 * 1e-9)
+                * r_mci;
         let (e, n, h) = map.frame.map_of_mcmf(&r_mcmf);
         let ground = map.height_at(e, n);
         let expected = ground.is_some_and(|g| {
@@ -428,7 +437,8 @@ impl TerrainNav {
         let mcmf_from_mci =
             Rotation3::from_axis_angle(&Vector3::z_axis(), -omega_rad_s * t_ns as f64 * 1e-9);
         let mcmf_from_body = mcmf_from_mci * q.to_rotation_matrix();
-        let cam_mcmf = mcmf_from_mci * r_mci + mcmf_from_body * Vector3::from(cfg.camera.position_body_m);
+        let cam_mcmf =
+            mcmf_from_mci * r_mci + mcmf_from_body * Vector3::from(cfg.camera.position_body_m);
         let cam_from_mcmf = (mcmf_from_body.matrix() * self.body_from_cam).transpose();
         let bore_mcmf = cam_from_mcmf.row(2).transpose();
 
@@ -486,22 +496,29 @@ impl TerrainNav {
         let level = map
             .levels
             .iter()
-            .position(|l| {
-                l.spacing_m >= min_cell_m && (reach_m / l.spacing_m).ceil() <= max_w
-            })
+            .position(|l| l.spacing_m >= min_cell_m && (reach_m / l.spacing_m).ceil() <= max_w)
             .ok_or(Rejection::OutOfReach)?;
         let lv = &map.levels[level];
         let s = lv.spacing_m;
-        let search = ((reach_m / s).ceil() as i64).clamp(cfg.min_search_cells as i64, cfg.max_search_cells.max(cfg.min_search_cells) as i64);
+        let search = ((reach_m / s).ceil() as i64).clamp(
+            cfg.min_search_cells as i64,
+            cfg.max_search_cells.max(cfg.min_search_cells) as i64,
+        );
         let pc = cfg.patch_cells as i64;
         let (cc, rc) = lv.cell_of(e_c, n_c);
         let (c0, r0) = (cc.round() as i64 - pc / 2, rc.round() as i64 - pc / 2);
-        if !lv.contains_window(c0 - search - 1, r0 - search - 1, pc + 2 * search + 2, pc + 2 * search + 2) {
+        if !lv.contains_window(
+            c0 - search - 1,
+            r0 - search - 1,
+            pc + 2 * search + 2,
+            pc + 2 * search + 2,
+        ) {
             return Err(Rejection::OutOfReach);
         }
 
         // The patch: each map cell's ground point seen through the camera.
-        let mip = ((s / footprint_m).log2().floor().max(0.0) as usize).clamp(base, self.mips.len() - 1);
+        let mip =
+            ((s / footprint_m).log2().floor().max(0.0) as usize).clamp(base, self.mips.len() - 1);
         let scale = (1usize << mip) as f64;
         let full = cfg.camera.full_scale_dn as f32;
         let mut sat = 0usize;
@@ -513,7 +530,10 @@ impl TerrainNav {
                 let h = lv.height_m[row * lv.width as usize + col] as f64;
                 let p = map.frame.mcmf_of_map(e, n, h);
                 let d = cam_from_mcmf * (p - cam_mcmf);
-                let (u, v) = cfg.camera.project(self.f_px, &d).ok_or(Rejection::OutOfReach)?;
+                let (u, v) = cfg
+                    .camera
+                    .project(self.f_px, &d)
+                    .ok_or(Rejection::OutOfReach)?;
                 let m = &self.mips[mip];
                 let (x, y) = (u / scale - 0.5, v / scale - 0.5);
                 if !(x >= 0.0 && y >= 0.0 && x < (m.w - 1) as f64 && y < (m.h - 1) as f64) {
@@ -596,7 +616,11 @@ impl TerrainNav {
         // The patch at map x matches the map at x + (su, sv) cells: the estimate is off
         // by that much (true minus estimate).
         let error_en_m = [su * s, sv * s];
-        let att_sigma = filter.estimate().sigma_att_rad.iter().fold(0.0f64, |a, &b| a.max(b));
+        let att_sigma = filter
+            .estimate()
+            .sigma_att_rad
+            .iter()
+            .fold(0.0f64, |a, &b| a.max(b));
         let sigma_m = (cfg.fix_sigma_cells * s).hypot(att_sigma * range_m);
         // What the shift measures: moving the camera by `d` moves the ground point a
         // ray meets by `d - b (up . d) / (up . b)` (b the ray, up the local vertical):
@@ -606,6 +630,18 @@ impl TerrainNav {
         let ub = up_mci.dot(&bore_mci);
         let rows = axes.map(|a| a - up_mci * (a.dot(&bore_mci) / ub));
         if !self.acquired {
+            // Acquisition: no filter gate stands behind the first fix, so two frames
+            // in a row must agree on it (within two cells of the coarser level; the
+            // estimate itself moves little in one frame period), as a false peak on a
+            // repeated or featureless pattern does not twice in the same place.
+            let agree = self.candidate.is_some_and(|(y0, s0, t0)| {
+                t_ns - t0 <= 3_000_000_000
+                    && (y0[0] - error_en_m[0]).hypot(y0[1] - error_en_m[1]) <= 2.0 * s0.max(s)
+            });
+            self.candidate = Some((error_en_m, s, t_ns));
+            if !agree {
+                return Err(Rejection::Unconfirmed);
+            }
             // Acquisition: the filter is told its horizontal position is as uncertain
             // as this first fix says it was (at least the fix's size on each axis).
             for (a, y) in axes.iter().zip(error_en_m) {
@@ -622,7 +658,15 @@ impl TerrainNav {
             nis,
         };
         if used {
+            if !self.acquired {
+                // From here the horizontal position is known to metres: the altimeters
+                // may take their ground from the map (before, a map height looked up
+                // hundreds of metres from the true spot would pull the estimate
+                // sideways through an oblique beam).
+                filter.set_ground_map(self.cfg.map.clone());
+            }
             self.acquired = true;
+            self.candidate = None;
             self.accepted += 1;
             self.last_accepted_ns = Some(t_ns);
             Ok(fix)
@@ -661,7 +705,6 @@ fn ncc(patch: &[f32], mean: f64, sd: f64, lv: &MapLevel, c0: i64, r0: i64, n: i6
     (spm / k - mean * mm) / (sd * var_m.sqrt())
 }
 
-
 #[cfg(test)]
 mod tests {
     //! The matcher against frames synthesised from the map's own texture through an
@@ -684,7 +727,8 @@ mod tests {
             return (k * e).sin() * (k * n).cos();
         }
         let hash = |i: i64, j: i64| {
-            let mut x = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+            let mut x = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
             x ^= x >> 29;
             x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
             x ^= x >> 32;
@@ -761,7 +805,11 @@ mod tests {
         let mut px = Vec::new();
         for v in 0..cam.height_px {
             for u in 0..cam.width_px {
-                let d = Vector3::new((u as f64 + 0.5 - 64.0) / fpx, (v as f64 + 0.5 - 64.0) / fpx, 1.0);
+                let d = Vector3::new(
+                    (u as f64 + 0.5 - 64.0) / fpx,
+                    (v as f64 + 0.5 - 64.0) / fpx,
+                    1.0,
+                );
                 let d = (mcmf_from_cam * d).normalize();
                 // The ray against the sphere of the map's (zero) heights.
                 let b = c.dot(&d);
@@ -817,13 +865,20 @@ mod tests {
         let (ann, px) = frame(&m, None);
         let mut nf = filter(&m, [12.0, -7.0], 30.0);
         let mut tn = nav(m.clone());
+        // The first fix waits for a second frame to confirm it (acquisition).
+        tn.frame(&ann, &px);
+        tn.process(&mut nf, 0.0, 0);
+        assert_eq!(tn.rejected()[Rejection::Unconfirmed as usize], 1);
         tn.frame(&ann, &px);
         tn.process(&mut nf, 0.0, 0);
         assert_eq!(tn.accepted(), 1, "rejected: {:?}", tn.rejected());
         let fix = tn.last_fix().unwrap();
         // True minus estimate: (-12, +7) m, on the 4 m level.
         assert_eq!(fix.level, 0);
-        assert!((fix.error_en_m[0] + 12.0).abs() < 0.5 && (fix.error_en_m[1] - 7.0).abs() < 0.5, "{fix:?}");
+        assert!(
+            (fix.error_en_m[0] + 12.0).abs() < 0.5 && (fix.error_en_m[1] - 7.0).abs() < 0.5,
+            "{fix:?}"
+        );
         let (r, _) = nf.pose_at(0);
         let (e, n, _) = m.frame.map_of_mcmf(&r);
         assert!(e.hypot(n) < 1.0, "estimate still {e:.2}, {n:.2} m off");
@@ -838,7 +893,12 @@ mod tests {
         let mut tn = nav(m);
         tn.frame(&ann, &px);
         tn.process(&mut nf, 0.0, 0);
-        assert_eq!(tn.rejected()[Rejection::Ambiguous as usize], 1, "{:?}", tn.rejected());
+        assert_eq!(
+            tn.rejected()[Rejection::Ambiguous as usize],
+            1,
+            "{:?}",
+            tn.rejected()
+        );
 
         // A blank frame.
         let m = map(None, 0.0);
@@ -848,7 +908,12 @@ mod tests {
         let mut tn = nav(m.clone());
         tn.frame(&ann, &blank);
         tn.process(&mut nf, 0.0, 0);
-        assert_eq!(tn.rejected()[Rejection::NoTexture as usize], 1, "{:?}", tn.rejected());
+        assert_eq!(
+            tn.rejected()[Rejection::NoTexture as usize],
+            1,
+            "{:?}",
+            tn.rejected()
+        );
 
         // Acquired on the right map, confident to 2 m; then a map whose ground is drawn
         // 16 m east of where it is: the matcher finds the 16 m shift, the filter's gate
@@ -856,15 +921,25 @@ mod tests {
         let (ann, px) = frame(&m, None);
         let mut nf = filter(&m, [0.5, 0.5], 2.0);
         let mut tn = nav(m.clone());
-        tn.frame(&ann, &px);
-        tn.process(&mut nf, 0.0, 0);
+        for _ in 0..2 {
+            tn.frame(&ann, &px);
+            tn.process(&mut nf, 0.0, 0);
+        }
         assert_eq!(tn.accepted(), 1, "{:?}", tn.rejected());
         tn.cfg.map = Some(Arc::new(map(None, 16.0)));
         tn.frame(&ann, &px);
         tn.process(&mut nf, 0.0, 0);
         assert_eq!(tn.accepted(), 1);
-        assert_eq!(tn.rejected()[Rejection::Gated as usize], 1, "{:?}", tn.rejected());
+        assert_eq!(
+            tn.rejected()[Rejection::Gated as usize],
+            1,
+            "{:?}",
+            tn.rejected()
+        );
         let fix = tn.last_fix().unwrap();
-        assert!(fix.nis > 20.0 && (fix.error_en_m[0] - 16.0).abs() < 1.0, "{fix:?}");
+        assert!(
+            fix.nis > 20.0 && (fix.error_en_m[0] - 16.0).abs() < 1.0,
+            "{fix:?}"
+        );
     }
 }

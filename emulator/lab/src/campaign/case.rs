@@ -537,15 +537,16 @@ pub fn run_case(
             result.sim_time_s = s.sim_time_s;
             result.propellant_used_kg = s.propellant_used_kg;
             result.fault_events = s.faults.len() as u64;
-            let nav = |f: &oils_emulator::fsw_monitor::FswSelfReport,
-                       e: &oils_emulator::fsw_monitor::NavErrorSample| NavError {
-                position_m: e.position_m,
-                horizontal_m: e.horizontal_m,
-                altitude_m: e.altitude_m,
-                velocity_m_s: e.velocity_m_s,
-                sigma_position_m: e.sigma_position_m,
-                from_sensors: f.from_sensors,
-            };
+            let nav =
+                |f: &oils_emulator::fsw_monitor::FswSelfReport,
+                 e: &oils_emulator::fsw_monitor::NavErrorSample| NavError {
+                    position_m: e.position_m,
+                    horizontal_m: e.horizontal_m,
+                    altitude_m: e.altitude_m,
+                    velocity_m_s: e.velocity_m_s,
+                    sigma_position_m: e.sigma_position_m,
+                    from_sensors: f.from_sensors,
+                };
             if let Some(f) = s.fsw_report.as_ref() {
                 result.nav_error = f.nav_error.as_ref().map(|e| nav(f, e));
                 result.nav_error_50m = f.nav_error_50m.as_ref().map(|e| nav(f, e));

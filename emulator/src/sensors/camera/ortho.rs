@@ -130,8 +130,13 @@ mod tests {
         };
         let l = render_level(None, None, &sun, refl, 4.0, 8, 4.0);
         // mu0 = 0.8, mu = 1, phase = acos(0.8): the closed form, every cell.
-        let want = super::super::photometry::lunar_lambert_iof(0.12, 0.8, 1.0, 0.8f64.acos().to_degrees());
-        assert!(l.iof.iter().all(|&v| (v as f64 - want).abs() < 1e-6), "{:?}", &l.iof[..4]);
+        let want =
+            super::super::photometry::lunar_lambert_iof(0.12, 0.8, 1.0, 0.8f64.acos().to_degrees());
+        assert!(
+            l.iof.iter().all(|&v| (v as f64 - want).abs() < 1e-6),
+            "{:?}",
+            &l.iof[..4]
+        );
         assert_eq!((l.e0_m, l.n0_m), (-14.0, -14.0));
     }
 }
