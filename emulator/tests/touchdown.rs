@@ -331,8 +331,9 @@ fn radius_m(p: &Plant) -> f64 {
 }
 
 /// The struts absorb the drop: from first contact every leg pushes at the crush load
-/// (the damper alone would push harder), so the energy balance `n F_crush D = m v^2 / 2
-/// + m g D` gives the centre of mass's travel `D = m v^2 / 2 / (n F_crush - m g)`; the
+/// (the damper alone would push harder), so the energy balance
+/// `n F_crush D = m v^2 / 2 + m g D` gives the centre of mass's travel
+/// `D = m v^2 / 2 / (n F_crush - m g)`; the
 /// struts crush `D - F_crush / k` (the elastic part takes the rest) and keep it. Then
 /// the elastic part unloads to the weight, `(F_crush - m g / n) / k`, and nothing throws
 /// the vehicle back up: no footpad leaves the ground, no overshoot above the rest.
