@@ -305,8 +305,8 @@ pub struct LanderConfig {
     #[serde(deserialize_with = "footpad_positions")]
     pub footpad_positions_body_m: [[f64; 3]; 4],
     /// Stiffness of one leg's elastic part (structure and footpad, in series with the
-    /// crushable strut), N/m (assumed: stiff, 0.4 mm under a quarter of the landed
-    /// weight, 6 mm at the crush load).
+    /// crushable strut), N/m (assumed: stiff, 0.35 mm under a quarter of the ~855 kg
+    /// landed weight, 6 mm at the crush load).
     pub leg_stiffness_n_m: f64,
     /// Damping of one leg's elastic part, N s/m (assumed: over critical for a quarter
     /// of the vehicle's mass, so the elastic part unloading from the crush load does
