@@ -91,7 +91,7 @@ proptest! {
         fields in prop::collection::vec(
             (prop::sample::select(vec![
                 "[nav_noise]\nposition_m", "[nav_noise]\naltitude_m", "[touchdown]\nvertical_speed_mps",
-                "[touchdown]\ntilt_deg", "[initial]\naltitude_m", "[initial]\nhorizontal_speed_m_s",
+                "[touchdown]\nstability_factor", "[initial]\naltitude_m", "[initial]\nhorizontal_speed_m_s",
                 "[moon]\nmu_m3_s2", "[propulsion]\nmax_thrust_n", "[propulsion]\ngas_pressure_pa",
                 "[lander]\ndry_mass_kg", "[lander]\ninertia_wet_kg_m2",
             ]), number_text()),
@@ -105,7 +105,7 @@ proptest! {
         let scenario: String = fields.iter().map(|(k, v)| format!("{k} = {v}\n")).collect();
         if let Ok(c) = toml::from_str::<ScenarioConfig>(&scenario) {
             if c.validate().is_ok() {
-                prop_assert!(c.nav_noise.position_m.is_finite() && c.touchdown.tilt_deg.is_finite());
+                prop_assert!(c.nav_noise.position_m.is_finite() && c.touchdown.stability_factor.is_finite());
                 prop_assert!(c.initial.altitude_m.is_finite() && c.moon.mu_m3_s2.is_finite());
             }
         }

@@ -480,6 +480,35 @@ fn a_campaign_says_why_each_case_crashed() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Issue #57: a lander sliding 75 m down a 45 deg slope was counted as `slope`. The
+/// terminal descent onto a 45 deg plane (steeper than the footpads' friction angle,
+/// inside the stability angle) slides: each case is `slid` and counted so.
+#[test]
+fn a_campaign_counts_the_cases_that_slid() {
+    let dir = scratch("mc-slid");
+    let spec = dir.join("slope.toml");
+    std::fs::write(
+        &spec,
+        "cases = 2\nseed = 1\n[base]\npropulsion = \"ideal\"\n\
+         [base.scenario.propulsion]\npropellant_kg = 300.0\n\
+         [base.scenario.initial]\nrange_to_site_m = 0.0\naltitude_m = 2000.0\n\
+         horizontal_speed_m_s = 0.0\nvertical_speed_m_s = -10.0\nthrust_pitch_deg = 90.0\n\
+         [base.scenario.nav_noise]\nenabled = true\n\
+         [base.scenario.terrain]\nkind = \"synthetic\"\nextent_m = 400.0\nspacing_m = 2.0\n\
+         crater_density = 0.0\nregional_slope_deg = 45.0\n",
+    )
+    .unwrap();
+    let out = dir.join("c");
+    mc_run(&out, &["--spec", spec.to_str().unwrap()]);
+    let rows = rows(&out);
+    assert_eq!(column(&rows, "outcome"), ["crashed"; 2]);
+    assert_eq!(column(&rows, "outcome_reason"), ["slid"; 2]);
+    let summary: serde_json::Value =
+        serde_json::from_str(&read(&out.join("summary.json"))).unwrap();
+    assert_eq!(summary["crash_reasons"]["slid"], 2, "{summary}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn camera_and_lidar_faults_strike_campaign_cases_reproducibly() {
     // Small frames over the bare sphere, every frame fault certain to strike: each case

@@ -313,3 +313,50 @@ fn the_pages_load_in_a_real_browser_with_every_figure_and_no_console_error() {
     eprintln!("screenshots in {}", shots.display());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Issue #57: a lander sliding down a 45 deg slope was reported as `slope`, with no word
+/// that it slid. The report now says `slid`, how far and how fast, in the printed
+/// outcome and the JSON, beside the limits it was judged against.
+#[test]
+fn a_run_that_slid_says_how_far_and_how_fast() {
+    let dir = scratch("report-slid");
+    let scenario = dir.join("slope.toml");
+    std::fs::write(
+        &scenario,
+        "[propulsion]\npropellant_kg = 300.0\n[initial]\nrange_to_site_m = 0.0\n\
+         altitude_m = 2000.0\nhorizontal_speed_m_s = 0.0\nvertical_speed_m_s = -10.0\n\
+         thrust_pitch_deg = 90.0\n[terrain]\nkind = \"synthetic\"\nextent_m = 400.0\n\
+         spacing_m = 2.0\ncrater_density = 0.0\nregional_slope_deg = 45.0\n",
+    )
+    .unwrap();
+    let json = dir.join("r.json");
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--propulsion",
+        "ideal",
+        "--no-log",
+        "--scenario",
+        scenario.to_str().unwrap(),
+        "--report",
+        json.to_str().unwrap(),
+    ]);
+    assert!(
+        !out.status.success(),
+        "a crash exits non-zero: {}",
+        text(&out)
+    );
+    let r: serde_json::Value = serde_json::from_str(&read(&json)).unwrap();
+    let td = &r["touchdown"];
+    assert_eq!(td["reason"], "slid", "{td}");
+    let slide_m = td["slide_m"].as_f64().unwrap();
+    let speed_m_s = td["slide_speed_m_s"].as_f64().unwrap();
+    // Down 45 deg for the 20 s settling limit at g (sin 45 - 0.6 cos 45) = 0.46 m/s^2.
+    assert!(slide_m > 50.0 && speed_m_s > 5.0, "{td}");
+    assert!(td["slope_deg"].as_f64().unwrap() > td["slope_limit_deg"].as_f64().unwrap());
+    assert_eq!(td["leg_crush_m"].as_array().unwrap().len(), 4, "{td}");
+    let line = format!("CRASHED (slid: {slide_m:.2} m, up to {speed_m_s:.2} m/s)");
+    assert!(text(&out).contains(&line), "{line} not in {}", text(&out));
+    let _ = std::fs::remove_dir_all(&dir);
+}

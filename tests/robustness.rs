@@ -53,7 +53,7 @@ fn non_finite_scenario_numbers_are_refused_by_name() {
         ("nav_noise", "altitude_m", "inf"),
         ("nav_noise", "velocity_m_s", "-1.0"),
         ("touchdown", "vertical_speed_mps", "nan"),
-        ("touchdown", "tilt_deg", "1e300"),
+        ("touchdown", "stability_factor", "1e300"),
         ("initial", "altitude_m", "inf"),
         ("propulsion", "gas_pressure_pa", "1e300"),
     ] {

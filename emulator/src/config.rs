@@ -304,11 +304,21 @@ pub struct LanderConfig {
     /// below the centre of mass is the altitude reference ([`Self::leg_height_m`]).
     #[serde(deserialize_with = "footpad_positions")]
     pub footpad_positions_body_m: [[f64; 3]; 4],
-    /// Axial stiffness of one leg's shock absorber, N/m (assumed).
+    /// Stiffness of one leg's elastic part (structure and footpad, in series with the
+    /// crushable strut), N/m (assumed: stiff, 0.35 mm under a quarter of the ~855 kg
+    /// landed weight, 6 mm at the crush load).
     pub leg_stiffness_n_m: f64,
-    /// Axial damping of one leg, N s/m (assumed: about 0.5 of critical for a quarter
-    /// of the landed mass).
+    /// Damping of one leg's elastic part, N s/m (assumed: over critical for a quarter
+    /// of the vehicle's mass, so the elastic part unloading from the crush load does
+    /// not throw the pads off the ground: a contact cannot pull, and below ~5e4 N s/m
+    /// the default vehicle hops a fraction of a millimetre).
     pub leg_damping_n_s_m: f64,
+    /// Load at which one leg's strut crushes (honeycomb, constant load), newtons
+    /// (assumed: sized so a drop at the vertical limit uses 2/3 of the stroke at the
+    /// wet mass; see `docs/plant.md`).
+    pub leg_crush_load_n: f64,
+    /// Crushable length of one leg's strut, metres (assumed; see `docs/plant.md`).
+    pub leg_stroke_m: f64,
     /// Coulomb friction coefficient of a footpad on regolith (assumed).
     pub footpad_friction: f64,
     /// Offset of the true centre of mass from the design one, body axes, metres (a
@@ -384,8 +394,10 @@ impl Default for LanderConfig {
                 [-1.8, 0.0, -1.2],
                 [0.0, -1.8, -1.2],
             ],
-            leg_stiffness_n_m: 2.0e5,
-            leg_damping_n_s_m: 6.0e3,
+            leg_stiffness_n_m: 1.0e6,
+            leg_damping_n_s_m: 6.0e4,
+            leg_crush_load_n: 6000.0,
+            leg_stroke_m: 0.25,
             footpad_friction: 0.6,
             com_offset_body_m: [0.0; 3],
             engine_thrust_scale: [1.0; 4],
@@ -539,6 +551,19 @@ impl LanderConfig {
             0.0,
             1e8,
             "in [0, 1e8] N s/m",
+        )?;
+        positive_at_most(
+            "lander.leg_crush_load_n",
+            self.leg_crush_load_n,
+            1e8,
+            "in (0, 1e8] N",
+        )?;
+        within(
+            "lander.leg_stroke_m",
+            self.leg_stroke_m,
+            0.0,
+            10.0,
+            "in [0, 10] m",
         )?;
         within(
             "lander.footpad_friction",
@@ -816,7 +841,10 @@ impl NavNoiseConfig {
     }
 }
 
-/// What counts as a safe landing (sourced design limits, tilt tightened to 10 deg).
+/// What counts as a safe landing: the contact speeds (sourced design limits), the
+/// margin the tilt and slope limits are derived with from the legs
+/// ([`crate::plant::legs::LandingLimits`]), the slide allowed, and when the vehicle is
+/// at rest.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct TouchdownLimits {
@@ -824,10 +852,13 @@ pub struct TouchdownLimits {
     pub vertical_speed_mps: f64,
     /// Largest horizontal speed, m/s.
     pub horizontal_speed_mps: f64,
-    /// Largest tilt of the body Z axis from the local vertical once at rest, degrees.
-    pub tilt_deg: f64,
-    /// Largest terrain slope under the footprint, degrees (sourced design limit).
-    pub slope_deg: f64,
+    /// At rest the centre of mass may be at most `1 / stability_factor` of the way to
+    /// the footprint's nearest edge: the tilt limit is `atan(tan(tip-over) / factor)`,
+    /// the slope limit that less what the legs can tilt (assumed: 3).
+    pub stability_factor: f64,
+    /// A footpad that slipped farther than this along the ground after first contact
+    /// makes the landing `slid`, metres (assumed: 0.5 m, a footpad's size).
+    pub slide_limit_m: f64,
     /// At rest: every footpad's speed over the ground below this, m/s (assumed).
     pub rest_speed_m_s: f64,
     /// ... held this long, seconds (assumed).
@@ -842,8 +873,8 @@ impl Default for TouchdownLimits {
         Self {
             vertical_speed_mps: 2.0,
             horizontal_speed_mps: 0.5,
-            tilt_deg: 10.0,
-            slope_deg: 12.0,
+            stability_factor: 3.0,
+            slide_limit_m: 0.5,
             rest_speed_m_s: 0.01,
             rest_hold_s: 0.5,
             settle_timeout_s: 20.0,
@@ -867,12 +898,18 @@ impl TouchdownLimits {
             100.0,
             "in (0, 100] m/s",
         )?;
-        positive_at_most("touchdown.tilt_deg", self.tilt_deg, 90.0, "in (0, 90] deg")?;
+        within(
+            "touchdown.stability_factor",
+            self.stability_factor,
+            1.0,
+            100.0,
+            "in [1, 100]",
+        )?;
         positive_at_most(
-            "touchdown.slope_deg",
-            self.slope_deg,
-            90.0,
-            "in (0, 90] deg",
+            "touchdown.slide_limit_m",
+            self.slide_limit_m,
+            1e4,
+            "in (0, 1e4] m",
         )?;
         positive_at_most(
             "touchdown.rest_speed_m_s",
@@ -1042,8 +1079,21 @@ impl ScenarioConfig {
         self.nav_noise.validate()?;
         self.state_vector.validate()?;
         self.touchdown.validate()?;
+        let limits = self.landing_limits();
+        check(
+            limits.slope_deg > 0.0,
+            "touchdown.stability_factor",
+            self.touchdown.stability_factor,
+            "leaves a tilt limit above what the legs' stroke can tilt the body (a derived \
+             slope limit above 0 deg): lower the factor or the stroke",
+        )?;
         self.sensors.validate()?;
         Ok(())
+    }
+
+    /// The tilt and slope limits the legs allow with `touchdown.stability_factor`.
+    pub fn landing_limits(&self) -> crate::plant::legs::LandingLimits {
+        crate::plant::legs::landing_limits(&self.lander, self.touchdown.stability_factor)
     }
 
     /// Wet mass at descent start, kilograms.
@@ -1098,7 +1148,16 @@ mod tests {
             ("touchdown.horizontal_speed_mps", |c, v| {
                 c.touchdown.horizontal_speed_mps = v
             }),
-            ("touchdown.tilt_deg", |c, v| c.touchdown.tilt_deg = v),
+            ("touchdown.stability_factor", |c, v| {
+                c.touchdown.stability_factor = v
+            }),
+            ("touchdown.slide_limit_m", |c, v| {
+                c.touchdown.slide_limit_m = v
+            }),
+            ("lander.leg_crush_load_n", |c, v| {
+                c.lander.leg_crush_load_n = v
+            }),
+            ("lander.leg_stroke_m", |c, v| c.lander.leg_stroke_m = v),
             ("propulsion.gas_pressure_pa", |c, v| {
                 c.propulsion.gas_pressure_pa = v
             }),

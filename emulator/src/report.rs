@@ -165,6 +165,12 @@ impl RunReport {
         match &s.touchdown {
             Some(td) => {
                 let why = match td.reason {
+                    Some(r @ crate::plant::CrashReason::Slid) => format!(
+                        " ({}: {:.2} m, up to {:.2} m/s)",
+                        r.as_str(),
+                        td.slide_m,
+                        td.slide_speed_m_s
+                    ),
                     Some(r) => format!(" ({})", r.as_str()),
                     None => String::new(),
                 };

@@ -100,7 +100,7 @@ fn assert_landed(out: &Outcome, cfg: &ScenarioConfig) {
         td.horizontal_speed_mps <= lim.horizontal_speed_mps,
         "{td:?}"
     );
-    assert!(td.tilt_deg <= lim.tilt_deg, "{td:?}");
+    assert!(td.tilt_deg <= cfg.landing_limits().tilt_deg, "{td:?}");
     assert!(td.landed);
     assert!(
         td.propellant_used_kg < cfg.propulsion.propellant_kg,

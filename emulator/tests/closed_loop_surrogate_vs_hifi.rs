@@ -76,7 +76,7 @@ fn surrogate_and_hifi_land_alike() {
         assert!(td.landed, "{td:?}");
         assert!(td.vertical_speed_mps <= lim.vertical_speed_mps);
         assert!(td.horizontal_speed_mps <= lim.horizontal_speed_mps);
-        assert!(td.tilt_deg <= lim.tilt_deg);
+        assert!(td.tilt_deg <= cfg.landing_limits().tilt_deg);
     }
     assert!(
         (hifi.vertical_speed_mps - sur.vertical_speed_mps).abs() <= 0.5,

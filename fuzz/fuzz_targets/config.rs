@@ -12,7 +12,7 @@ fuzz_target!(|data: &[u8]| {
     };
     if let Ok(c) = toml::from_str::<ScenarioConfig>(text) {
         if c.validate().is_ok() {
-            assert!(c.nav_noise.position_m.is_finite() && c.touchdown.tilt_deg.is_finite());
+            assert!(c.nav_noise.position_m.is_finite() && c.touchdown.stability_factor.is_finite());
         }
     }
     if let Ok(c) = toml::from_str::<RunConfig>(text) {

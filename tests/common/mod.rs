@@ -83,9 +83,10 @@ pub fn terminal_descent_scenario() -> PathBuf {
 
 /// Checks a report's touchdown against the scenario's `[touchdown]` limits.
 pub fn assert_soft_touchdown(r: &serde_json::Value, scenario: &Path) {
-    let limits = oils_emulator::run_config::load_scenario(scenario.to_str().unwrap())
-        .expect("scenario loads")
-        .touchdown;
+    let scenario = oils_emulator::run_config::load_scenario(scenario.to_str().unwrap())
+        .expect("scenario loads");
+    let tilt_limit_deg = scenario.landing_limits().tilt_deg;
+    let limits = scenario.touchdown;
     assert_eq!(r["outcome"], "landed", "{r}");
     let td = &r["touchdown"];
     assert!(
@@ -96,7 +97,11 @@ pub fn assert_soft_touchdown(r: &serde_json::Value, scenario: &Path) {
         td["horizontal_speed_mps"].as_f64().unwrap() <= limits.horizontal_speed_mps,
         "{td}"
     );
-    assert!(td["tilt_deg"].as_f64().unwrap() <= limits.tilt_deg, "{td}");
+    assert!(td["tilt_deg"].as_f64().unwrap() <= tilt_limit_deg, "{td}");
+    assert!(
+        (td["tilt_limit_deg"].as_f64().unwrap() - tilt_limit_deg).abs() < 1e-9,
+        "the report names the limit it judged against: {td}"
+    );
 }
 
 /// A frozen digest of `tests/data/frozen-digests.toml` (`key` = propulsion model, or

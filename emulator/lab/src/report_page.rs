@@ -299,12 +299,15 @@ pub fn write_campaign(
     }
     out.push_str("</table>\n");
     let lim = &spec.base.scenario.touchdown;
+    let legs = spec.base.scenario.landing_limits();
     let _ = writeln!(
         out,
-        "<p>Landing limits: vertical speed {} m/s, horizontal speed {} m/s, tilt {} deg.",
+        "<p>Landing limits: vertical speed {} m/s, horizontal speed {} m/s, tilt at rest {} deg, slope {} deg (both from the legs), slide {} m.",
         num(Some(lim.vertical_speed_mps)),
         num(Some(lim.horizontal_speed_mps)),
-        num(Some(lim.tilt_deg))
+        num(Some(legs.tilt_deg)),
+        num(Some(legs.slope_deg)),
+        num(Some(lim.slide_limit_m))
     );
     if let Some(e) = &s.footprint_3sigma {
         let _ = write!(

@@ -12,8 +12,8 @@
 //! rigid body is then integrated over the step (RK4) with the model's mean thrust held
 //! and the mass falling linearly by what was ejected. If a footpad reaches the ground
 //! inside the step, the first-contact instant is found by re-integrating shorter
-//! sub-steps; from there the legs' spring-damper loads join in, in sub-steps of at most
-//! [`legs::CONTACT_SUBSTEP_NS`].
+//! sub-steps; from there the legs' loads (crushable struts, [`legs`]) join in, in
+//! sub-steps of at most [`legs::CONTACT_SUBSTEP_NS`].
 
 pub mod frames;
 pub mod ground;
@@ -88,6 +88,9 @@ pub enum CrashReason {
     HorizontalSpeed,
     /// The vehicle fell over (centre of mass past the footprint's edge).
     TipOver,
+    /// A footpad slipped along the ground farther than `touchdown.slide_limit_m`
+    /// after first contact.
+    Slid,
     /// The ground under the footprint steeper than the limit.
     Slope,
     /// At rest, but tilted more than the limit.
@@ -103,6 +106,7 @@ impl CrashReason {
             CrashReason::VerticalSpeed => "vertical-speed",
             CrashReason::HorizontalSpeed => "horizontal-speed",
             CrashReason::TipOver => "tip-over",
+            CrashReason::Slid => "slid",
             CrashReason::Slope => "slope",
             CrashReason::Tilt => "tilt",
             CrashReason::NotAtRest => "not-at-rest",
@@ -127,6 +131,16 @@ pub struct TouchdownState {
     pub contact_tilt_deg: f64,
     /// Slope of the ground under the footprint at first contact, degrees.
     pub slope_deg: f64,
+    /// Farthest any footpad slipped along the ground after first contact, metres.
+    pub slide_m: f64,
+    /// Fastest footpad speed along the ground while it slipped, m/s.
+    pub slide_speed_m_s: f64,
+    /// Crushed length of each leg's strut at the end, metres.
+    pub leg_crush_m: [f64; legs::FOOTPADS],
+    /// The tilt limit judged against (derived from the legs), degrees.
+    pub tilt_limit_deg: f64,
+    /// The slope limit judged against (derived from the legs), degrees.
+    pub slope_limit_deg: f64,
     /// Time the landing ended (at rest, tipped, judged), seconds since the start.
     pub end_t_s: f64,
     /// Main and attitude-thruster propellant used by the end, kilograms.
@@ -166,20 +180,24 @@ struct Setup {
 struct Limits {
     vertical_speed_mps: f64,
     horizontal_speed_mps: f64,
+    /// Derived from the legs ([`legs::landing_limits`]).
     tilt_deg: f64,
+    /// Derived from the legs, as the tilt.
     slope_deg: f64,
+    slide_m: f64,
     rest_speed_m_s: f64,
     rest_hold_s: f64,
     settle_timeout_s: f64,
 }
 
-impl From<&TouchdownLimits> for Limits {
-    fn from(l: &TouchdownLimits) -> Self {
+impl Limits {
+    fn new(l: &TouchdownLimits, derived: &legs::LandingLimits) -> Self {
         Self {
             vertical_speed_mps: l.vertical_speed_mps,
             horizontal_speed_mps: l.horizontal_speed_mps,
-            tilt_deg: l.tilt_deg,
-            slope_deg: l.slope_deg,
+            tilt_deg: derived.tilt_deg,
+            slope_deg: derived.slope_deg,
+            slide_m: l.slide_limit_m,
             rest_speed_m_s: l.rest_speed_m_s,
             rest_hold_s: l.rest_hold_s,
             settle_timeout_s: l.settle_timeout_s,
@@ -276,7 +294,7 @@ impl Plant {
             rcs_max_torque_nm: Vector3::from(lander.rcs_max_torque_nm()),
             rcs_moment_arm_m: Vector3::from(lander.rcs_moment_arm_m),
             rcs_exhaust_m_s: lander.rcs_isp_s * G0_M_S2,
-            limits: Limits::from(&cfg.touchdown),
+            limits: Limits::new(&cfg.touchdown, &cfg.landing_limits()),
         };
         let ground = Ground::new(
             &cfg.terrain,
@@ -605,8 +623,12 @@ impl Plant {
             for i in 6..10 {
                 x[i] /= q_norm;
             }
-            self.legs
-                .update_anchors(&x, step_start_s + t_a + h_s, &rotation, &self.ground);
+            self.legs.update_between_substeps(
+                &x,
+                step_start_s + t_a + h_s,
+                &rotation,
+                &self.ground,
+            );
         }
         x
     }
@@ -638,8 +660,15 @@ impl Plant {
         td.end_t_s = t_s;
         td.tilt_deg = tilt_deg;
         td.propellant_used_kg = self.setup.wet_mass_kg - self.state.mass_kg;
+        td.slide_m = self.legs.slide_m();
+        td.slide_speed_m_s = self.legs.slide_speed_m_s();
+        td.leg_crush_m = self.legs.crush_m();
+        // The worst first: fell over, slid (a slide that ended on its legs still moved
+        // the vehicle off where it touched), then the ground and the state at the end.
         td.reason = if tipped {
             Some(CrashReason::TipOver)
+        } else if td.slide_m > lim.slide_m {
+            Some(CrashReason::Slid)
         } else if td.slope_deg > lim.slope_deg {
             Some(CrashReason::Slope)
         } else if !at_rest {
@@ -754,6 +783,11 @@ impl Plant {
             tilt_deg,
             contact_tilt_deg: tilt_deg,
             slope_deg,
+            slide_m: 0.0,
+            slide_speed_m_s: 0.0,
+            leg_crush_m: [0.0; legs::FOOTPADS],
+            tilt_limit_deg: lim.tilt_deg,
+            slope_limit_deg: lim.slope_deg,
             end_t_s: t_s,
             propellant_used_kg: self.setup.wet_mass_kg - s.mass_kg,
             landed: false,
@@ -889,6 +923,16 @@ impl Plant {
     /// Name of the propulsion model.
     pub fn propulsion_name(&self) -> &'static str {
         self.propulsion.name()
+    }
+
+    /// The legs: their crushed lengths and how far the footpads slipped so far.
+    pub fn legs(&self) -> &Legs {
+        &self.legs
+    }
+
+    /// How many footpads touched the ground at the end of the last step.
+    pub fn footpads_in_contact(&self) -> u8 {
+        self.pads_in_contact
     }
 
     /// The touchdown, once it happened.

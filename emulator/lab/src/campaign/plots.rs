@@ -134,7 +134,10 @@ fn quantities(spec: &CampaignSpec) -> [Quantity; 4] {
             short: "tilt",
             unit: "deg",
             value: |r| r.touchdown.map(|t| t.tilt_deg),
-            limit: Some((td.tilt_deg, "landing limit")),
+            limit: Some((
+                spec.base.scenario.landing_limits().tilt_deg,
+                "landing limit",
+            )),
         },
         Quantity {
             key: "propellant_used_kg",
