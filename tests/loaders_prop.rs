@@ -336,6 +336,8 @@ proptest! {
                 steps: 2,
                 sim_time_s: x[0],
                 touchdown: Some(Touchdown {
+                slope_deg: 0.0,
+                roughness_m: 0.0,
                     t_s: x[1],
                     vertical_speed_mps: x[2],
                     horizontal_speed_mps: x[3],

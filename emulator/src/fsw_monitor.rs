@@ -10,7 +10,10 @@
 
 use crate::plant::TruthState;
 use hdrhistogram::Histogram;
-use oils_shared::{Command, FswReport, NAV_FLAG_FROM_SENSORS, NAV_FLAG_VALID, RATE_GROUPS};
+use oils_shared::{
+    Command, FswReport, NAV_FLAG_FROM_SENSORS, NAV_FLAG_TERRAIN_LOST, NAV_FLAG_TERRAIN_USED,
+    NAV_FLAG_VALID, RATE_GROUPS,
+};
 use serde::Serialize;
 
 /// Navigation error at one instant.
@@ -58,6 +61,16 @@ pub struct FswSelfReport {
     pub nav_nees_mean: Option<f64>,
     /// The last `nav_flags` reported.
     pub nav_flags: u32,
+    /// When it first said a terrain-relative fix updated its filter
+    /// (`NAV_FLAG_TERRAIN_USED`), s.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub terrain_first_fix_s: Option<f64>,
+    /// When it first declared terrain navigation lost (`NAV_FLAG_TERRAIN_LOST`), s, and
+    /// for how many cycles in all it said so.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub terrain_lost_s: Option<f64>,
+    /// Cycles flagged `NAV_FLAG_TERRAIN_LOST`.
+    pub terrain_lost_cycles: u64,
     /// Boots (1: never reset).
     pub boot_count: u32,
     /// Rate-group cycle slips it counted (wall clock).
@@ -117,6 +130,14 @@ impl FswMonitor {
         self.report.navigation_reported = true;
         self.report.from_sensors = f.nav_flags & NAV_FLAG_FROM_SENSORS != 0;
         self.report.nav_flags = f.nav_flags;
+        let t_s = t_ns as f64 * 1e-9;
+        if f.nav_flags & NAV_FLAG_TERRAIN_USED != 0 && self.report.terrain_first_fix_s.is_none() {
+            self.report.terrain_first_fix_s = Some(t_s);
+        }
+        if f.nav_flags & NAV_FLAG_TERRAIN_LOST != 0 {
+            self.report.terrain_lost_s.get_or_insert(t_s);
+            self.report.terrain_lost_cycles += 1;
+        }
         let mut e = [0.0; 3];
         let mut ev = [0.0; 3];
         for i in 0..3 {

@@ -541,6 +541,16 @@ fn fsw_report_lines(out: &mut String, f: &crate::fsw_monitor::FswSelfReport) {
                 "            in use at the end: {}{lost}",
                 used.join(", ")
             );
+            if let Some(t) = f.terrain_first_fix_s {
+                let _ = writeln!(out, "            terrain navigation: first fix at t = {t:.1} s");
+            }
+            if let Some(t) = f.terrain_lost_s {
+                let _ = writeln!(
+                    out,
+                    "            TERRAIN NAVIGATION LOST by the flight software from t = {t:.1} s ({} cycles flagged): it flew on its inertial and altimeter estimate",
+                    f.terrain_lost_cycles
+                );
+            }
         }
     }
     if f.boot_count > 1 {
@@ -552,7 +562,7 @@ fn fsw_report_lines(out: &mut String, f: &crate::fsw_monitor::FswSelfReport) {
         );
     }
     // The reference GNC's groups (docs/gnc.md); another flight software's are numbered.
-    const NAMES: [&str; 4] = ["navigation", "guidance", "control", "3"];
+    const NAMES: [&str; 4] = ["navigation", "guidance", "control", "terrain"];
     for (name, g) in NAMES.iter().zip(f.group_compute_ns.iter()) {
         let _ = writeln!(
             out,

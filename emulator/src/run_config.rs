@@ -514,6 +514,22 @@ impl RunConfig {
                 }
                 _ => {}
             }
+            if self.gnc.hazard_avoidance {
+                if self.gnc.navigation != GncNavigation::Sensors {
+                    return Err(invalid(
+                        "gnc.hazard_avoidance",
+                        "true",
+                        "hazard avoidance is part of the sensor navigation: gnc.navigation = \"sensors\" (--gnc-nav sensors)",
+                    ));
+                }
+                if !self.scenario.sensors.lidar.enabled {
+                    return Err(invalid(
+                        "gnc.hazard_avoidance",
+                        "true",
+                        "hazard detection maps the ground with the flash lidar: [scenario.sensors.lidar] enabled = true (the pinpoint scenario flies it)",
+                    ));
+                }
+            }
             if let Some(map) = &self.gnc.map {
                 if self.gnc.navigation != GncNavigation::Sensors {
                     return Err(invalid(
@@ -756,6 +772,10 @@ pub const NAMED_SCENARIOS: &[(&str, &str)] = &[
     (
         "pinpoint",
         include_str!("../config/scenarios/pinpoint.toml"),
+    ),
+    (
+        "hazardous-site",
+        include_str!("../config/scenarios/hazardous-site.toml"),
     ),
 ];
 

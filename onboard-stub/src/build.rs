@@ -63,6 +63,14 @@ pub fn gnc_config(
     }
     cfg.navigation = options.navigation;
     cfg.attitude_actuator = options.attitude;
+    if options.hazard_avoidance {
+        if options.navigation != crate::fsw::GncNavigation::Sensors {
+            return Err(FswBuildError::Argument(
+                "hazard avoidance is part of the sensor navigation: add --gnc-nav sensors".into(),
+            ));
+        }
+        cfg.hazard.enabled = true;
+    }
     if let Some(path) = &options.map {
         if options.navigation != crate::fsw::GncNavigation::Sensors {
             return Err(FswBuildError::Argument(format!(

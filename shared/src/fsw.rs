@@ -157,6 +157,10 @@ pub struct GncOptions {
     /// `navigation = sensors`); none: no terrain-relative navigation.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub map: Option<PathBuf>,
+    /// Hazard detection and avoidance at the hover from the flash lidar's frames (with
+    /// `navigation = sensors` and the lidar on board).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub hazard_avoidance: bool,
 }
 
 impl GncOptions {

@@ -149,6 +149,12 @@ pub const NAV_FLAG_TERRAIN_USED: u32 = 1 << 8;
 /// its height band) but no fix has been accepted for 10 s: the estimate is the inertial
 /// and altimeter one.
 pub const NAV_FLAG_TERRAIN_LOST: u32 = 1 << 9;
+/// `FswReport::nav_flags`: hazard detection mapped the ground at the hover and chose a
+/// spot (diverting there if it is not under the vehicle).
+pub const NAV_FLAG_HAZARD_MAPPED: u32 = 1 << 10;
+/// `FswReport::nav_flags`: hazard avoidance is on but the final descent began without a
+/// hazard map (no lidar frame in the hover): it lands at the nominal point.
+pub const NAV_FLAG_HAZARD_UNMAPPED: u32 = 1 << 11;
 
 /// Rate groups a flight software may time in [`FswReport::group_compute_ns`].
 pub const RATE_GROUPS: usize = 4;

@@ -17,6 +17,9 @@ use oils_onboard_stub::gnc::terrain_nav::CameraModel;
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// The default levels' spacings, m.
+pub const DEFAULT_SPACINGS_M: [f64; 9] = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0, 128.0];
+
 /// Arguments of `oils map`.
 #[derive(Debug, clap::Args)]
 pub struct MapArgs {

@@ -71,6 +71,10 @@ pub struct SpecArgs {
     /// spec's base): torque or thrusters.
     #[arg(long, value_name = "torque|thrusters")]
     pub gnc_attitude: Option<oils_shared::fsw::GncAttitude>,
+    /// The reference GNC's hazard avoidance at the hover: on or off (overrides the
+    /// spec's `base.gnc.hazard_avoidance`; off flies the same cases blind).
+    #[arg(long, value_name = "on|off", value_parser = ["on", "off"])]
+    pub gnc_hda: Option<String>,
 }
 
 /// `oils mc run`.
@@ -222,6 +226,9 @@ fn resolve(args: &SpecArgs, store: &Store) -> Result<CampaignSpec> {
     }
     if let Some(a) = args.gnc_attitude {
         spec.base.gnc.attitude = a;
+    }
+    if let Some(h) = &args.gnc_hda {
+        spec.base.gnc.hazard_avoidance = h == "on";
     }
     spec.validate()?;
     campaign::case::check_targets(&spec)?;
@@ -453,6 +460,16 @@ fn print_summary(merged: &Merged, dir: &Path) {
             .collect::<Vec<_>>()
             .join(", ")
     );
+    if !s.unsafe_touchdowns.is_empty() {
+        println!(
+            "unsafe touchdowns: {}",
+            s.unsafe_touchdowns
+                .iter()
+                .map(|(why, n)| format!("{why} {n}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     println!(
         "landed by faults: {}",
         s.landed_by_faults

@@ -102,6 +102,10 @@ pub struct RunArgs {
     /// sensors unless given; needs the camera on board, as in --scenario pinpoint).
     #[arg(long, value_name = "MAP")]
     pub gnc_map: Option<std::path::PathBuf>,
+    /// Hazard detection and avoidance by the reference GNC at the hover, from the flash
+    /// lidar: on or off [default: off] (needs sensor navigation and the lidar on board).
+    #[arg(long, value_name = "on|off", value_parser = ["on", "off"])]
+    pub gnc_hda: Option<String>,
     /// What the reference GNC turns the vehicle with: torque (the ideal torque actuator)
     /// or thrusters (the eight attitude thrusters, pulse-width modulated).
     /// [default: torque]
@@ -288,6 +292,34 @@ impl RunArgs {
             // A failure scenario: the default scenario with its devices, navigation and
             // faults (docs/gnc.md, "Failure scenarios").
             f.apply(&mut cfg).context("--scenario")?;
+            if let Some(t) = &f.terrain {
+                // Its onboard map, made once (the ground segment's work, before the run).
+                let path = std::path::Path::new(t.map_file);
+                if !path.exists() {
+                    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                        std::fs::create_dir_all(dir)
+                            .with_context(|| format!("creating {}", dir.display()))?;
+                    }
+                    eprintln!(
+                        "oils run: making the onboard map {} for --scenario {} (once; oils map --scenario pinpoint{})",
+                        path.display(),
+                        f.name,
+                        t.shift_feature.map_or(String::new(), |v| format!(
+                            " --shift-feature {}",
+                            v.map(|x| x.to_string()).join(",")
+                        ))
+                    );
+                    super::map::run(&super::map::MapArgs {
+                        scenario: "pinpoint".into(),
+                        out: path.to_path_buf(),
+                        spacings_m: super::map::DEFAULT_SPACINGS_M.to_vec(),
+                        cells: 1024,
+                        sun_az_el: None,
+                        shift_feature: t.shift_feature.map(|v| v.to_vec()),
+                    })
+                    .context("making the scenario's onboard map")?;
+                }
+            }
             // What the command line says explicitly still wins.
             set!(dt_ms => dt_ms, telemetry => telemetry);
             if let Some(n) = self.gnc_nav {
@@ -340,6 +372,9 @@ impl RunArgs {
             // filter (an explicit --gnc-nav bench still asks for the refusal). Decided
             // last, once --fsw and --no-stub have said who flies.
             cfg.gnc.navigation = oils_shared::fsw::GncNavigation::Sensors;
+        }
+        if let Some(h) = &self.gnc_hda {
+            cfg.gnc.hazard_avoidance = h == "on";
         }
         if let Some(map) = &self.gnc_map {
             cfg.gnc.map = Some(map.clone());

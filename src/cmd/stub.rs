@@ -44,6 +44,9 @@ pub struct StubArgs {
     /// `--gnc-nav sensors`).
     #[arg(long, value_name = "MAP")]
     pub gnc_map: Option<std::path::PathBuf>,
+    /// Hazard detection and avoidance at the hover (with `--gnc-nav sensors`).
+    #[arg(long)]
+    pub gnc_hda: bool,
     /// What the reference GNC turns the vehicle with: `torque` (ideal) or `thrusters`.
     #[arg(long, default_value = "torque")]
     pub gnc_attitude: oils_shared::fsw::GncAttitude,
@@ -90,6 +93,7 @@ impl From<&StubArgs> for StubOptions {
                 navigation: a.gnc_nav,
                 attitude: a.gnc_attitude,
                 map: a.gnc_map.clone(),
+                hazard_avoidance: a.gnc_hda,
             },
             wait: a.wait.clone(),
             timeout_ms: a.timeout_ms,

@@ -124,6 +124,9 @@ pub fn spawn(
     if let Some(map) = &cfg.gnc.map {
         p.arg("--gnc-map").arg(map);
     }
+    if cfg.gnc.hazard_avoidance {
+        p.arg("--gnc-hda");
+    }
     if let Some(params) = &cfg.fsw_params {
         p.arg("--fsw-params").arg(params);
     }

@@ -131,6 +131,11 @@ pub struct TouchdownState {
     pub contact_tilt_deg: f64,
     /// Slope of the ground under the footprint at first contact, degrees.
     pub slope_deg: f64,
+    /// Roughness of the ground under the footprint at first contact: the largest
+    /// height of the terrain above or below the plane fitted through it within
+    /// [`FOOTPRINT_RADIUS_M`] of the centre of mass's ground point, metres (a rock or a
+    /// hole under the lander; judged by campaigns, not by the landing).
+    pub roughness_m: f64,
     /// Farthest any footpad slipped along the ground after first contact, metres.
     pub slide_m: f64,
     /// Fastest footpad speed along the ground while it slipped, m/s.
@@ -149,6 +154,63 @@ pub struct TouchdownState {
     pub landed: bool,
     /// Why it is not a landing (`None` when landed).
     pub reason: Option<CrashReason>,
+}
+
+/// Radius of the ground a touchdown's roughness is judged over, m: the footpads' 1.8 m
+/// circle and their pads (`docs/plant.md`).
+pub const FOOTPRINT_RADIUS_M: f64 = 2.2;
+
+/// The largest residual of the plane fitted through the ground within
+/// [`FOOTPRINT_RADIUS_M`] of the ground point below `p_mcmf` (heights sampled every
+/// 0.25 m). No allocation.
+fn footprint_roughness_m(ground: &Ground, p_mcmf: &Vector3<f64>) -> f64 {
+    let up = p_mcmf.normalize();
+    let east = Vector3::z().cross(&up);
+    let east = if east.norm() > 1e-9 { east.normalize() } else { Vector3::x() };
+    let north = up.cross(&east);
+    // A sphere through the ground point: heights relative to it.
+    let p0 = p_mcmf - up * ground.height_m(p_mcmf);
+    let step = 0.25;
+    let k = (FOOTPRINT_RADIUS_M / step).floor() as i32;
+    let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy, mut sz, mut sxz, mut syz) =
+        (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let h = |x: f64, y: f64| {
+        let q = p0 + east * x + north * y;
+        let q = q.normalize() * p0.norm();
+        -ground.height_m(&q)
+    };
+    for a in -k..=k {
+        for b in -k..=k {
+            let (x, y) = (b as f64 * step, a as f64 * step);
+            if x.hypot(y) > FOOTPRINT_RADIUS_M {
+                continue;
+            }
+            let z = h(x, y);
+            n += 1.0;
+            sx += x;
+            sy += y;
+            sxx += x * x;
+            sxy += x * y;
+            syy += y * y;
+            sz += z;
+            sxz += x * z;
+            syz += y * z;
+        }
+    }
+    let m = nalgebra::Matrix3::new(n, sx, sy, sx, sxx, sxy, sy, sxy, syy);
+    let Some(c) = m.lu().solve(&Vector3::new(sz, sxz, syz)) else {
+        return 0.0;
+    };
+    let mut rough = 0.0f64;
+    for a in -k..=k {
+        for b in -k..=k {
+            let (x, y) = (b as f64 * step, a as f64 * step);
+            if x.hypot(y) <= FOOTPRINT_RADIUS_M {
+                rough = rough.max((h(x, y) - (c.x + c.y * x + c.z * y)).abs());
+            }
+        }
+    }
+    rough
 }
 
 /// First contact, kept while the vehicle settles on its legs.
@@ -783,6 +845,7 @@ impl Plant {
             tilt_deg,
             contact_tilt_deg: tilt_deg,
             slope_deg,
+            roughness_m: footprint_roughness_m(&self.ground, &p_mcmf),
             slide_m: 0.0,
             slide_speed_m_s: 0.0,
             leg_crush_m: [0.0; legs::FOOTPADS],

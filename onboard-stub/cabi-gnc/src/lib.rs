@@ -61,6 +61,8 @@ struct Params {
     site_deg: Option<[f64; 2]>,
     /// Terrain navigation data (`oils map`), read when the library is initialised.
     map: Option<std::path::PathBuf>,
+    /// Hazard detection and avoidance at the hover.
+    hazard_avoidance: Option<bool>,
 }
 
 /// The GNC the parameters text asks for.
@@ -70,6 +72,7 @@ fn build(params: &str) -> Result<ReferenceGnc, String> {
         navigation: p.navigation.unwrap_or_default(),
         attitude: p.attitude.unwrap_or_default(),
         map: p.map,
+        hazard_avoidance: p.hazard_avoidance.unwrap_or(false),
     };
     let site = p.site_deg.map(|[latitude_deg, longitude_deg]| SiteTarget {
         latitude_deg,

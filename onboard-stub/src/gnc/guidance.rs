@@ -59,6 +59,18 @@ pub struct LandingSite {
 }
 
 impl LandingSite {
+    /// The site-fixed point that is at `p_now_mci` at `t_s`, as given at `chosen_t_s`
+    /// (the inverse of [`Self::turned`]).
+    pub fn unturned(&self, p_now_mci: &Vector3<f64>, t_s: f64, omega_rad_s: f64) -> Vector3<f64> {
+        let angle = -omega_rad_s * (t_s - self.chosen_t_s);
+        let (s, c) = angle.sin_cos();
+        Vector3::new(
+            c * p_now_mci.x - s * p_now_mci.y,
+            s * p_now_mci.x + c * p_now_mci.y,
+            p_now_mci.z,
+        )
+    }
+
     /// Where the Moon's rotation (`omega_rad_s` about `mci` +Z) has carried the
     /// site-fixed point `p_mci` (given at `chosen_t_s`) by `t_s`.
     pub fn turned(&self, p_mci: &Vector3<f64>, t_s: f64, omega_rad_s: f64) -> Vector3<f64> {
@@ -118,6 +130,10 @@ pub struct Guidance {
     held_accel_mci_m_s2: Vector3<f64>,
     vertical_integral_m_s2: f64,
     last_t_s: f64,
+    /// Hazard avoidance holds the hover (waiting for its map, or flying a divert).
+    hover_hold: bool,
+    /// A divert to a safe spot was commanded: the hover's position loop is stiffer.
+    diverting: bool,
 }
 
 /// Unit vector along the horizontal velocity, or any horizontal unit vector at rest.
@@ -143,6 +159,8 @@ impl Guidance {
             cfg: cfg.clone(),
             phase: Phase::RoughBraking,
             phase_start_s: 0.0,
+            hover_hold: false,
+            diverting: false,
             started: false,
             rough_start: (0.0, 0.0),
             rough_accel_h_m_s2: 0.0,
@@ -165,6 +183,30 @@ impl Guidance {
     /// The landing site, once chosen.
     pub fn site(&self) -> Option<LandingSite> {
         self.site
+    }
+
+    /// Hazard avoidance holds the hover (at most `hover_max_s`) while `hold`.
+    pub fn set_hover_hold(&mut self, hold: bool) {
+        self.hover_hold = hold;
+    }
+
+    /// Moves the landing site to the ground point `surface_mci_m` (where it is at `t_s`):
+    /// the safe spot hazard avoidance chose. The hover flies over it on a stiffer
+    /// position loop (`divert_gain_position_1_s2`).
+    pub fn divert_to(&mut self, surface_mci_m: &Vector3<f64>, t_s: f64) {
+        let omega = self.cfg.moon_rotation_rad_s;
+        if let Some(site) = &mut self.site {
+            site.surface_mci_m = site.unturned(surface_mci_m, t_s, omega);
+            self.diverting = true;
+        }
+    }
+
+    /// Horizontal distance from the vehicle to the landing site's ground point, m.
+    pub fn site_offset_m(&self, nav: &NavSolution) -> Option<f64> {
+        let site = self.site?;
+        let now = site.turned(&site.surface_mci_m, nav.t_s, self.cfg.moon_rotation_rad_s);
+        let off = nav.pos_mci_m - now;
+        Some((off - nav.up_mci * off.dot(&nav.up_mci)).norm())
     }
 
     fn enter(&mut self, phase: Phase, t_s: f64) {
@@ -223,7 +265,8 @@ impl Guidance {
                 }
             }
             Phase::Hover => {
-                if t_s - self.phase_start_s >= self.cfg.hover_s {
+                let held = t_s - self.phase_start_s;
+                if held >= self.cfg.hover_s && (!self.hover_hold || held >= self.cfg.hover_max_s) {
                     self.enter(Phase::FinalDescent, t_s);
                 }
             }
@@ -617,7 +660,12 @@ impl Guidance {
                 if n > c.terminal_max_position_error_m {
                     off_h *= c.terminal_max_position_error_m / n;
                 }
-                a_h -= off_h * c.terminal_gain_position_1_s2;
+                let gain = if self.diverting && self.phase == Phase::Hover {
+                    c.divert_gain_position_1_s2
+                } else {
+                    c.terminal_gain_position_1_s2
+                };
+                a_h -= off_h * gain;
             }
         }
         let max_tilt_deg = if h < c.final_upright_altitude_m {

@@ -9,6 +9,7 @@ pub mod allocation;
 pub mod attitude;
 pub mod covariance;
 pub mod guidance;
+pub mod hazard;
 pub mod nav_filter;
 pub mod navigation;
 pub mod sensor_nav;
@@ -26,7 +27,8 @@ use navigation::NavFilter;
 use oils_shared::clock::monotonic_ns_if;
 use oils_shared::{
     Command, FrameAnnouncement, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE,
-    ATTITUDE_MODE_THRUSTERS, ENGINE_COUNT, NAV_FLAG_VALID, RATE_GROUPS, TLM_FLAG_FOOTPAD_CONTACT,
+    ATTITUDE_MODE_THRUSTERS, ENGINE_COUNT, NAV_FLAG_HAZARD_MAPPED, NAV_FLAG_HAZARD_UNMAPPED, NAV_FLAG_VALID, RATE_GROUPS,
+    TLM_FLAG_FOOTPAD_CONTACT,
 };
 use sensor_nav::{SensorNav, SensorNavConfig};
 use thrust_loop::ThrustLoop;
@@ -197,6 +199,14 @@ pub struct GncConfig {
     pub hover_capture_m: f64,
     /// Hover duration, seconds (0: no hover).
     pub hover_s: f64,
+    /// Longest hover while hazard avoidance holds it (waiting for its map, or flying
+    /// its divert), seconds; then the final descent starts wherever the vehicle is.
+    pub hover_max_s: f64,
+    /// Position gain of the hover while diverting to a safe spot, 1/s^2 (with the 0.3
+    /// 1/s speed gain: 0.2 rad/s, damping 0.75, a 15 m divert in about 20 s).
+    pub divert_gain_position_1_s2: f64,
+    /// Hazard detection and avoidance at the hover (off by default).
+    pub hazard: hazard::HazardConfig,
     /// Hover altitude gain, 1/s.
     pub hover_gain_altitude_1_s: f64,
     /// Largest vertical speed while hovering, m/s.
@@ -321,6 +331,9 @@ impl Default for GncConfig {
             hover_altitude_m: 100.0,
             hover_capture_m: 0.5,
             hover_s: 10.0,
+            hover_max_s: 60.0,
+            divert_gain_position_1_s2: 0.04,
+            hazard: hazard::HazardConfig::default(),
             hover_gain_altitude_1_s: 0.3,
             hover_max_speed_m_s: 2.0,
             final_decel_m_s2: 0.08,
@@ -498,6 +511,8 @@ pub struct ReferenceGnc {
     cfg: GncConfig,
     nav: NavFilter,
     sensor_nav: SensorNav,
+    /// Hazard detection and avoidance at the hover (with sensor navigation).
+    hazard: hazard::HazardDetection,
     /// Boots so far (kept across a computer reset, as a real boot counter in protected
     /// memory is).
     boot_count: u32,
@@ -598,7 +613,8 @@ impl ReferenceGnc {
     /// Builds the GNC; allocation happens here, never in `step`.
     pub fn new(cfg: GncConfig) -> Result<Self, GncConfigError> {
         let terrain = terrain_nav::TerrainNav::new(cfg.sensor_nav.terrain.clone());
-        Self::with_terrain(cfg, terrain)
+        let hazard = hazard::HazardDetection::new(cfg.hazard.clone());
+        Self::with_terrain(cfg, terrain, hazard)
     }
 
     /// [`ReferenceGnc::new`] around terrain navigation buffers already allocated (a
@@ -606,8 +622,10 @@ impl ReferenceGnc {
     fn with_terrain(
         cfg: GncConfig,
         terrain: terrain_nav::TerrainNav,
+        mut hazard: hazard::HazardDetection,
     ) -> Result<Self, GncConfigError> {
         cfg.validate()?;
+        hazard.reset();
         let allocator = ThrustAllocator::new(&cfg).ok_or(GncConfigError {
             field: "engine_positions_body_m",
             why: "engines must be able to produce x/y torque",
@@ -619,6 +637,7 @@ impl ReferenceGnc {
         Ok(Self {
             nav: NavFilter::new(&cfg),
             sensor_nav: SensorNav::with_terrain(cfg.sensor_nav.clone(), terrain),
+            hazard,
             boot_count: 1,
             down: false,
             guidance: Guidance::new(&cfg),
@@ -760,7 +779,11 @@ impl FlightSoftware for ReferenceGnc {
         let slips = self.cycle_slips;
         let timing = self.compute_timing;
         let terrain = self.sensor_nav.take_terrain();
-        if let Ok(fresh) = Self::with_terrain(self.cfg.clone(), terrain) {
+        let hazard = std::mem::replace(
+            &mut self.hazard,
+            hazard::HazardDetection::new(hazard::HazardConfig::default()),
+        );
+        if let Ok(fresh) = Self::with_terrain(self.cfg.clone(), terrain, hazard) {
             *self = fresh;
         }
         self.boot_count = boots;
@@ -772,6 +795,7 @@ impl FlightSoftware for ReferenceGnc {
     fn frame(&mut self, ann: &FrameAnnouncement, pixels: &[u8]) {
         if self.cfg.navigation == GncNavigation::Sensors {
             self.sensor_nav.frame(ann, pixels);
+            self.hazard.frame(ann, pixels);
         }
     }
 
@@ -790,10 +814,10 @@ impl FlightSoftware for ReferenceGnc {
         // frame's time of validity, a few ms back).
         if self.cfg.navigation == GncNavigation::Sensors {
             let vision_ns = self.clock_ns();
-            if self
+            let matched = self
                 .sensor_nav
-                .terrain_group(self.cfg.moon_rotation_rad_s, tlm.header.t_ns)
-            {
+                .terrain_group(self.cfg.moon_rotation_rad_s, tlm.header.t_ns);
+            if matched | self.hazard_group() {
                 let period_ns = (self.cfg.vision_period_s * 1e9).round() as i64;
                 self.time_group(&mut report, 3, vision_ns, period_ns);
             }
@@ -824,6 +848,13 @@ impl FlightSoftware for ReferenceGnc {
                 }
             }
         };
+        if self.hazard.enabled() {
+            if self.hazard.choice().is_some() {
+                report.nav_flags |= NAV_FLAG_HAZARD_MAPPED;
+            } else if self.guidance.phase() == Phase::FinalDescent {
+                report.nav_flags |= NAV_FLAG_HAZARD_UNMAPPED;
+            }
+        }
         // Group 2 starts where group 0 ended: one clock read for both.
         let nav_done_ns = self.time_group(&mut report, 0, start_ns, self.cycle_ns());
         report.phase = self.guidance.phase() as u32;
@@ -834,6 +865,39 @@ impl FlightSoftware for ReferenceGnc {
 }
 
 impl ReferenceGnc {
+    /// Hazard detection (in rate group 3): armed on entering the hover, it assesses the
+    /// first lidar frame then and diverts guidance to the spot it chooses. Returns
+    /// whether it assessed a frame.
+    fn hazard_group(&mut self) -> bool {
+        if !self.hazard.enabled() {
+            return false;
+        }
+        if self.guidance.phase() == Phase::Hover && self.hazard.choice().is_none() {
+            self.hazard.arm();
+        }
+        if !self.hazard.armed() {
+            return false;
+        }
+        let Some(site) = self.guidance.site() else {
+            return false;
+        };
+        let omega = self.cfg.moon_rotation_rad_s;
+        let aim = |t_ns: i64| site.turned(&site.surface_mci_m, t_ns as f64 * 1e-9, omega);
+        match self.hazard.assess(self.sensor_nav.filter(), aim) {
+            Some(choice) => {
+                self.guidance
+                    .divert_to(&choice.spot_mci_m, choice.t_ns as f64 * 1e-9);
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The hazard choice (with hazard avoidance on, once made).
+    pub fn hazard_choice(&self) -> Option<&hazard::SpotChoice> {
+        self.hazard.choice()
+    }
+
     /// The wall clock for the rate groups' compute times, ns; 0 when they are not timed
     /// (every group then reports 1 ns, "ran", and no cycle slip).
     fn clock_ns(&self) -> u64 {
@@ -960,6 +1024,13 @@ impl ReferenceGnc {
         let set = self.engine_set;
         let max_accel = self.allocator.max_total_n(set) * eta / mass_kg;
         let min_accel = self.allocator.min_total_n(set) * eta / mass_kg;
+        // Hazard avoidance holds the hover while it waits for its map or flies its
+        // divert (within half a metre of the chosen spot).
+        let hold = self.hazard.enabled()
+            && (self.hazard.armed()
+                || (self.hazard.choice().is_some()
+                    && self.guidance.site_offset_m(&nav).is_some_and(|d| d > 0.5)));
+        self.guidance.set_hover_hold(hold);
         let (guid, guidance_ns) =
             self.guidance_group(&nav, tlm.header.t_ns, max_accel, min_accel, report);
 

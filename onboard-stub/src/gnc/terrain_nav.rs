@@ -154,8 +154,8 @@ pub struct TerrainNavConfig {
     pub acquisition_radius_m: f64,
     /// [`Self::max_second_peak_ratio`] for the first fix (no filter gate behind it).
     pub acquisition_second_peak_ratio: f64,
-    /// Terrain navigation is "lost" (`NAV_FLAG_TERRAIN_LOST`) after this long without
-    /// an accepted fix while frames are expected (within the height band), ns.
+    /// Terrain navigation, once acquired, is "lost" (`NAV_FLAG_TERRAIN_LOST`) after this
+    /// long without an accepted fix while frames are expected (in the height band), ns.
     pub lost_after_ns: i64,
 }
 
@@ -333,14 +333,13 @@ impl TerrainNav {
             .is_some_and(|t| t_ns.saturating_sub(t) <= window_ns)
     }
 
-    /// Whether frames have been expected for `lost_after_ns` with no fix accepted.
+    /// Whether terrain navigation, once acquired, has had no fix accepted for
+    /// `lost_after_ns` while frames were expected (over the map, in the height band).
     pub fn lost(&self, t_ns: i64) -> bool {
-        let since = match (self.expected_since_ns, self.last_accepted_ns) {
-            (Some(e), Some(a)) => e.max(a),
-            (Some(e), None) => e,
-            _ => return false,
+        let (Some(e), Some(a)) = (self.expected_since_ns, self.last_accepted_ns) else {
+            return false;
         };
-        t_ns.saturating_sub(since) > self.cfg.lost_after_ns
+        t_ns.saturating_sub(e.max(a)) > self.cfg.lost_after_ns
     }
 
     fn reject(&mut self, why: Rejection) {

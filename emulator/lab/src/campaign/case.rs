@@ -456,6 +456,12 @@ pub struct Touchdown {
     pub horizontal_speed_mps: f64,
     /// Tilt at contact, degrees.
     pub tilt_deg: f64,
+    /// Slope under the footprint at contact, degrees.
+    #[serde(default)]
+    pub slope_deg: f64,
+    /// Roughness under the footprint at contact (largest rock or hole about its plane), m.
+    #[serde(default)]
+    pub roughness_m: f64,
 }
 
 /// Runs `setup` in process with `stop` (set when the case is over its budget or the
@@ -565,6 +571,8 @@ pub fn run_case(
                 vertical_speed_mps: t.vertical_speed_mps,
                 horizontal_speed_mps: t.horizontal_speed_mps,
                 tilt_deg: t.tilt_deg,
+                slope_deg: t.slope_deg,
+                roughness_m: t.roughness_m,
             });
             result.outcome = format!("{:?}", s.outcome).to_lowercase();
             result.outcome_reason = s

@@ -259,6 +259,8 @@ mod tests {
             steps: 1,
             sim_time_s: 1.0,
             touchdown: Some(Touchdown {
+                slope_deg: 0.0,
+                roughness_m: 0.0,
                 t_s: 1.0,
                 vertical_speed_mps: vz,
                 horizontal_speed_mps: 0.1,

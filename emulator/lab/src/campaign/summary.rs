@@ -163,6 +163,10 @@ pub struct Summary {
     pub outcomes: BTreeMap<String, u64>,
     /// Crashed cases by the reason (`tip-over`, `slope`, `vertical-speed`...).
     pub crash_reasons: BTreeMap<String, u64>,
+    /// Cases that touched down unsafe, by cause: a crash's reason, or `rock` (landed
+    /// with a rock or hole over [`HAZARD_CLEARANCE_M`] under the footprint).
+    #[serde(default)]
+    pub unsafe_touchdowns: BTreeMap<String, u64>,
     /// Cases and landed cases by the faults they were given: `none` (fault-free), or
     /// the fault kinds joined with `+` (`thrust-degraded`, `engine-off+telemetry-drop`).
     pub landed_by_faults: BTreeMap<String, LandedCount>,
@@ -224,6 +228,26 @@ pub struct NominalSummary {
     pub propellant_used_kg: f64,
 }
 
+/// The body's clearance above the footpads, m: a rock or hole under the footprint
+/// beyond it makes a landing unsafe (assumed, as the reference GNC's hazard limit,
+/// `docs/gnc.md`).
+pub const HAZARD_CLEARANCE_M: f64 = 0.3;
+
+/// Why a case's touchdown was unsafe (`None`: safe). A case that never touched down
+/// gives its outcome.
+pub fn touchdown_hazard(r: &CaseResult) -> Option<String> {
+    let Some(td) = &r.touchdown else {
+        return Some(r.outcome.clone());
+    };
+    if let Some(why) = &r.outcome_reason {
+        return Some(why.clone());
+    }
+    if r.outcome != "landed" {
+        return Some(r.outcome.clone());
+    }
+    (td.roughness_m > HAZARD_CLEARANCE_M).then(|| "rock".to_string())
+}
+
 /// Per-case figures derived at merge time: the end point about the scenario's site.
 struct Derived {
     downrange_error_m: f64,
@@ -263,7 +287,7 @@ fn text(s: &str) -> String {
 }
 
 /// The fixed columns of `cases.csv`, before the applied dispersion values.
-pub const CSV_COLUMNS: [&str; 21] = [
+pub const CSV_COLUMNS: [&str; 24] = [
     "index",
     "seed",
     "outcome",
@@ -285,6 +309,9 @@ pub const CSV_COLUMNS: [&str; 21] = [
     "nav_horizontal_error_m",
     "nav_altitude_error_m",
     "nav_horizontal_error_50m_m",
+    "touchdown_safe",
+    "touchdown_hazard",
+    "touchdown_roughness_m",
 ];
 
 /// `cases.csv` text.
@@ -304,7 +331,7 @@ pub fn cases_csv(results: &[CaseResult], nominal: &CaseResult) -> String {
         let td = r.touchdown;
         let _ = write!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             r.index.map_or(String::new(), |i| i.to_string()),
             r.seed,
             r.outcome,
@@ -326,6 +353,9 @@ pub fn cases_csv(results: &[CaseResult], nominal: &CaseResult) -> String {
             opt(r.nav_error.map(|e| e.horizontal_m)),
             opt(r.nav_error.map(|e| e.altitude_m)),
             opt(r.nav_error_50m.map(|e| e.horizontal_m)),
+            touchdown_hazard(r).is_none(),
+            text(touchdown_hazard(r).as_deref().unwrap_or("")),
+            opt(td.map(|t| t.roughness_m)),
         );
         for a in &applied {
             out.push(',');
@@ -357,6 +387,12 @@ pub fn summarise(
     for r in results {
         if let Some(why) = &r.outcome_reason {
             *crash_reasons.entry(why.clone()).or_insert(0) += 1;
+        }
+    }
+    let mut unsafe_touchdowns = BTreeMap::new();
+    for r in results.iter().filter(|r| !r.digest.is_empty()) {
+        if let Some(why) = touchdown_hazard(r) {
+            *unsafe_touchdowns.entry(why).or_insert(0) += 1;
         }
     }
     let mut landed_by_faults: BTreeMap<String, LandedCount> = BTreeMap::new();
@@ -480,6 +516,7 @@ pub fn summarise(
         },
         outcomes,
         crash_reasons,
+        unsafe_touchdowns,
         landed_by_faults,
         nominal: NominalSummary {
             outcome: nominal.outcome.clone(),
