@@ -114,3 +114,76 @@ fn a_map_needs_sensor_navigation_and_the_camera_and_a_damaged_one_is_refused() {
     let t = text(&out);
     assert!(t.contains("damaged.oilsmap") && t.contains("hash does not match"), "{t}");
 }
+
+/// A failure scenario flown from `dir` (its onboard map is made there on first use).
+fn fly_scenario(dir: &Path, name: &str) -> (String, serde_json::Value) {
+    let rep = dir.join(format!("{name}.json"));
+    let out = oils()
+        .current_dir(dir)
+        .args(["run", "--scenario", name, "--link", "inproc", "--no-log", "--report"])
+        .arg(&rep)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out));
+    (text(&out), report(&rep))
+}
+
+#[test]
+fn camera_blinded_falls_back_and_says_so() {
+    let dir = scratch("terrain-nav-camera-blinded");
+    let (out, r) = fly_scenario(&dir, "camera-blinded");
+    assert!(out.contains("making the onboard map"), "{out}");
+    assert_eq!(r["outcome"], "landed", "{out}");
+    // Fixes before the glare, none after: declared lost, and the estimate carried on
+    // inertially with the altimeters and the velocimeter.
+    let f = &r["fsw_report"];
+    assert!(f["terrain_first_fix_s"].as_f64().unwrap() < 800.0, "{out}");
+    assert!(f["terrain_lost_s"].as_f64().is_some(), "{out}");
+    assert!(out.contains("TERRAIN NAVIGATION LOST"), "{out}");
+    let h = f["nav_error"]["horizontal_m"].as_f64().unwrap();
+    assert!(h < 10.0, "horizontal error at touchdown {h} m");
+}
+
+#[test]
+fn a_false_fix_from_a_shifted_map_is_rejected_not_flown() {
+    let dir = scratch("terrain-nav-false-fix");
+    let (out, r) = fly_scenario(&dir, "false-fix");
+    assert_eq!(r["outcome"], "landed", "{out}");
+    // Within 200 m of the site the map is drawn 30 m off: flown, those fixes would
+    // leave a 30 m error; gated, the frames over it give no fix (lost at the end) and
+    // the estimate keeps the metres it had.
+    let f = &r["fsw_report"];
+    assert!(f["terrain_lost_s"].as_f64().is_some(), "{out}");
+    let h = f["nav_error"]["horizontal_m"].as_f64().unwrap();
+    assert!(h < 10.0, "horizontal error at touchdown {h} m: a false fix was flown");
+}
+
+#[test]
+fn hazard_avoidance_lands_clear_of_the_rock_a_blind_landing_meets() {
+    let dir = scratch("terrain-nav-hazard");
+    let map = dir.join("hazardous-site.oilsmap");
+    let out = run_oils(&["map", "--scenario", "hazardous-site", "--cells", "512", "--out", map.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out));
+    let fly = |hda: &str| {
+        let rep = dir.join(format!("hda-{hda}.json"));
+        let out = run_oils(&[
+            "run", "--scenario", "hazardous-site", "--link", "inproc", "--no-log",
+            "--gnc-map", map.to_str().unwrap(), "--gnc-hda", hda,
+            "--report", rep.to_str().unwrap(),
+        ]);
+        assert!(out.status.success(), "{}", text(&out));
+        report(&rep)
+    };
+    // Blind, the nominal descent sets down on a rock over the 0.3 m clearance.
+    let blind = fly("off");
+    let rough = blind["touchdown"]["roughness_m"].as_f64().unwrap();
+    assert!(rough > 0.3, "the blind landing's ground is {rough} m rough");
+    // With hazard detection it maps the ground at the hover, diverts, and lands clear.
+    let seen = fly("on");
+    assert_eq!(seen["outcome"], "landed");
+    let flags = seen["fsw_report"]["nav_flags"].as_u64().unwrap();
+    assert_ne!(flags & (1 << 10), 0, "NAV_FLAG_HAZARD_MAPPED not reported: {flags}");
+    let t = &seen["touchdown"];
+    let (slope, rough) = (t["slope_deg"].as_f64().unwrap(), t["roughness_m"].as_f64().unwrap());
+    assert!(rough <= 0.3 && slope <= 8.0, "landed on {slope} deg, {rough} m rough");
+}
