@@ -579,3 +579,54 @@ fn c_flight_software_reads_every_frame_in_place_and_checks_its_hash() {
         text(&stub)
     );
 }
+
+/// The same GNC with terrain navigation and hazard avoidance (`map` and
+/// `hazard_avoidance` in its `--fsw-params`): through the C ABI it reads the camera's
+/// and the lidar's frames in place (`oils_fsw_frame`, zero-copy over iceoryx2) and flies
+/// the hazardous-site descent with the digest of the native GNC.
+#[test]
+fn rust_gnc_with_terrain_navigation_through_the_c_abi_gives_the_native_digest() {
+    let dir = scratch("cabi-gnc-terrain");
+    let map = dir.join("hazardous-site.oilsmap");
+    let out = run_oils(&["map", "--scenario", "hazardous-site", "--cells", "512", "--out", map.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", text(&out));
+    let native_rep = dir.join("native.json");
+    let out = run_oils(&[
+        "run",
+        "--scenario",
+        "hazardous-site",
+        "--no-log",
+        "--gnc-map",
+        map.to_str().unwrap(),
+        "--gnc-hda",
+        "on",
+        "--report",
+        native_rep.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", text(&out));
+    let native = report(&native_rep);
+    assert_eq!(native["outcome"], "landed");
+    let params = dir.join("gnc.toml");
+    std::fs::write(
+        &params,
+        format!(
+            "navigation = \"sensors\"\nhazard_avoidance = true\nmap = \"{}\"\n",
+            map.display()
+        ),
+    )
+    .unwrap();
+    let id = run_id(0xc6);
+    let mut stub = c_stub(&id, &cabi_gnc_library());
+    stub.arg("--fsw-params").arg(&params);
+    let rep = dir.join("cabi.json");
+    let (emulator, stub) = fly_with_client(
+        &["--no-log", "--scenario", "hazardous-site", "--telemetry", "sensors", "--report", rep.to_str().unwrap()],
+        &id,
+        stub,
+    );
+    assert!(stub.status.success(), "stub: {}", text(&stub));
+    assert!(emulator.status.success(), "oils run: {}", text(&emulator));
+    let through_c = report(&rep);
+    assert_eq!(through_c["outcome"], "landed");
+    assert_eq!(through_c["digest"], native["digest"], "the terrain-navigating GNC through the C ABI must fly the native descent");
+}
