@@ -588,7 +588,15 @@ fn c_flight_software_reads_every_frame_in_place_and_checks_its_hash() {
 fn rust_gnc_with_terrain_navigation_through_the_c_abi_gives_the_native_digest() {
     let dir = scratch("cabi-gnc-terrain");
     let map = dir.join("hazardous-site.oilsmap");
-    let out = run_oils(&["map", "--scenario", "hazardous-site", "--cells", "512", "--out", map.to_str().unwrap()]);
+    let out = run_oils(&[
+        "map",
+        "--scenario",
+        "hazardous-site",
+        "--cells",
+        "512",
+        "--out",
+        map.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", text(&out));
     let native_rep = dir.join("native.json");
     let out = run_oils(&[
@@ -620,7 +628,15 @@ fn rust_gnc_with_terrain_navigation_through_the_c_abi_gives_the_native_digest() 
     stub.arg("--fsw-params").arg(&params);
     let rep = dir.join("cabi.json");
     let (emulator, stub) = fly_with_client(
-        &["--no-log", "--scenario", "hazardous-site", "--telemetry", "sensors", "--report", rep.to_str().unwrap()],
+        &[
+            "--no-log",
+            "--scenario",
+            "hazardous-site",
+            "--telemetry",
+            "sensors",
+            "--report",
+            rep.to_str().unwrap(),
+        ],
         &id,
         stub,
     );
@@ -628,5 +644,8 @@ fn rust_gnc_with_terrain_navigation_through_the_c_abi_gives_the_native_digest() 
     assert!(emulator.status.success(), "oils run: {}", text(&emulator));
     let through_c = report(&rep);
     assert_eq!(through_c["outcome"], "landed");
-    assert_eq!(through_c["digest"], native["digest"], "the terrain-navigating GNC through the C ABI must fly the native descent");
+    assert_eq!(
+        through_c["digest"], native["digest"],
+        "the terrain-navigating GNC through the C ABI must fly the native descent"
+    );
 }

@@ -347,6 +347,8 @@ proptest! {
                 downrange_m: Some(x[6]),
                 crossrange_m: Some(x[7]),
                 nav_error: None,
+                nav_error_50m: None,
+                nav_horizontal_by_altitude: Vec::new(),
                 fault_events: 0,
                 faults: vec![],
                 out_of_envelope: None,

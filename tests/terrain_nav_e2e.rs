@@ -18,7 +18,9 @@ fn pinpoint_256(dir: &Path) -> PathBuf {
     )
     .unwrap();
     let marker = "[sensors.camera]";
-    let at = text.find(marker).expect("pinpoint.toml has a camera section");
+    let at = text
+        .find(marker)
+        .expect("pinpoint.toml has a camera section");
     let end = at + text[at..].find('\n').unwrap();
     let text = format!(
         "{}\nwidth_px = 256\nheight_px = 256{}",
@@ -76,7 +78,11 @@ fn the_pinpoint_descent_navigates_by_the_terrain_to_slim_class_errors() {
     assert!(at_50 < 10.0, "horizontal error at 50 m {at_50} m");
     assert!(at_end < 10.0, "horizontal error at touchdown {at_end} m");
     // The terrain group ran (a frame a second below 6 km) and is reported by name.
-    assert!(text(&out).contains("rate group  terrain:"), "{}", text(&out));
+    assert!(
+        text(&out).contains("rate group  terrain:"),
+        "{}",
+        text(&out)
+    );
     let by_alt = f["nav_error_by_altitude"].as_array().unwrap();
     assert_eq!(by_alt.len(), 12, "every height gate passed: {by_alt:?}");
 }
@@ -87,13 +93,32 @@ fn a_map_needs_sensor_navigation_and_the_camera_and_a_damaged_one_is_refused() {
     let map = make_map(&dir);
     let m = map.to_str().unwrap();
     // Bench navigation cannot use a map.
-    let out = run_oils(&["run", "--link", "inproc", "--no-log", "--gnc-map", m, "--gnc-nav", "bench", "--telemetry", "both"]);
+    let out = run_oils(&[
+        "run",
+        "--link",
+        "inproc",
+        "--no-log",
+        "--gnc-map",
+        m,
+        "--gnc-nav",
+        "bench",
+        "--telemetry",
+        "both",
+    ]);
     assert!(!out.status.success());
-    assert!(text(&out).contains("gnc.navigation = \"sensors\""), "{}", text(&out));
+    assert!(
+        text(&out).contains("gnc.navigation = \"sensors\""),
+        "{}",
+        text(&out)
+    );
     // The default scenario has no camera.
     let out = run_oils(&["run", "--link", "inproc", "--no-log", "--gnc-map", m]);
     assert!(!out.status.success());
-    assert!(text(&out).contains("looks through the camera"), "{}", text(&out));
+    assert!(
+        text(&out).contains("looks through the camera"),
+        "{}",
+        text(&out)
+    );
     // A flipped byte: refused before tick 0, by name.
     let mut bytes = std::fs::read(&map).unwrap();
     bytes[4096] ^= 0x40;
@@ -112,7 +137,10 @@ fn a_map_needs_sensor_navigation_and_the_camera_and_a_damaged_one_is_refused() {
     ]);
     assert!(!out.status.success());
     let t = text(&out);
-    assert!(t.contains("damaged.oilsmap") && t.contains("hash does not match"), "{t}");
+    assert!(
+        t.contains("damaged.oilsmap") && t.contains("hash does not match"),
+        "{t}"
+    );
 }
 
 /// A failure scenario flown from `dir` (its onboard map is made there on first use).
@@ -120,7 +148,15 @@ fn fly_scenario(dir: &Path, name: &str) -> (String, serde_json::Value) {
     let rep = dir.join(format!("{name}.json"));
     let out = oils()
         .current_dir(dir)
-        .args(["run", "--scenario", name, "--link", "inproc", "--no-log", "--report"])
+        .args([
+            "run",
+            "--scenario",
+            name,
+            "--link",
+            "inproc",
+            "--no-log",
+            "--report",
+        ])
         .arg(&rep)
         .output()
         .unwrap();
@@ -155,21 +191,41 @@ fn a_false_fix_from_a_shifted_map_is_rejected_not_flown() {
     let f = &r["fsw_report"];
     assert!(f["terrain_lost_s"].as_f64().is_some(), "{out}");
     let h = f["nav_error"]["horizontal_m"].as_f64().unwrap();
-    assert!(h < 10.0, "horizontal error at touchdown {h} m: a false fix was flown");
+    assert!(
+        h < 10.0,
+        "horizontal error at touchdown {h} m: a false fix was flown"
+    );
 }
 
 #[test]
 fn hazard_avoidance_lands_clear_of_the_rock_a_blind_landing_meets() {
     let dir = scratch("terrain-nav-hazard");
     let map = dir.join("hazardous-site.oilsmap");
-    let out = run_oils(&["map", "--scenario", "hazardous-site", "--cells", "512", "--out", map.to_str().unwrap()]);
+    let out = run_oils(&[
+        "map",
+        "--scenario",
+        "hazardous-site",
+        "--cells",
+        "512",
+        "--out",
+        map.to_str().unwrap(),
+    ]);
     assert!(out.status.success(), "{}", text(&out));
     let fly = |hda: &str| {
         let rep = dir.join(format!("hda-{hda}.json"));
         let out = run_oils(&[
-            "run", "--scenario", "hazardous-site", "--link", "inproc", "--no-log",
-            "--gnc-map", map.to_str().unwrap(), "--gnc-hda", hda,
-            "--report", rep.to_str().unwrap(),
+            "run",
+            "--scenario",
+            "hazardous-site",
+            "--link",
+            "inproc",
+            "--no-log",
+            "--gnc-map",
+            map.to_str().unwrap(),
+            "--gnc-hda",
+            hda,
+            "--report",
+            rep.to_str().unwrap(),
         ]);
         assert!(out.status.success(), "{}", text(&out));
         report(&rep)
@@ -182,8 +238,18 @@ fn hazard_avoidance_lands_clear_of_the_rock_a_blind_landing_meets() {
     let seen = fly("on");
     assert_eq!(seen["outcome"], "landed");
     let flags = seen["fsw_report"]["nav_flags"].as_u64().unwrap();
-    assert_ne!(flags & (1 << 10), 0, "NAV_FLAG_HAZARD_MAPPED not reported: {flags}");
+    assert_ne!(
+        flags & (1 << 10),
+        0,
+        "NAV_FLAG_HAZARD_MAPPED not reported: {flags}"
+    );
     let t = &seen["touchdown"];
-    let (slope, rough) = (t["slope_deg"].as_f64().unwrap(), t["roughness_m"].as_f64().unwrap());
-    assert!(rough <= 0.3 && slope <= 8.0, "landed on {slope} deg, {rough} m rough");
+    let (slope, rough) = (
+        t["slope_deg"].as_f64().unwrap(),
+        t["roughness_m"].as_f64().unwrap(),
+    );
+    assert!(
+        rough <= 0.3 && slope <= 8.0,
+        "landed on {slope} deg, {rough} m rough"
+    );
 }

@@ -542,7 +542,10 @@ fn fsw_report_lines(out: &mut String, f: &crate::fsw_monitor::FswSelfReport) {
                 used.join(", ")
             );
             if let Some(t) = f.terrain_first_fix_s {
-                let _ = writeln!(out, "            terrain navigation: first fix at t = {t:.1} s");
+                let _ = writeln!(
+                    out,
+                    "            terrain navigation: first fix at t = {t:.1} s"
+                );
             }
             if let Some(t) = f.terrain_lost_s {
                 let _ = writeln!(

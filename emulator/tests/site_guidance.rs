@@ -24,7 +24,7 @@ fn fly_to_site(cfg: &RunConfig) -> (Outcome, f64, f64) {
         longitude_deg: cfg.scenario.site.longitude_deg,
     };
     let fsw =
-        oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id, Some(site), cfg.gnc)
+        oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id, Some(site), cfg.gnc.clone())
             .unwrap();
     let mut last = None;
     let mut observe = |_k: u64, plant: &Plant| {

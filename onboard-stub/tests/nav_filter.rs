@@ -74,7 +74,7 @@ fn recording() -> &'static [Record] {
                 latitude_deg: cfg.scenario.site.latitude_deg,
                 longitude_deg: cfg.scenario.site.longitude_deg,
             }),
-            cfg.gnc,
+            cfg.gnc.clone(),
         )
         .unwrap();
         session::run(

@@ -166,7 +166,11 @@ pub const FOOTPRINT_RADIUS_M: f64 = 2.2;
 fn footprint_roughness_m(ground: &Ground, p_mcmf: &Vector3<f64>) -> f64 {
     let up = p_mcmf.normalize();
     let east = Vector3::z().cross(&up);
-    let east = if east.norm() > 1e-9 { east.normalize() } else { Vector3::x() };
+    let east = if east.norm() > 1e-9 {
+        east.normalize()
+    } else {
+        Vector3::x()
+    };
     let north = up.cross(&east);
     // A sphere through the ground point: heights relative to it.
     let p0 = p_mcmf - up * ground.height_m(p_mcmf);

@@ -18,7 +18,7 @@ pub fn try_fly(cfg: &RunConfig) -> Result<RunReport, session::SessionError> {
             latitude_deg: cfg.scenario.site.latitude_deg,
             longitude_deg: cfg.scenario.site.longitude_deg,
         }),
-        cfg.gnc,
+        cfg.gnc.clone(),
     )
     .unwrap();
     session::run(

@@ -21,7 +21,13 @@
 
 use super::nav_filter::NavFilter;
 use nalgebra::{Matrix3, Vector3};
-use oils_shared::{FrameAnnouncement, FRAME_DEVICE_LIDAR, FRAME_FLAG_FROZEN, FRAME_FLAG_OUTAGE, FRAME_FORMAT_F32_LE_M};
+use oils_shared::{
+    FrameAnnouncement, FRAME_DEVICE_LIDAR, FRAME_FLAG_FROZEN, FRAME_FLAG_OUTAGE,
+    FRAME_FORMAT_F32_LE_M,
+};
+
+/// A judged candidate: its score, offset east and north (m), slope (deg), roughness (m).
+type Pick = (f64, f64, f64, f64, f64);
 
 /// The flash lidar as the flight software knows it (the emulator's defaults,
 /// `docs/sensors.md`).
@@ -251,13 +257,20 @@ impl HazardDetection {
                 if !(range > 0.0 && range.is_finite()) {
                     continue;
                 }
-                let d = Vector3::new((i as f64 + 0.5 - cx) / f_px, (j as f64 + 0.5 - cy) / f_px, 1.0)
-                    .normalize();
+                let d = Vector3::new(
+                    (i as f64 + 0.5 - cx) / f_px,
+                    (j as f64 + 0.5 - cy) / f_px,
+                    1.0,
+                )
+                .normalize();
                 let p = origin + mci_from_lidar * d * range - r;
                 let (x, y, z) = (p.dot(&east), p.dot(&north), p.dot(&up));
                 // Heights about the first return (f32 keeps centimetres there).
                 let z0 = *z_ref.get_or_insert(z);
-                let (ci, cj) = (((x + half) / cfg.cell_m).floor(), ((y + half) / cfg.cell_m).floor());
+                let (ci, cj) = (
+                    ((x + half) / cfg.cell_m).floor(),
+                    ((y + half) / cfg.cell_m).floor(),
+                );
                 if ci < 0.0 || cj < 0.0 || ci >= side as f64 || cj >= side as f64 {
                     continue;
                 }
@@ -275,7 +288,8 @@ impl HazardDetection {
         let step = cfg.candidate_step_m;
         let reach = cfg.max_divert_m;
         let steps = (reach / step).floor() as i64;
-        let (mut best_safe, mut best_any): (Option<(f64, f64, f64, f64, f64)>, Option<(f64, f64, f64, f64, f64)>) = (None, None);
+        // (score, east, north, slope, roughness)
+        let (mut best_safe, mut best_any): (Option<Pick>, Option<Pick>) = (None, None);
         let (mut candidates, mut safe_candidates) = (0u32, 0u32);
         for a in -steps..=steps {
             for b in -steps..=steps {
@@ -312,7 +326,10 @@ impl HazardDetection {
             (None, None) => return None,
         };
         let (_, dx, dy, slope, rough) = pick;
-        let spot = r + east * (ax + dx) + north * (ay + dy) + up * (z0 + self.plane_height(ax + dx, ay + dy).unwrap_or(0.0));
+        let spot = r
+            + east * (ax + dx)
+            + north * (ay + dy)
+            + up * (z0 + self.plane_height(ax + dx, ay + dy).unwrap_or(0.0));
         let (aim_slope, aim_rough) = aim_judged.unwrap_or((f64::NAN, f64::NAN));
         let choice = SpotChoice {
             t_ns,
@@ -386,10 +403,16 @@ impl HazardDetection {
         let side = self.side as i64;
         let half = cfg.half_extent_m;
         let k = (rad / cfg.cell_m).ceil() as i64 + 1;
-        let (ci, cj) = (((x + half) / cfg.cell_m).floor() as i64, ((y + half) / cfg.cell_m).floor() as i64);
+        let (ci, cj) = (
+            ((x + half) / cfg.cell_m).floor() as i64,
+            ((y + half) / cfg.cell_m).floor() as i64,
+        );
         for j in cj - k..=cj + k {
             for i in ci - k..=ci + k {
-                let (px, py) = (-half + (i as f64 + 0.5) * cfg.cell_m, -half + (j as f64 + 0.5) * cfg.cell_m);
+                let (px, py) = (
+                    -half + (i as f64 + 0.5) * cfg.cell_m,
+                    -half + (j as f64 + 0.5) * cfg.cell_m,
+                );
                 if (px - x).hypot(py - y) > rad {
                     continue;
                 }
@@ -412,7 +435,10 @@ impl HazardDetection {
                 return;
             }
             let (i, j) = (k % side, k / side);
-            let (px, py) = (-half + (i as f64 + 0.5) * cfg.cell_m, -half + (j as f64 + 0.5) * cfg.cell_m);
+            let (px, py) = (
+                -half + (i as f64 + 0.5) * cfg.cell_m,
+                -half + (j as f64 + 0.5) * cfg.cell_m,
+            );
             f(px, py, (self.sum[k] / self.count[k] as f32) as f64);
         });
     }

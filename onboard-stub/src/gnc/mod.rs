@@ -27,8 +27,8 @@ use navigation::NavFilter;
 use oils_shared::clock::monotonic_ns_if;
 use oils_shared::{
     Command, FrameAnnouncement, FswReport, Telemetry, ATTITUDE_MODE_IDEAL_TORQUE,
-    ATTITUDE_MODE_THRUSTERS, ENGINE_COUNT, NAV_FLAG_HAZARD_MAPPED, NAV_FLAG_HAZARD_UNMAPPED, NAV_FLAG_VALID, RATE_GROUPS,
-    TLM_FLAG_FOOTPAD_CONTACT,
+    ATTITUDE_MODE_THRUSTERS, ENGINE_COUNT, NAV_FLAG_HAZARD_MAPPED, NAV_FLAG_HAZARD_UNMAPPED,
+    NAV_FLAG_VALID, RATE_GROUPS, TLM_FLAG_FOOTPAD_CONTACT,
 };
 use sensor_nav::{SensorNav, SensorNavConfig};
 use thrust_loop::ThrustLoop;

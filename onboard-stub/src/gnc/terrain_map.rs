@@ -228,14 +228,17 @@ impl TerrainMap {
             .chain(&c.image_right_body)
             .chain(&c.position_body_m)
             .all(|v| v.is_finite());
-        if !(8..=MAX_SIDE).contains(&c.width_px)
-            || !(8..=MAX_SIDE).contains(&c.height_px)
-            || !(c.fov_deg > 0.0 && c.fov_deg < 170.0)
-            || !(c.k1.is_finite() && c.k2.is_finite())
-            || !mount_finite
-            || Vector3::from(c.boresight_body).norm() == 0.0
-            || c.full_scale_dn == 0
-        {
+        let sized = (8..=MAX_SIDE).contains(&c.width_px)
+            && (8..=MAX_SIDE).contains(&c.height_px)
+            && c.fov_deg > 0.0
+            && c.fov_deg < 170.0;
+        let camera_ok = sized
+            && c.k1.is_finite()
+            && c.k2.is_finite()
+            && mount_finite
+            && Vector3::from(c.boresight_body).norm() > 0.0
+            && c.full_scale_dn > 0;
+        if !camera_ok {
             return Err(format!(
                 "camera: sides of 8 to {MAX_SIDE} px, a field of view in (0, 170) deg, finite distortion and mounting, a boresight, a full scale"
             ));

@@ -579,7 +579,7 @@ impl TerrainNav {
         }
         let (peak, at) = best;
         let (ba, bb) = (at / side, at % side);
-        if !(peak >= cfg.min_peak_ncc) {
+        if peak.is_nan() || peak < cfg.min_peak_ncc {
             return Err(Rejection::WeakPeak);
         }
         if ba == 0 || bb == 0 || ba == side - 1 || bb == side - 1 {

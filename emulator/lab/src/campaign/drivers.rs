@@ -270,6 +270,8 @@ mod tests {
             downrange_m: Some(0.0),
             crossrange_m: Some(0.0),
             nav_error: None,
+            nav_error_50m: None,
+            nav_horizontal_by_altitude: Vec::new(),
             fault_events: 0,
             faults: vec![],
             out_of_envelope: None,
