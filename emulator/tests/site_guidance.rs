@@ -23,9 +23,15 @@ fn fly_to_site(cfg: &RunConfig) -> (Outcome, f64, f64) {
         latitude_deg: cfg.scenario.site.latitude_deg,
         longitude_deg: cfg.scenario.site.longitude_deg,
     };
-    let fsw =
-        oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id, Some(site), cfg.gnc.clone())
-            .unwrap();
+    let fsw = oils_onboard_stub::build::build_fsw(
+        &cfg.fsw,
+        None,
+        None,
+        run_id,
+        Some(site),
+        cfg.gnc.clone(),
+    )
+    .unwrap();
     let mut last = None;
     let mut observe = |_k: u64, plant: &Plant| {
         last = Some((plant.state().pos_mci_m, plant.time_ns() as f64 * 1e-9));

@@ -29,7 +29,8 @@ fn config() -> RunConfig {
 fn fly(cfg: &RunConfig, untimed: bool) -> Result<RunReport, session::SessionError> {
     let run_id = session::fresh_run_id();
     let fsw =
-        oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id, None, cfg.gnc.clone()).unwrap();
+        oils_onboard_stub::build::build_fsw(&cfg.fsw, None, None, run_id, None, cfg.gnc.clone())
+            .unwrap();
     session::run(
         cfg,
         run_id,
