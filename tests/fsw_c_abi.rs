@@ -623,7 +623,7 @@ fn rust_gnc_with_terrain_navigation_through_the_c_abi_gives_the_native_digest() 
         ),
     )
     .unwrap();
-    let id = run_id(0xc6);
+    let id = run_id(0xc8);
     let mut stub = c_stub(&id, &cabi_gnc_library());
     stub.arg("--fsw-params").arg(&params);
     let rep = dir.join("cabi.json");
