@@ -218,7 +218,12 @@ fn nav_filter_on_a_recorded_descent_is_accurate_and_consistent() {
             "mean NEES {} (3 expected)",
             fig.nees_mean
         );
+        // Every device channel (the terrain fixes need a map, which this run has not).
         for (c, ch) in last.channels.iter().enumerate() {
+            if c == oils_onboard_stub::gnc::nav_filter::Channel::Terrain as usize {
+                assert_eq!(ch.accepted, 0, "no map, no terrain fix");
+                continue;
+            }
             assert!(ch.accepted > 1000, "channel {c} used {} times", ch.accepted);
         }
     }

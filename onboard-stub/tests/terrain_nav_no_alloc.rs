@@ -35,6 +35,7 @@ static GLOBAL: Counting = Counting;
 
 const R_M: f64 = 1_737_400.0;
 const H_M: f64 = 300.0;
+const HOVER_M: f64 = 100.0;
 
 /// Value noise on a 10 m lattice.
 fn texture(e: f64, n: f64) -> f64 {
@@ -136,13 +137,14 @@ fn matching_frames_and_mapping_hazards_allocate_nothing() {
         bytes: px.len() as u32,
         ..Default::default()
     };
-    // A flat ground 300 m below for the lidar (its pixels' ranges to the sphere).
+    // A flat ground 100 m below for the lidar (the hover; its pixels' ranges to the
+    // sphere), seen by a filter of its own there.
     let lidar = HazardConfig {
         enabled: true,
         ..HazardConfig::default()
     }
     .lidar;
-    let lidar_origin = f.mcmf_of_map(0.0, 0.0, H_M) + q * Vector3::from(lidar.position_body_m);
+    let lidar_origin = f.mcmf_of_map(0.0, 0.0, HOVER_M) + q * Vector3::from(lidar.position_body_m);
     let lz = Vector3::from(lidar.boresight_body).normalize();
     let lr = Vector3::from(lidar.image_right_body);
     let lx = (lr - lz * lz.dot(&lr)).normalize();
@@ -191,6 +193,11 @@ fn matching_frames_and_mapping_hazards_allocate_nothing() {
         enabled: true,
         ..HazardConfig::default()
     });
+    let mut hover = Telemetry::default();
+    hover.nav.pos_mci_m = f.mcmf_of_map(0.0, 0.0, HOVER_M).into();
+    hover.nav.q_mci_from_body = [q.w, q.i, q.j, q.k];
+    let mut hover_nf = NavFilter::new(NavFilterConfig::default());
+    hover_nf.step(&hover);
     let aim = f.mcmf_of_map(0.0, 0.0, 0.0);
 
     let before = ALLOCS.load(Ordering::Relaxed);
@@ -200,7 +207,7 @@ fn matching_frames_and_mapping_hazards_allocate_nothing() {
     }
     hz.arm();
     hz.frame(&lann, &ranges);
-    let choice = hz.assess(&nf, |_| aim);
+    let choice = hz.assess(&hover_nf, |_| aim);
     let after = ALLOCS.load(Ordering::Relaxed);
     assert_eq!(
         tn.accepted(),
