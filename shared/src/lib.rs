@@ -34,6 +34,7 @@ pub mod clock;
 pub mod domain;
 pub mod fsw;
 pub mod link;
+pub mod plane_fit;
 pub mod profile;
 pub mod realtime;
 pub mod service;

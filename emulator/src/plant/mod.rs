@@ -176,33 +176,21 @@ fn footprint_roughness_m(ground: &Ground, p_mcmf: &Vector3<f64>) -> f64 {
     let p0 = p_mcmf - up * ground.height_m(p_mcmf);
     let step = 0.25;
     let k = (FOOTPRINT_RADIUS_M / step).floor() as i32;
-    let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy, mut sz, mut sxz, mut syz) =
-        (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     let h = |x: f64, y: f64| {
         let q = p0 + east * x + north * y;
         let q = q.normalize() * p0.norm();
         -ground.height_m(&q)
     };
+    let mut fit = oils_shared::plane_fit::PlaneFit::default();
     for a in -k..=k {
         for b in -k..=k {
             let (x, y) = (b as f64 * step, a as f64 * step);
-            if x.hypot(y) > FOOTPRINT_RADIUS_M {
-                continue;
+            if x.hypot(y) <= FOOTPRINT_RADIUS_M {
+                fit.add(x, y, h(x, y));
             }
-            let z = h(x, y);
-            n += 1.0;
-            sx += x;
-            sy += y;
-            sxx += x * x;
-            sxy += x * y;
-            syy += y * y;
-            sz += z;
-            sxz += x * z;
-            syz += y * z;
         }
     }
-    let m = nalgebra::Matrix3::new(n, sx, sy, sx, sxx, sxy, sy, sxy, syy);
-    let Some(c) = m.lu().solve(&Vector3::new(sz, sxz, syz)) else {
+    let Some([c0, cx, cy]) = fit.solve() else {
         return 0.0;
     };
     let mut rough = 0.0f64;
@@ -210,7 +198,7 @@ fn footprint_roughness_m(ground: &Ground, p_mcmf: &Vector3<f64>) -> f64 {
         for b in -k..=k {
             let (x, y) = (b as f64 * step, a as f64 * step);
             if x.hypot(y) <= FOOTPRINT_RADIUS_M {
-                rough = rough.max((h(x, y) - (c.x + c.y * x + c.z * y)).abs());
+                rough = rough.max((h(x, y) - (c0 + cx * x + cy * y)).abs());
             }
         }
     }

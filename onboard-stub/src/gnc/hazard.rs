@@ -21,6 +21,7 @@
 
 use super::nav_filter::NavFilter;
 use nalgebra::{Matrix3, Vector3};
+use oils_shared::plane_fit::PlaneFit;
 use oils_shared::{
     FrameAnnouncement, FRAME_DEVICE_LIDAR, FRAME_FLAG_FROZEN, FRAME_FLAG_OUTAGE,
     FRAME_FORMAT_F32_LE_M,
@@ -351,50 +352,34 @@ impl HazardDetection {
     /// The plane through the footprint at local `(x, y)`: its slope (deg) and the largest
     /// residual (m); `None` when too little of it was seen.
     fn judge(&self, x: f64, y: f64) -> Option<(f64, f64)> {
-        let (coef, cells) = self.fit(x, y)?;
-        let [a, b, c] = coef;
-        let cfg = &self.cfg;
-        let rad = cfg.footprint_radius_m;
+        let plane = self.fit(x, y)?;
+        let [a, b, c] = plane;
         let mut rough = 0.0f64;
-        self.for_cells(x, y, rad, |cx, cy, h| {
+        self.for_cells(x, y, self.cfg.footprint_radius_m, |cx, cy, h| {
             rough = rough.max((h - (a + b * (cx - x) + c * (cy - y))).abs());
         });
-        let _ = cells;
-        Some((b.hypot(c).atan().to_degrees(), rough))
+        Some((PlaneFit::slope_deg(&plane), rough))
     }
 
     /// The fitted plane's height at `(x, y)` (relative to the first return).
     fn plane_height(&self, x: f64, y: f64) -> Option<f64> {
-        self.fit(x, y).map(|(c, _)| c[0])
+        self.fit(x, y).map(|c| c[0])
     }
 
-    /// Least-squares plane `h = a + b (x' - x) + c (y' - y)` over the footprint's cells.
-    fn fit(&self, x: f64, y: f64) -> Option<([f64; 3], usize)> {
+    /// Least-squares plane `h = a + b (x' - x) + c (y' - y)` over the footprint's cells
+    /// (the same fit the emulator judges a touchdown's ground with).
+    fn fit(&self, x: f64, y: f64) -> Option<[f64; 3]> {
         let cfg = &self.cfg;
         let rad = cfg.footprint_radius_m;
-        let (mut n, mut sx, mut sy, mut sxx, mut sxy, mut syy, mut sz, mut sxz, mut syz) =
-            (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
         let mut total = 0usize;
         self.for_disk(x, y, rad, |_| total += 1);
-        self.for_cells(x, y, rad, |cx, cy, h| {
-            let (u, v) = (cx - x, cy - y);
-            n += 1.0;
-            sx += u;
-            sy += v;
-            sxx += u * u;
-            sxy += u * v;
-            syy += v * v;
-            sz += h;
-            sxz += u * h;
-            syz += v * h;
-        });
-        if total == 0 || n < cfg.min_coverage * total as f64 || n < 6.0 {
+        let mut fit = PlaneFit::default();
+        self.for_cells(x, y, rad, |cx, cy, h| fit.add(cx - x, cy - y, h));
+        let n = fit.count();
+        if total == 0 || (n as f64) < cfg.min_coverage * total as f64 || n < 6 {
             return None;
         }
-        let m = Matrix3::new(n, sx, sy, sx, sxx, sxy, sy, sxy, syy);
-        let rhs = Vector3::new(sz, sxz, syz);
-        let sol = m.lu().solve(&rhs)?;
-        Some(([sol.x, sol.y, sol.z], n as usize))
+        fit.solve()
     }
 
     /// Every cell centre within `rad` of `(x, y)` inside the map.

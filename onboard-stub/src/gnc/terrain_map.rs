@@ -60,7 +60,7 @@ pub enum MapError {
 
 /// The map projection about the site: azimuthal equidistant on the sphere of
 /// `radius_m`, Moon-fixed. The same projection as the emulator's terrain grid
-/// (`emulator/src/world/terrain/map.rs`; a workspace test holds the two together).
+/// (`emulator/src/world/terrain/map.rs`; `tests/fsw_models.rs` holds the two together).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MapFrame {
     /// Site latitude, degrees.

@@ -98,7 +98,7 @@ impl CameraModel {
 
     /// Image point (pixels, pixel `(i, j)` spans `[i, i+1)`) of a camera direction.
     #[inline]
-    fn project(&self, f_px: f64, p: &Vector3<f64>) -> Option<(f64, f64)> {
+    pub fn project(&self, f_px: f64, p: &Vector3<f64>) -> Option<(f64, f64)> {
         if p.z <= 0.0 {
             return None;
         }
